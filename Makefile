@@ -1,0 +1,41 @@
+# Two commands on a fresh machine with python3 and make (README):
+#   make demo   simulated robot + operator over Zenoh on loopback, with the operator view
+#   make test   fresh virtual environment, install with test extras, lint, type-check, full suite
+PYTHON ?= python3
+VENV   ?= .venv
+BIN     = $(VENV)/bin
+DEMO_ARGS ?=
+
+.PHONY: demo test venv lint typecheck pytest bench clean
+
+$(BIN)/egc-teleop: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $@
+
+venv: $(BIN)/egc-teleop
+
+demo: venv
+	$(BIN)/egc-teleop demo $(DEMO_ARGS)
+
+# `test` always rebuilds the environment from scratch so that CI proves a clean install.
+test:
+	rm -rf $(VENV)
+	$(MAKE) venv lint typecheck pytest
+
+lint: venv
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+
+typecheck: venv
+	$(BIN)/mypy
+
+pytest: venv
+	$(BIN)/pytest -n 2 --dist loadgroup
+
+bench: venv
+	$(BIN)/egc-teleop bench all
+
+clean:
+	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache

@@ -1,0 +1,64 @@
+"""Zenoh key expressions of the wire contract (DESIGN 7, pinned)."""
+
+from __future__ import annotations
+
+import re
+
+DEFAULT_ROBOT_ID = "sim"
+_ID_RE = re.compile(r"^[A-Za-z0-9_\-]{1,64}$")
+
+
+def validate_id(identifier: str, what: str = "robot id") -> str:
+    """Ids become key-expression chunks: no '/', '*', '$', '?', '#' or whitespace."""
+    if not isinstance(identifier, str) or not _ID_RE.match(identifier):
+        raise ValueError(f"{what} {identifier!r} must be 1-64 characters of [A-Za-z0-9_-]")
+    return identifier
+
+
+def cmd(robot: str) -> str:
+    return f"egc/{validate_id(robot)}/cmd"
+
+
+def telemetry(robot: str) -> str:
+    return f"egc/{validate_id(robot)}/telemetry"
+
+
+def state(robot: str) -> str:
+    return f"egc/{validate_id(robot)}/state"
+
+
+def clock(robot: str) -> str:
+    return f"egc/{validate_id(robot)}/clock"
+
+
+def scan(robot: str) -> str:
+    return f"egc/{validate_id(robot)}/scan"
+
+
+def base_cmd(robot: str) -> str:
+    return f"egc/{validate_id(robot)}/base/cmd"
+
+
+def base_odom(robot: str) -> str:
+    return f"egc/{validate_id(robot)}/base/odom"
+
+
+def alive_robot(robot: str) -> str:
+    return f"egc/{validate_id(robot)}/alive/robot"
+
+
+def alive_operator(robot: str, operator_id: str) -> str:
+    return f"egc/{validate_id(robot)}/alive/operator/{validate_id(operator_id, 'operator id')}"
+
+
+def alive_operators(robot: str) -> str:
+    """Wildcard matching every operator's liveliness token of one robot."""
+    return f"egc/{validate_id(robot)}/alive/operator/*"
+
+
+def operator_id_from_alive_key(key: str) -> str | None:
+    """The operator id at the end of an ``alive/operator/<id>`` key, or None."""
+    parts = str(key).split("/")
+    if len(parts) == 5 and parts[0] == "egc" and parts[2:4] == ["alive", "operator"]:
+        return parts[4]
+    return None

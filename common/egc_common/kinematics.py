@@ -1,0 +1,74 @@
+"""Differential-drive kinematics (paper eqs. 1-3) and footprint geometry, all in SI units.
+
+Poses are (x, y, theta) tuples in metres and radians. Arc integration is exact for constant
+(v, w) over a step, not Euler.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+_SMALL_ANGLE = 1e-9
+
+
+def wrap_angle(angle_rad: float) -> float:
+    """Wrap to (-pi, pi]."""
+    a = math.fmod(angle_rad + math.pi, 2.0 * math.pi)
+    if a <= 0.0:
+        a += 2.0 * math.pi
+    return a - math.pi
+
+
+def arc_displacement(v_mps: float, w_radps: float, dt_s: float) -> tuple[float, float, float]:
+    """Displacement (dx, dy, dtheta) in the start frame after moving on a constant arc for dt.
+
+    Uses the chord form of eq. 6: the end point lies at distance |2 R sin(w dt / 2)| along the
+    direction w dt / 2, which tends to v dt as w -> 0 without a division by w.
+    """
+    dtheta = w_radps * dt_s
+    half = 0.5 * dtheta
+    if abs(half) < _SMALL_ANGLE:
+        chord = v_mps * dt_s
+    else:
+        chord = v_mps * dt_s * math.sin(half) / half
+    return chord * math.cos(half), chord * math.sin(half), dtheta
+
+
+def integrate_arc(
+    pose: tuple[float, float, float], v_mps: float, w_radps: float, dt_s: float
+) -> tuple[float, float, float]:
+    """Exact pose after driving (v, w) for dt from ``pose`` (world frame)."""
+    x, y, th = pose
+    dx, dy, dth = arc_displacement(v_mps, w_radps, dt_s)
+    c, s = math.cos(th), math.sin(th)
+    return x + c * dx - s * dy, y + s * dx + c * dy, wrap_angle(th + dth)
+
+
+def wheel_speeds(v_mps: float, w_radps: float, wheel_base_m: float) -> tuple[float, float]:
+    """(left, right) wheel rim speeds for a body twist (inverse of eq. 2)."""
+    half = 0.5 * wheel_base_m * w_radps
+    return v_mps - half, v_mps + half
+
+
+def body_twist(left_mps: float, right_mps: float, wheel_base_m: float) -> tuple[float, float]:
+    """Body twist (v, w) from wheel rim speeds (eq. 2 with r folded into the rim speeds)."""
+    return 0.5 * (left_mps + right_mps), (right_mps - left_mps) / wheel_base_m
+
+
+def footprint_corners(length_m: float, width_m: float) -> FloatArray:
+    """The rectangular footprint's corners in {R} (centred on the origin), CCW, shape (4, 2)."""
+    hl, hw = 0.5 * length_m, 0.5 * width_m
+    return np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]], dtype=np.float64)
+
+
+def distance_to_footprint(points: FloatArray, length_m: float, width_m: float) -> FloatArray:
+    """Distance (m) from each point in {R} to the centred rectangle; 0 for points inside."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    dx = np.maximum(np.abs(p[:, 0]) - 0.5 * length_m, 0.0)
+    dy = np.maximum(np.abs(p[:, 1]) - 0.5 * width_m, 0.0)
+    return np.hypot(dx, dy)

@@ -1,0 +1,492 @@
+"""Wire contract (DESIGN 7, pinned): msgpack maps with strict, non-raising decoders.
+
+Every ``decode_*`` function returns either the message (a frozen dataclass) or a ``Rejection``
+with a typed ``RejectReason``; nothing that arrives from the network can make them raise.
+Unknown keys are ignored (forward compatibility within schema version 1); missing keys, wrong
+types, non-finite floats, out-of-range values, unknown versions and oversized payloads are
+rejected.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass, field
+from typing import Any, Final, TypeVar
+
+import msgpack
+import numpy as np
+import numpy.typing as npt
+
+SCHEMA_VERSION: Final = 1
+MAX_COMMAND_BYTES: Final = 512
+MAX_TELEMETRY_BYTES: Final = 4 * 1024 * 1024
+MAX_SCAN_BYTES: Final = 4 * 1024 * 1024
+MAX_SMALL_BYTES: Final = 4096
+MAX_INT: Final = 2**63 - 1
+MAX_ID_CHARS: Final = 64
+MAX_SCAN_BEAMS: Final = 200_000
+
+MODES: Final = ("direct", "shared")
+STATES: Final = ("IDLE", "DRIVING", "HOLD", "ESTOP")
+
+
+class RejectReason(enum.Enum):
+    """Why a message was dropped; the robot counts and logs each one by reason."""
+
+    TOO_LARGE = "too_large"
+    NOT_MSGPACK = "not_msgpack"
+    NOT_A_MAP = "not_a_map"
+    UNKNOWN_VERSION = "unknown_version"
+    MISSING_KEY = "missing_key"
+    WRONG_TYPE = "wrong_type"
+    NOT_FINITE = "not_finite"
+    OUT_OF_RANGE = "out_of_range"
+    # Reasons the robot adds after decoding (DESIGN 8):
+    STALE = "stale"
+    DUPLICATE_SEQ = "duplicate_seq"
+    OUT_OF_ORDER = "out_of_order"
+    NOT_IN_CONTROL = "not_in_control"
+
+
+@dataclass(frozen=True, slots=True)
+class Rejection:
+    reason: RejectReason
+    detail: str
+
+    def __str__(self) -> str:
+        return f"{self.reason.value}: {self.detail}"
+
+
+class _InvalidError(Exception):
+    def __init__(self, reason: RejectReason, detail: str) -> None:
+        super().__init__(detail)
+        self.rejection = Rejection(reason, detail)
+
+
+# ---------------------------------------------------------------------------------------------
+# Field readers: each raises _InvalidError, which the decoders turn into a Rejection.
+
+
+def _get(m: Mapping[Any, Any], key: str) -> Any:
+    if key not in m:
+        raise _InvalidError(RejectReason.MISSING_KEY, f"missing key {key!r}")
+    return m[key]
+
+
+def _int(m: Mapping[Any, Any], key: str, lo: int = 0, hi: int = MAX_INT) -> int:
+    value = _get(m, key)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise _InvalidError(RejectReason.WRONG_TYPE, f"{key!r} must be an integer")
+    if not lo <= value <= hi:
+        raise _InvalidError(RejectReason.OUT_OF_RANGE, f"{key!r}={value} outside [{lo}, {hi}]")
+    return value
+
+
+def _float(m: Mapping[Any, Any], key: str, lo: float = -math.inf, hi: float = math.inf) -> float:
+    value = _get(m, key)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise _InvalidError(RejectReason.WRONG_TYPE, f"{key!r} must be a number")
+    try:
+        x = float(value)
+    except OverflowError:
+        raise _InvalidError(RejectReason.OUT_OF_RANGE, f"{key!r} is too large") from None
+    if not math.isfinite(x):
+        raise _InvalidError(RejectReason.NOT_FINITE, f"{key!r} must be finite")
+    if not lo <= x <= hi:
+        raise _InvalidError(RejectReason.OUT_OF_RANGE, f"{key!r}={x} outside [{lo}, {hi}]")
+    return x
+
+
+def _opt_float(m: Mapping[Any, Any], key: str) -> float | None:
+    return None if m.get(key) is None else _float(m, key)
+
+
+def _bool(m: Mapping[Any, Any], key: str) -> bool:
+    value = _get(m, key)
+    if not isinstance(value, bool):
+        raise _InvalidError(RejectReason.WRONG_TYPE, f"{key!r} must be a boolean")
+    return value
+
+
+def _str(
+    m: Mapping[Any, Any],
+    key: str,
+    choices: tuple[str, ...] | None = None,
+    max_chars: int = MAX_ID_CHARS,
+) -> str:
+    value = _get(m, key)
+    if not isinstance(value, str):
+        raise _InvalidError(RejectReason.WRONG_TYPE, f"{key!r} must be a string")
+    if choices is not None and value not in choices:
+        raise _InvalidError(
+            RejectReason.OUT_OF_RANGE, f"{key!r} must be one of {', '.join(choices)}"
+        )
+    if not 0 < len(value) <= max_chars or not value.isprintable():
+        raise _InvalidError(
+            RejectReason.OUT_OF_RANGE, f"{key!r} must be 1-{max_chars} printable chars"
+        )
+    return value
+
+
+def _f32_array(
+    m: Mapping[Any, Any],
+    key: str,
+    width: int = 1,
+    max_items: int = MAX_SCAN_BEAMS,
+    allow_nonfinite: bool = False,
+) -> npt.NDArray[np.float32]:
+    value = _get(m, key)
+    if not isinstance(value, (bytes, bytearray)):
+        raise _InvalidError(RejectReason.WRONG_TYPE, f"{key!r} must be bytes of float32")
+    if len(value) % (4 * width):
+        raise _InvalidError(
+            RejectReason.OUT_OF_RANGE, f"{key!r} length is not a multiple of {4 * width}"
+        )
+    arr = np.frombuffer(bytes(value), dtype="<f4")
+    if arr.size // width > max_items:
+        raise _InvalidError(RejectReason.TOO_LARGE, f"{key!r} has more than {max_items} items")
+    if not allow_nonfinite and not np.all(np.isfinite(arr)):
+        raise _InvalidError(RejectReason.NOT_FINITE, f"{key!r} holds non-finite values")
+    return arr.reshape(-1, width) if width > 1 else arr
+
+
+def _unpack(payload: object, max_bytes: int) -> Mapping[Any, Any]:
+    if isinstance(payload, memoryview):
+        payload = payload.tobytes()
+    if not isinstance(payload, (bytes, bytearray)):
+        raise _InvalidError(RejectReason.WRONG_TYPE, "payload must be bytes")
+    if len(payload) > max_bytes:
+        raise _InvalidError(RejectReason.TOO_LARGE, f"{len(payload)} bytes > limit {max_bytes}")
+    try:
+        obj = msgpack.unpackb(bytes(payload), raw=False, strict_map_key=False, timestamp=0)
+    except Exception as exc:  # msgpack raises many types (ExtraData, ValueError, ...)
+        raise _InvalidError(
+            RejectReason.NOT_MSGPACK, f"not msgpack: {type(exc).__name__}"
+        ) from None
+    if not isinstance(obj, dict):
+        raise _InvalidError(RejectReason.NOT_A_MAP, f"payload is a {type(obj).__name__}, not a map")
+    version = obj.get("v")
+    if isinstance(version, bool) or not isinstance(version, int):
+        raise _InvalidError(
+            RejectReason.MISSING_KEY if version is None else RejectReason.WRONG_TYPE,
+            "schema version 'v' must be an integer",
+        )
+    if version != SCHEMA_VERSION:
+        raise _InvalidError(RejectReason.UNKNOWN_VERSION, f"schema version {version} not supported")
+    return obj
+
+
+T = TypeVar("T")
+
+
+def _decode(
+    payload: object, max_bytes: int, build: Callable[[Mapping[Any, Any]], T]
+) -> T | Rejection:
+    try:
+        return build(_unpack(payload, max_bytes))
+    except _InvalidError as exc:
+        return exc.rejection
+    except RecursionError:
+        return Rejection(RejectReason.NOT_MSGPACK, "nesting too deep")
+
+
+def _pack(obj: Mapping[str, Any]) -> bytes:
+    data: bytes = msgpack.packb(obj, use_bin_type=True)
+    return data
+
+
+# ---------------------------------------------------------------------------------------------
+# OperatorCommand
+
+
+@dataclass(frozen=True, slots=True)
+class OperatorCommand:
+    """One joystick sample from an operator (DESIGN 7). x forward, y left, both in [-1, 1]."""
+
+    seq: int
+    stamp_ns: int
+    x: float
+    y: float
+    mode: str
+    deadman: bool
+    estop: bool
+    reset: bool
+    op: str
+
+    def __post_init__(self) -> None:
+        rejection = decode_command(_pack(self._wire()))
+        if isinstance(rejection, Rejection):
+            raise ValueError(f"invalid OperatorCommand: {rejection}")
+
+    def _wire(self) -> dict[str, Any]:
+        return {"v": SCHEMA_VERSION, **{k: getattr(self, k) for k in self.__slots__}}
+
+    def encode(self) -> bytes:
+        return _pack(self._wire())
+
+
+def _build_command(m: Mapping[Any, Any]) -> OperatorCommand:
+    fields_ = {
+        "seq": _int(m, "seq"),
+        "stamp_ns": _int(m, "stamp_ns"),
+        "x": _float(m, "x", -1.0, 1.0),
+        "y": _float(m, "y", -1.0, 1.0),
+        "mode": _str(m, "mode", MODES),
+        "deadman": _bool(m, "deadman"),
+        "estop": _bool(m, "estop"),
+        "reset": _bool(m, "reset"),
+        "op": _str(m, "op"),
+    }
+    cmd = object.__new__(OperatorCommand)
+    for key, value in fields_.items():
+        object.__setattr__(cmd, key, value)
+    return cmd
+
+
+def decode_command(payload: object) -> OperatorCommand | Rejection:
+    return _decode(payload, MAX_COMMAND_BYTES, _build_command)
+
+
+# ---------------------------------------------------------------------------------------------
+# Telemetry (robot -> operators, every control cycle)
+
+Circle = tuple[float, float, float]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Telemetry:
+    """One control cycle as the operator view needs it (DESIGN 7 keys plus view extras).
+
+    ``scan_xy`` holds the (possibly decimated) scan points in {R}; circles are (x, y, r) in {R}.
+    """
+
+    seq: int
+    stamp_ns: int
+    state: str
+    mode: str
+    v_ref: float
+    w_ref: float
+    v_cmd: float
+    w_cmd: float
+    w_si: float
+    region: str = "safe"
+    side: str | None = None
+    limiter: str = "none"
+    igc: Circle | None = None
+    agc: Circle | None = None
+    egc: Circle | None = None
+    r_rc: float = 0.0
+    scan_xy: npt.NDArray[np.float32] = field(default_factory=lambda: np.zeros((0, 2), np.float32))
+    pose: tuple[float, float, float] | None = None
+    cmd_age_ms: float | None = None
+    scan_age_ms: float | None = None
+    operator: str | None = None
+    profile: str = ""
+    rejected: int = 0
+    cycle: int = 0
+
+    def encode(self) -> bytes:
+        d = asdict(self)
+        d["scan_xy"] = np.ascontiguousarray(self.scan_xy, dtype="<f4").tobytes()
+        for key in ("igc", "agc", "egc", "pose"):
+            if d[key] is not None:
+                d[key] = [float(v) for v in d[key]]
+        return _pack({"v": SCHEMA_VERSION, **d})
+
+
+REGIONS: Final = ("safe", "conditional", "unsafe")
+SIDES: Final = ("left", "right")
+
+
+def _opt_tuple(m: Mapping[Any, Any], key: str, n: int) -> tuple[float, ...] | None:
+    value = m.get(key)
+    if value is None:
+        return None
+    if not isinstance(value, list) or len(value) != n:
+        raise _InvalidError(RejectReason.WRONG_TYPE, f"{key!r} must be a list of {n} numbers")
+    return tuple(_float({key: v}, key) for v in value)
+
+
+def _opt_str(m: Mapping[Any, Any], key: str, choices: tuple[str, ...] | None = None) -> str | None:
+    return None if m.get(key) is None else _str(m, key, choices)
+
+
+def _build_telemetry(m: Mapping[Any, Any]) -> Telemetry:
+    t = object.__new__(Telemetry)
+    values: dict[str, Any] = {
+        "seq": _int(m, "seq"),
+        "stamp_ns": _int(m, "stamp_ns"),
+        "state": _str(m, "state", STATES),
+        "mode": _str(m, "mode", MODES),
+        "v_ref": _float(m, "v_ref"),
+        "w_ref": _float(m, "w_ref"),
+        "v_cmd": _float(m, "v_cmd"),
+        "w_cmd": _float(m, "w_cmd"),
+        "w_si": _float(m, "w_si", 0.0, 1.0),
+        "region": _str(m, "region", REGIONS) if "region" in m else "safe",
+        "side": _opt_str(m, "side", SIDES),
+        "limiter": _str(m, "limiter") if "limiter" in m else "none",
+        "igc": _opt_tuple(m, "igc", 3),
+        "agc": _opt_tuple(m, "agc", 3),
+        "egc": _opt_tuple(m, "egc", 3),
+        "r_rc": _float(m, "r_rc") if "r_rc" in m else 0.0,
+        "scan_xy": _f32_array(m, "scan_xy", 2) if "scan_xy" in m else np.zeros((0, 2), np.float32),
+        "pose": _opt_tuple(m, "pose", 3),
+        "cmd_age_ms": _opt_float(m, "cmd_age_ms"),
+        "scan_age_ms": _opt_float(m, "scan_age_ms"),
+        "operator": _opt_str(m, "operator"),
+        "profile": _str(m, "profile") if m.get("profile") else "",
+        "rejected": _int(m, "rejected") if "rejected" in m else 0,
+        "cycle": _int(m, "cycle") if "cycle" in m else 0,
+    }
+    for key, value in values.items():
+        object.__setattr__(t, key, value)
+    return t
+
+
+def decode_telemetry(payload: object) -> Telemetry | Rejection:
+    return _decode(payload, MAX_TELEMETRY_BYTES, _build_telemetry)
+
+
+# ---------------------------------------------------------------------------------------------
+# State (robot -> operators, on change and at 1 Hz)
+
+
+@dataclass(frozen=True, slots=True)
+class StateMessage:
+    stamp_ns: int
+    state: str
+    reason: str
+    operator: str | None = None
+    rejected: int = 0
+
+    def encode(self) -> bytes:
+        return _pack({"v": SCHEMA_VERSION, **asdict(self)})
+
+
+def _build_state(m: Mapping[Any, Any]) -> StateMessage:
+    return StateMessage(
+        stamp_ns=_int(m, "stamp_ns"),
+        state=_str(m, "state", STATES),
+        reason=_str(m, "reason", max_chars=256),
+        operator=_opt_str(m, "operator"),
+        rejected=_int(m, "rejected") if "rejected" in m else 0,
+    )
+
+
+def decode_state(payload: object) -> StateMessage | Rejection:
+    return _decode(payload, MAX_SMALL_BYTES, _build_state)
+
+
+# ---------------------------------------------------------------------------------------------
+# Clock reply (robot queryable)
+
+
+def encode_clock_reply(robot_now_ns: int) -> bytes:
+    return _pack({"v": SCHEMA_VERSION, "stamp_ns": int(robot_now_ns)})
+
+
+def decode_clock_reply(payload: object) -> int | Rejection:
+    return _decode(payload, MAX_SMALL_BYTES, lambda m: _int(m, "stamp_ns"))
+
+
+# ---------------------------------------------------------------------------------------------
+# Remote driver messages: scan, base command, odometry
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class ScanMessage:
+    """A planar scan in the ROS LaserScan layout; ranges may hold inf/NaN (no return)."""
+
+    stamp_ns: int
+    angle_min_rad: float
+    angle_increment_rad: float
+    range_min_m: float
+    range_max_m: float
+    ranges_m: npt.NDArray[np.float32]
+    no_return_is_free: bool = False
+
+    def encode(self) -> bytes:
+        d = {f: getattr(self, f) for f in self.__slots__}
+        d["ranges_m"] = np.ascontiguousarray(self.ranges_m, dtype="<f4").tobytes()
+        return _pack({"v": SCHEMA_VERSION, **d})
+
+
+def _build_scan(m: Mapping[Any, Any]) -> ScanMessage:
+    range_min = _float(m, "range_min_m", 0.0, 1e4)
+    range_max = _float(m, "range_max_m", 0.0, 1e4)
+    if not range_min < range_max:
+        raise _InvalidError(RejectReason.OUT_OF_RANGE, "range_min_m must be < range_max_m")
+    return ScanMessage(
+        stamp_ns=_int(m, "stamp_ns"),
+        angle_min_rad=_float(m, "angle_min_rad", -10.0, 10.0),
+        angle_increment_rad=_float(m, "angle_increment_rad", -1.0, 1.0),
+        range_min_m=range_min,
+        range_max_m=range_max,
+        ranges_m=_f32_array(m, "ranges_m", allow_nonfinite=True),
+        no_return_is_free=_bool(m, "no_return_is_free") if "no_return_is_free" in m else False,
+    )
+
+
+def decode_scan(payload: object) -> ScanMessage | Rejection:
+    return _decode(payload, MAX_SCAN_BYTES, _build_scan)
+
+
+@dataclass(frozen=True, slots=True)
+class BaseCommand:
+    """Velocity sent to the base (robot -> driver)."""
+
+    stamp_ns: int
+    seq: int
+    linear_mps: float
+    angular_radps: float
+
+    def encode(self) -> bytes:
+        return _pack({"v": SCHEMA_VERSION, **asdict(self)})
+
+
+def _build_base_cmd(m: Mapping[Any, Any]) -> BaseCommand:
+    return BaseCommand(
+        stamp_ns=_int(m, "stamp_ns"),
+        seq=_int(m, "seq"),
+        linear_mps=_float(m, "linear_mps", -100.0, 100.0),
+        angular_radps=_float(m, "angular_radps", -100.0, 100.0),
+    )
+
+
+def decode_base_command(payload: object) -> BaseCommand | Rejection:
+    return _decode(payload, MAX_SMALL_BYTES, _build_base_cmd)
+
+
+@dataclass(frozen=True, slots=True)
+class Odometry:
+    """Pose and twist reported by the base (driver -> robot); world frame, SI units."""
+
+    stamp_ns: int
+    x_m: float
+    y_m: float
+    theta_rad: float
+    linear_mps: float
+    angular_radps: float
+    collided: bool = False
+
+    def encode(self) -> bytes:
+        return _pack({"v": SCHEMA_VERSION, **asdict(self)})
+
+
+def _build_odom(m: Mapping[Any, Any]) -> Odometry:
+    return Odometry(
+        stamp_ns=_int(m, "stamp_ns"),
+        x_m=_float(m, "x_m"),
+        y_m=_float(m, "y_m"),
+        theta_rad=_float(m, "theta_rad"),
+        linear_mps=_float(m, "linear_mps"),
+        angular_radps=_float(m, "angular_radps"),
+        collided=_bool(m, "collided") if "collided" in m else False,
+    )
+
+
+def decode_odometry(payload: object) -> Odometry | Rejection:
+    return _decode(payload, MAX_SMALL_BYTES, _build_odom)

@@ -1,0 +1,107 @@
+"""Laser scans and their conversion to points in the robot frame {R} (DESIGN 3, 5).
+
+A reading is *valid* when it is finite and within [range_min, range_max]. NaN, inf, readings
+below range_min (the sensor's blind zone) and above range_max (the usual "no return" encoding,
+e.g. range_max + 1) are dropped. Whether "no valid reading at all" means *free* or *unknown* is
+the driver's declaration (``no_return_is_free``); the filter treats unknown as a reason to stop.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Scan:
+    """One planar range scan: beam angles in {R} (rad, CCW from +x) and ranges (m)."""
+
+    angles_rad: FloatArray
+    ranges_m: FloatArray
+    range_min_m: float
+    range_max_m: float
+    stamp_ns: int = 0
+    no_return_is_free: bool = False
+    mount_x_m: float = 0.0
+    mount_y_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        angles = np.asarray(self.angles_rad, dtype=np.float64)
+        ranges = np.asarray(self.ranges_m, dtype=np.float64)
+        if angles.ndim != 1 or angles.shape != ranges.shape:
+            raise ValueError("scan angles and ranges must be 1-D arrays of the same length")
+        if not (math.isfinite(self.range_min_m) and math.isfinite(self.range_max_m)):
+            raise ValueError("scan range_min/range_max must be finite")
+        if not 0.0 <= self.range_min_m < self.range_max_m:
+            raise ValueError("scan needs 0 <= range_min < range_max")
+        if not np.all(np.isfinite(angles)):
+            raise ValueError("scan angles must be finite")
+        object.__setattr__(self, "angles_rad", angles)
+        object.__setattr__(self, "ranges_m", ranges)
+
+    @staticmethod
+    def uniform(
+        ranges_m: npt.ArrayLike,
+        angle_min_rad: float,
+        angle_increment_rad: float,
+        range_min_m: float,
+        range_max_m: float,
+        **kwargs: object,
+    ) -> Scan:
+        """A scan in the ROS LaserScan layout (first angle and increment)."""
+        r = np.asarray(ranges_m, dtype=np.float64)
+        angles = angle_min_rad + angle_increment_rad * np.arange(r.size, dtype=np.float64)
+        return Scan(angles, r, range_min_m, range_max_m, **kwargs)  # type: ignore[arg-type]
+
+    @property
+    def valid_mask(self) -> npt.NDArray[np.bool_]:
+        r = self.ranges_m
+        with np.errstate(invalid="ignore"):
+            return np.isfinite(r) & (r >= self.range_min_m) & (r <= self.range_max_m)
+
+    def points(self) -> FloatArray:
+        """Valid readings as an (N, 2) array of (x, y) in {R}, metres."""
+        return ranges_to_points(
+            self.ranges_m,
+            self.angles_rad,
+            self.range_min_m,
+            self.range_max_m,
+            self.mount_x_m,
+            self.mount_y_m,
+        )
+
+
+def ranges_to_points(
+    ranges_m: FloatArray,
+    angles_rad: FloatArray,
+    range_min_m: float,
+    range_max_m: float,
+    mount_x_m: float = 0.0,
+    mount_y_m: float = 0.0,
+) -> FloatArray:
+    """Valid (finite, range_min <= r <= range_max) readings to (N, 2) points in {R}."""
+    r = np.asarray(ranges_m, dtype=np.float64)
+    a = np.asarray(angles_rad, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        keep = np.isfinite(r) & (r >= range_min_m) & (r <= range_max_m)
+    r = r[keep]
+    a = a[keep]
+    out = np.empty((r.size, 2), dtype=np.float64)
+    out[:, 0] = r * np.cos(a) + mount_x_m
+    out[:, 1] = r * np.sin(a) + mount_y_m
+    return out
+
+
+def finite_points(points: npt.ArrayLike) -> FloatArray:
+    """An (N, 2) float array of the finite rows of ``points`` (empty input gives shape (0, 2))."""
+    p = np.asarray(points, dtype=np.float64)
+    if p.size == 0:
+        return np.empty((0, 2), dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise ValueError("points must be an (N, 2) array of x, y in metres")
+    return p[np.all(np.isfinite(p), axis=1)]

@@ -1,0 +1,3 @@
+from egc_app.cli import main
+
+raise SystemExit(main())

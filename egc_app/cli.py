@@ -1,0 +1,72 @@
+"""``egc-teleop`` entry point (DESIGN 2, pinned): one console script with subcommands.
+
+Subcommand modules are imported lazily so that ``egc-teleop filter`` does not pay for Zenoh or
+Rerun. Each module exposes ``configure(parser)`` and ``run(args) -> int``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+from typing import NoReturn
+
+from egc_common.errors import UsageError
+
+# name -> (module, one-line help)
+SUBCOMMANDS: dict[str, tuple[str, str]] = {
+    "filter": (
+        "egc_robot.filter_cli",
+        "filter JSON-lines commands against scan points (stdin -> stdout)",
+    ),
+    "robot": ("egc_app.robot_cmd", "run the robot process (commands in, filtered velocity out)"),
+    "operator": ("egc_operator.cli", "run the operator process (joystick in, commands out)"),
+    "sim": ("egc_sim.bridge", "run the simulated robot as a remote driver over Zenoh"),
+    "demo": ("egc_app.demo", "simulated robot + scripted operator + operator view on loopback"),
+    "episode": ("egc_app.episode", "run one headless episode (or a batch) and print JSON"),
+    "bench": ("egc_app.bench", "run the benchmarks in bench/"),
+}
+
+
+class CliArgumentParser(argparse.ArgumentParser):
+    """Bad arguments: one clear line on stderr and exit code 2 (DESIGN 2)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def build_parser() -> CliArgumentParser:
+    parser = CliArgumentParser(prog="egc-teleop", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=CliArgumentParser)
+    sub.required = True
+    for name, (_, help_text) in SUBCOMMANDS.items():
+        sub.add_parser(name, help=help_text, description=help_text)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args_list = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    # Parse only the subcommand name first, then let its module define the rest.
+    if not args_list or args_list[0] in ("-h", "--help"):
+        parser.parse_args(args_list or ["--help"])
+        return 0
+    name = args_list[0]
+    if name not in SUBCOMMANDS:
+        parser.error(f"unknown command {name!r} (choose from {', '.join(SUBCOMMANDS)})")
+    module = importlib.import_module(SUBCOMMANDS[name][0])
+    sub = CliArgumentParser(prog=f"egc-teleop {name}", description=SUBCOMMANDS[name][1])
+    module.configure(sub)
+    args = sub.parse_args(args_list[1:])
+    try:
+        return int(module.run(args) or 0)
+    except UsageError as exc:
+        print(f"egc-teleop {name}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,1 @@
+"""The operator process (the paper's "master"): joystick input, command publisher, view."""

@@ -1,0 +1,1 @@
+"""The robot process (the paper's "slave"): filters, command pipeline, safety, drivers."""

@@ -1,0 +1,172 @@
+"""``egc-teleop filter`` (pinned): the EGC filter as a JSON-lines tool on stdin/stdout.
+
+Each input line is ``{"v": float, "w": float, "points": [[x, y], ...]}`` (points in {R}, metres).
+Each output line carries the paper's equations alone (DESIGN 5.1-5.8) in ``v``/``w`` with their
+intermediates, and, under ``final``, what the robot would send to the base after the rules of
+DESIGN 5.9-5.10 and the profile's velocity limits (acceleration limits need a previous command
+and are not applied: each line stands alone). In the undefined cases of DESIGN 5.9, ``v``/``w``
+carry that case's documented rule, named by ``case``. A malformed line gives
+``{"error": "..."}`` and processing continues.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from typing import Any, TextIO
+
+from egc_common.errors import UsageError
+from egc_common.profiles import PROFILES, get_profile
+
+from egc_robot.filters.egc import EgcResult
+from egc_robot.pipeline import PipelineConfig, filter_velocity
+
+MAX_LINE_CHARS = 50_000_000
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--filter", default="egc", choices=["egc", "none"], help="filter to apply (default: egc)"
+    )
+    parser.add_argument(
+        "--profile",
+        default="pioneer3dx",
+        metavar="NAME",
+        help=f"robot profile: {', '.join(sorted(PROFILES))} (default: pioneer3dx)",
+    )
+    parser.add_argument(
+        "--horizon",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="prediction horizon kT in seconds (default: r_max / v_max)",
+    )
+    parser.add_argument(
+        "--no-return-is-free",
+        action="store_true",
+        help="treat a line with no points as free space instead of unknown",
+    )
+
+
+class LineError(ValueError):
+    pass
+
+
+def _reject_constant(name: str) -> float:
+    raise LineError(f"{name} is not a finite number")
+
+
+def _number(value: Any, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise LineError(f"{what} must be a number")
+    x = float(value)
+    if not math.isfinite(x):
+        raise LineError(f"{what} must be finite")
+    return x
+
+
+def parse_line(line: str) -> tuple[float, float, list[tuple[float, float]]]:
+    """Validate one input line; raises LineError with a message for the error line."""
+    if len(line) > MAX_LINE_CHARS:
+        raise LineError("line too long")
+    try:
+        obj = json.loads(line, parse_constant=_reject_constant)
+    except LineError:
+        raise
+    except (ValueError, RecursionError) as exc:
+        raise LineError(f"invalid JSON: {exc}") from None
+    if not isinstance(obj, dict):
+        raise LineError("line must be a JSON object")
+    for key in ("v", "w", "points"):
+        if key not in obj:
+            raise LineError(f"missing key {key!r}")
+    v = _number(obj["v"], "v")
+    w = _number(obj["w"], "w")
+    raw = obj["points"]
+    if not isinstance(raw, list):
+        raise LineError("points must be a list of [x, y]")
+    points = []
+    for i, p in enumerate(raw):
+        if not isinstance(p, list) or len(p) != 2:
+            raise LineError(f"points[{i}] must be [x, y]")
+        points.append((_number(p[0], f"points[{i}][0]"), _number(p[1], f"points[{i}][1]")))
+    return v, w, points
+
+
+def _circle(c: tuple[float, float, float] | None) -> list[float] | None:
+    return None if c is None else [c[0], c[1], c[2]]
+
+
+def result_json(res: EgcResult | None, v_ref: float, w_ref: float) -> dict[str, Any]:
+    if res is None:  # --filter none
+        return {
+            "v": v_ref,
+            "w": w_ref,
+            "w_si": 1.0,
+            "modified": False,
+            "region": "safe",
+            "side": None,
+            "rc": 0.0,
+            "igc": None,
+            "agc": None,
+            "egc": None,
+            "case": "none",
+        }
+    return {
+        "v": res.v_mps,
+        "w": res.w_radps,
+        "w_si": res.w_si,
+        "modified": res.modified,
+        "region": res.region.value,
+        "side": None if res.side is None else res.side.value,
+        "rc": res.r_rc_m,
+        "igc": _circle(res.igc),
+        "agc": _circle(res.agc),
+        "egc": _circle(res.egc),
+        "case": res.case.value,
+    }
+
+
+def process(stream_in: TextIO, stream_out: TextIO, config: PipelineConfig) -> int:
+    """Filter every line of ``stream_in``; returns the number of error lines written."""
+    errors = 0
+    for raw_line in stream_in:
+        line = raw_line.strip()
+        if not line:
+            continue
+        try:
+            v, w, points = parse_line(line)
+            mode = "shared" if config.filter == "egc" else "direct"
+            out = filter_velocity(config, v, w, mode, points, None, 0.0)
+            doc = result_json(out.filtered, v, w)
+            doc["final"] = {
+                "v": out.v_cmd_mps,
+                "w": out.w_cmd_radps,
+                "limiter": out.limiter.value,
+                "sweep_scale": out.sweep_scale,
+                "escape": out.escape,
+            }
+            text = json.dumps(doc, allow_nan=False)
+        except (LineError, ValueError) as exc:
+            errors += 1
+            text = json.dumps({"error": str(exc)})
+        stream_out.write(text + "\n")
+        stream_out.flush()
+    return errors
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        profile = get_profile(args.profile)
+        config = PipelineConfig(
+            profile,
+            filter=args.filter,
+            horizon_s=args.horizon,
+            no_return_is_free=args.no_return_is_free,
+        )
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    process(sys.stdin, sys.stdout, config)
+    return 0

@@ -1,0 +1,5 @@
+"""Shared-autonomy filters. Each is a pure function of command, scan points and parameters."""
+
+from egc_robot.filters.egc import EgcCase, EgcParams, EgcResult, Region, Side, egc_filter
+
+__all__ = ["EgcCase", "EgcParams", "EgcResult", "Region", "Side", "egc_filter"]

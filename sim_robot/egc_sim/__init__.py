@@ -1,0 +1,1 @@
+"""sim_robot: worlds, lidar, differential drive, collisions, scripted operators, episodes."""
