@@ -17,7 +17,8 @@ in; a frozen ``EgcResult`` with every intermediate out. The steps, as pinned in 
 
 Cases the paper leaves undefined (DESIGN 5.9), each never less safe than stopping:
 
-- ``NON_FINITE_INPUT``: v, w, a radius or the horizon is NaN or infinite -> stop (0, 0), w_SI 0.
+- ``INVALID_INPUT``: v or w is NaN, infinite or beyond 1e6 in magnitude -> stop (0, 0), w_SI 0.
+  Scan points that are not finite or beyond 1e6 m are dropped like invalid readings.
 - ``NO_POINTS_UNKNOWN``: no valid point at all and the sensor did not declare "no return means
   free" -> nothing was seen, so nothing is known to be free: stop, w_SI 0, region unsafe.
 - ``NO_POINTS_FREE``: no valid point and the driver declares no-return as free -> pass, w_SI 1.
@@ -46,6 +47,10 @@ import numpy.typing as npt
 FloatArray = npt.NDArray[np.float64]
 Point = tuple[float, float]
 
+# Inputs beyond this magnitude (m, m/s, rad/s) are treated as invalid: no real robot or sensor
+# produces them, and squaring them would overflow.
+MAX_ABS_INPUT = 1e6
+
 
 class Region(enum.Enum):
     """Regions of the safety index circle (eq. 5)."""
@@ -70,7 +75,7 @@ class EgcCase(enum.Enum):
     ZERO_WEIGHTS = "zero_weights"
     NO_POINTS_UNKNOWN = "no_points_unknown"
     NO_POINTS_FREE = "no_points_free"
-    NON_FINITE_INPUT = "non_finite_input"
+    INVALID_INPUT = "invalid_input"
 
 
 @dataclass(frozen=True, slots=True)
@@ -210,8 +215,8 @@ def _stop(case: EgcCase, r_rc: float, p_igc: Point, r_igc: float, region: Region
 def egc_filter(v_mps: float, w_radps: float, points: npt.ArrayLike, params: EgcParams) -> EgcResult:
     """Filter one command against scan points (N, 2) in {R}; see the module docstring."""
     kT, r_min, r_max = params.horizon_s, params.r_min_m, params.r_max_m
-    if not (math.isfinite(v_mps) and math.isfinite(w_radps)):
-        return _stop(EgcCase.NON_FINITE_INPUT, 0.0, (0.0, 0.0), 0.0, Region.UNSAFE)
+    if not (abs(v_mps) <= MAX_ABS_INPUT and abs(w_radps) <= MAX_ABS_INPUT):  # also NaN
+        return _stop(EgcCase.INVALID_INPUT, 0.0, (0.0, 0.0), 0.0, Region.UNSAFE)
 
     pts = np.asarray(points, dtype=np.float64)
     if pts.size == 0:
@@ -219,9 +224,9 @@ def egc_filter(v_mps: float, w_radps: float, points: npt.ArrayLike, params: EgcP
     elif pts.ndim != 2 or pts.shape[1] != 2:
         raise ValueError("points must be an (N, 2) array")
     px, py = pts[:, 0], pts[:, 1]
-    finite = np.isfinite(px) & np.isfinite(py)
-    if not finite.all():
-        px, py = px[finite], py[finite]
+    valid = (np.abs(px) <= MAX_ABS_INPUT) & (np.abs(py) <= MAX_ABS_INPUT)  # NaN compares False
+    if not valid.all():
+        px, py = px[valid], py[valid]
 
     p_igc = predicted_position(v_mps, w_radps, kT)  # eq. 6
     r_rc = math.hypot(*p_igc)  # eq. 7
