@@ -1,0 +1,201 @@
+"""The one thin Zenoh adapter shared by the robot, the operator and the sim bridge (DESIGN 1, 7).
+
+Everything that decides how a process joins the Zenoh network lives here, so that the three
+processes and the tests agree on it:
+
+- Peer mode by default, with **multicast scouting off** and explicit endpoints: a process only
+  talks to the endpoints it is told about (``--connect``/``--listen``), so tests on loopback can
+  run in parallel on free ports without finding each other. Client mode (``--mode client``)
+  connects to a router (``deploy/``).
+- ``--zenoh-config FILE`` loads a full Zenoh JSON5 configuration (TLS, access control, ...);
+  ``--mode``, ``--connect`` and ``--listen`` given on the command line still override it.
+- Lease 1000 ms with 4 keep-alives per lease: a hung peer (SIGSTOP, its TCP link still open) is
+  declared dead within 1 s, which drops its liveliness tokens (DESIGN 8: operator lost -> HOLD).
+  Each side advertises its own lease, so every process of this project uses the same value.
+- QoS helpers: commands are published with priority INTERACTIVE_HIGH and express (no batching);
+  telemetry and state with congestion control DROP at DATA priority, so that they can never
+  delay or block a command.
+
+Only this module and the process adapters import ``zenoh``; the cores never do (DESIGN 2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import socket
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from egc_common.errors import UsageError
+
+MODES = ("peer", "client")
+DEFAULT_PORT = 7447
+DEFAULT_ENDPOINT = f"tcp/127.0.0.1:{DEFAULT_PORT}"
+LEASE_MS = 1000
+KEEP_ALIVES_PER_LEASE = 4
+RECONNECT_PERIOD_MS = (250, 1000)  # first retry, longest retry
+
+
+@dataclass(frozen=True, slots=True)
+class ZenohOptions:
+    """How one process joins the Zenoh network."""
+
+    mode: str | None = None
+    connect: tuple[str, ...] = ()
+    listen: tuple[str, ...] = ()
+    config_file: str | None = None
+    lease_ms: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.mode is not None and self.mode not in MODES:
+            raise UsageError(f"zenoh mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        for endpoint in (*self.connect, *self.listen):
+            if "/" not in endpoint:
+                raise UsageError(f"zenoh endpoint {endpoint!r} must look like tcp/HOST:PORT")
+        if self.lease_ms is not None and not 100 <= self.lease_ms <= 600_000:
+            raise UsageError("--lease-ms must be within [100, 600000]")
+
+
+def add_zenoh_arguments(
+    parser: argparse.ArgumentParser,
+    default_listen: Sequence[str] = (),
+    default_connect: Sequence[str] = (),
+) -> None:
+    """Add --zenoh-config, --mode, --connect, --listen and --lease-ms to a subcommand."""
+    group = parser.add_argument_group("zenoh")
+    group.add_argument(
+        "--zenoh-config",
+        metavar="FILE",
+        help="Zenoh JSON5 configuration file (TLS, access control, router, ...); "
+        "--mode/--connect/--listen still override it",
+    )
+    group.add_argument(
+        "--mode", choices=MODES, default=None, help="Zenoh mode (default: peer, or the file's)"
+    )
+    group.add_argument(
+        "--connect",
+        action="append",
+        metavar="ENDPOINT",
+        help="endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable; default: "
+        f"{', '.join(default_connect) or 'none'})",
+    )
+    group.add_argument(
+        "--listen",
+        action="append",
+        metavar="ENDPOINT",
+        help=f"endpoint to listen on (repeatable; default: {', '.join(default_listen) or 'none'})",
+    )
+    group.add_argument(
+        "--lease-ms",
+        type=int,
+        default=None,
+        metavar="MS",
+        help=f"transport lease; a silent peer is dropped after it (default: {LEASE_MS})",
+    )
+    parser.set_defaults(
+        _zenoh_default_listen=tuple(default_listen), _zenoh_default_connect=tuple(default_connect)
+    )
+
+
+def options_from_args(args: argparse.Namespace) -> ZenohOptions:
+    """The options given on the command line; role defaults apply only without a config file."""
+    from_file = args.zenoh_config is not None
+    connect = args.connect or ([] if from_file else list(args._zenoh_default_connect))
+    listen = args.listen or ([] if from_file else list(args._zenoh_default_listen))
+    return ZenohOptions(
+        mode=args.mode,
+        connect=tuple(connect),
+        listen=tuple(listen),
+        config_file=args.zenoh_config,
+        lease_ms=args.lease_ms,
+    )
+
+
+def build_config(options: ZenohOptions) -> zenoh.Config:
+    """A Zenoh configuration for ``options`` (see the module docstring for the rules)."""
+    if options.config_file is not None:
+        path = Path(options.config_file)
+        if not path.is_file():
+            raise UsageError(f"zenoh config file not found: {path}")
+        try:
+            config = zenoh.Config.from_file(str(path))
+        except Exception as exc:  # zenoh raises its own ZError with the parser's message
+            raise UsageError(f"invalid zenoh config {path}: {exc}") from None
+    else:
+        config = zenoh.Config()
+        _insert(config, "mode", "peer")
+        _insert(config, "scouting/multicast/enabled", False)
+        _insert(config, "listen/endpoints", [])
+        _insert(config, "transport/link/tx/lease", LEASE_MS)
+        _insert(config, "transport/link/tx/keep_alive", KEEP_ALIVES_PER_LEASE)
+        first, longest = RECONNECT_PERIOD_MS
+        _insert(
+            config,
+            "connect/retry",
+            {"period_init_ms": first, "period_max_ms": longest, "period_increase_factor": 2},
+        )
+    if options.mode is not None:
+        _insert(config, "mode", options.mode)
+    if options.connect:
+        _insert(config, "connect/endpoints", list(options.connect))
+    if options.listen:
+        _insert(config, "listen/endpoints", list(options.listen))
+    if options.lease_ms is not None:
+        _insert(config, "transport/link/tx/lease", options.lease_ms)
+    return config
+
+
+def _insert(config: zenoh.Config, key: str, value: Any) -> None:
+    try:
+        config.insert_json5(key, json.dumps(value))
+    except Exception as exc:
+        raise UsageError(f"zenoh config {key}={value!r} rejected: {exc}") from None
+
+
+def open_session(options: ZenohOptions) -> zenoh.Session:
+    """Open a session; a failure (e.g. a port in use) becomes one clear UsageError line."""
+    config = build_config(options)
+    try:
+        return zenoh.open(config)
+    except Exception as exc:
+        raise UsageError(f"cannot open zenoh session: {exc}") from None
+
+
+def command_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
+    """Operator commands and base commands: high priority, express, never queued behind data."""
+    return session.declare_publisher(
+        key,
+        priority=zenoh.Priority.INTERACTIVE_HIGH,
+        express=True,
+        congestion_control=zenoh.CongestionControl.DROP,
+    )
+
+
+def data_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
+    """Telemetry, state, scans and odometry: dropped under congestion, never blocking."""
+    return session.declare_publisher(
+        key, priority=zenoh.Priority.DATA, congestion_control=zenoh.CongestionControl.DROP
+    )
+
+
+def payload_bytes(sample: zenoh.Sample) -> bytes:
+    """The raw payload of a sample (the strict decoders of ``messages`` take it from here)."""
+    data: bytes = sample.payload.to_bytes()
+    return data
+
+
+def free_tcp_port(host: str = "127.0.0.1") -> int:
+    """A TCP port that was free a moment ago (tests: one per robot so they run in parallel)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+def loopback_endpoint(port: int) -> str:
+    return f"tcp/127.0.0.1:{port}"

@@ -1,0 +1,382 @@
+"""The robot's per-cycle controller: command acceptance, control ownership, the DESIGN 8 state
+machine and the command pipeline, with no IO and no clock (DESIGN 2).
+
+Every method takes the robot's monotonic time in nanoseconds; the Zenoh node (``zenoh_node``),
+the headless episode runner and the tests feed it the same way.
+
+Acceptance rules for ``egc/<robot>/cmd`` (DESIGN 7, 8), in this order, each rejection counted by
+reason and returned to the caller for logging:
+
+1. strict decoding (``messages.decode_command``: size, msgpack, types, ranges, NaN);
+2. age on the robot's clock: ``stamp_ns`` older than ``max_command_age`` or further in the
+   future than that is STALE. ``stamp_ns == 0`` means "the operator is not synchronised yet":
+   accepted by default (the watchdog then bounds the age from arrival), rejected when
+   ``require_clock_sync`` is set;
+3. ``seq`` strictly increasing per operator: equal is DUPLICATE_SEQ, lower is OUT_OF_ORDER.
+   An operator that was silent for ``release_timeout`` starts a new session (its seq history
+   is forgotten), so a restarted operator is not locked out;
+4. control: the first operator to send a valid command with the deadman held takes control;
+   any other operator's command is NOT_IN_CONTROL. Control is released when the operator's
+   liveliness token goes away (explicit release or a lost/hung process) or after
+   ``release_timeout`` without a valid command from it.
+
+An e-stop request is honoured from every decodable command, whoever sent it and however old:
+stopping is always allowed (DESIGN 1: nothing from the network can do more than stop the robot).
+
+``step`` runs one control cycle: state machine, then ``pipeline.step_command`` while DRIVING,
+``safety.decelerate`` in HOLD and IDLE, zero in ESTOP; it returns the base command and the
+telemetry of the cycle.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter, OrderedDict
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+from egc_common.messages import (
+    BaseCommand,
+    Odometry,
+    OperatorCommand,
+    Rejection,
+    RejectReason,
+    StateMessage,
+    Telemetry,
+    decode_command,
+)
+from egc_common.scan import Scan
+
+from egc_robot.pipeline import Limiter, PipelineConfig, PipelineResult, step_command
+from egc_robot.safety import decelerate
+from egc_robot.state_machine import Inputs, State, Transition, next_state
+
+NS_PER_S = 1_000_000_000
+_MAX_TRACKED_OPERATORS = 64
+_STOPPED_EPS = 1e-6
+_MAX_DT_S = 0.5
+
+
+@dataclass(frozen=True, slots=True)
+class ControllerConfig:
+    """DESIGN 8 parameters (seconds) around the command pipeline's configuration."""
+
+    pipeline: PipelineConfig
+    max_command_age_s: float = 0.3
+    command_timeout_s: float = 0.25
+    scan_timeout_s: float = 0.2
+    release_timeout_s: float = 1.0
+    centre_tolerance: float = 0.05
+    require_clock_sync: bool = False
+    telemetry_scan_decimation: int = 2
+    nominal_period_s: float = 0.05
+
+    def __post_init__(self) -> None:
+        for name in (
+            "max_command_age_s",
+            "command_timeout_s",
+            "scan_timeout_s",
+            "release_timeout_s",
+            "nominal_period_s",
+        ):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number of seconds")
+        if not 0.0 <= self.centre_tolerance < 1.0:
+            raise ValueError("centre_tolerance must be in [0, 1)")
+        if self.telemetry_scan_decimation < 1:
+            raise ValueError("telemetry_scan_decimation must be >= 1")
+
+
+@dataclass(frozen=True, slots=True)
+class CommandVerdict:
+    """What happened to one received command payload."""
+
+    command: OperatorCommand | None
+    rejection: Rejection | None
+    took_control: bool = False
+    latency_ns: int | None = None  # arrival minus stamp, when the operator is synchronised
+
+    @property
+    def accepted(self) -> bool:
+        return self.rejection is None
+
+
+@dataclass(frozen=True, slots=True)
+class CycleOutput:
+    base: BaseCommand
+    telemetry: Telemetry
+    state_changed: StateMessage | None
+    result: PipelineResult | None
+
+
+@dataclass(slots=True)
+class _OperatorTrack:
+    last_seq: int
+    last_rx_ns: int
+
+
+@dataclass(slots=True)
+class _Scan:
+    points: npt.NDArray[np.float64]
+    rx_ns: int
+
+
+@dataclass(slots=True)
+class Counters:
+    accepted: int = 0
+    rejected: Counter[str] = field(default_factory=Counter)
+    estops: int = 0
+    cycles: int = 0
+
+    @property
+    def rejected_total(self) -> int:
+        return sum(self.rejected.values())
+
+
+class RobotController:
+    """Pure per-cycle robot logic (see the module docstring)."""
+
+    def __init__(self, config: ControllerConfig, start_ns: int) -> None:
+        self.config = config
+        self.counters = Counters()
+        self._transition = Transition(State.IDLE, "no operator")
+        self._state_since_ns = start_ns
+        self._controller_op: str | None = None
+        self._no_operator_reason = "no operator"
+        self._command: OperatorCommand | None = None
+        self._command_rx_ns = 0
+        self._tracks: OrderedDict[str, _OperatorTrack] = OrderedDict()
+        self._alive: set[str] = set()
+        self._estop_pending = False
+        self._scan: _Scan | None = None
+        self._telemetry_xy = np.zeros((0, 2), np.float32)
+        self._pose: tuple[float, float, float] | None = None
+        self._previous = (0.0, 0.0)
+        self._last_step_ns: int | None = None
+
+    # -- inputs -------------------------------------------------------------------------------
+
+    @property
+    def state(self) -> State:
+        return self._transition.state
+
+    @property
+    def reason(self) -> str:
+        return self._transition.reason
+
+    @property
+    def operator(self) -> str | None:
+        return self._controller_op
+
+    def on_command(self, payload: object, now_ns: int) -> CommandVerdict:
+        """Decode and vet one payload from ``egc/<robot>/cmd``; never raises."""
+        decoded = decode_command(payload)
+        if isinstance(decoded, Rejection):
+            return self._reject(None, decoded)
+        cmd = decoded
+        if cmd.estop:
+            if not self._estop_pending:
+                self.counters.estops += 1
+            self._estop_pending = True
+        cfg = self.config
+        max_age_ns = int(cfg.max_command_age_s * NS_PER_S)
+        latency_ns: int | None = None
+        if cmd.stamp_ns == 0:
+            if cfg.require_clock_sync:
+                return self._reject(cmd, Rejection(RejectReason.STALE, "operator not synchronised"))
+        else:
+            latency_ns = now_ns - cmd.stamp_ns
+            if latency_ns > max_age_ns:
+                return self._reject(
+                    cmd, Rejection(RejectReason.STALE, f"{latency_ns / 1e6:.0f} ms old")
+                )
+            if latency_ns < -max_age_ns:
+                return self._reject(
+                    cmd,
+                    Rejection(RejectReason.STALE, f"stamped {-latency_ns / 1e6:.0f} ms ahead"),
+                )
+        track = self._tracks.get(cmd.op)
+        release_ns = int(cfg.release_timeout_s * NS_PER_S)
+        if track is not None and now_ns - track.last_rx_ns > release_ns:
+            track = None  # a new session of that operator
+        if track is not None and cmd.seq <= track.last_seq:
+            reason = (
+                RejectReason.DUPLICATE_SEQ
+                if cmd.seq == track.last_seq
+                else RejectReason.OUT_OF_ORDER
+            )
+            return self._reject(cmd, Rejection(reason, f"seq {cmd.seq} after {track.last_seq}"))
+        self._track(cmd.op, cmd.seq, now_ns)
+        took_control = False
+        if self._controller_op is None and cmd.deadman:
+            self._controller_op = cmd.op
+            took_control = True
+        if self._controller_op != cmd.op:
+            holder = self._controller_op or "nobody (hold the deadman to take control)"
+            return self._reject(
+                cmd, Rejection(RejectReason.NOT_IN_CONTROL, f"{cmd.op}: control held by {holder}")
+            )
+        self._command = cmd
+        self._command_rx_ns = now_ns
+        self.counters.accepted += 1
+        return CommandVerdict(cmd, None, took_control, latency_ns)
+
+    def on_scan(self, scan: Scan, now_ns: int) -> None:
+        """The newest scan; its arrival time decides freshness (scan_timeout)."""
+        points = scan.points()
+        self._scan = _Scan(points, now_ns)
+        step = self.config.telemetry_scan_decimation
+        self._telemetry_xy = np.ascontiguousarray(points[::step], dtype=np.float32)
+
+    def on_odometry(self, odometry: Odometry) -> None:
+        self._pose = (odometry.x_m, odometry.y_m, odometry.theta_rad)
+
+    def on_operator_alive(self, operator_id: str, alive: bool) -> None:
+        """A liveliness token ``alive/operator/<id>`` appeared or went away."""
+        if alive:
+            if operator_id not in self._alive:
+                self._tracks.pop(operator_id, None)  # a (re)started operator: new seq session
+            if len(self._alive) < _MAX_TRACKED_OPERATORS:
+                self._alive.add(operator_id)
+            return
+        self._alive.discard(operator_id)
+        if operator_id == self._controller_op:
+            self._release(f"operator {operator_id} lost")
+
+    # -- the control cycle --------------------------------------------------------------------
+
+    def step(self, now_ns: int) -> CycleOutput:
+        """One control cycle at ``now_ns``: decide the state, compute and return the base command."""
+        cfg = self.config
+        dt_s = (
+            cfg.nominal_period_s
+            if self._last_step_ns is None
+            else min(max((now_ns - self._last_step_ns) / NS_PER_S, 0.0), _MAX_DT_S)
+        )
+        self._last_step_ns = now_ns
+        self.counters.cycles += 1
+        cmd = self._command
+        if (
+            self._controller_op is not None
+            and now_ns - self._command_rx_ns > cfg.release_timeout_s * NS_PER_S
+        ):
+            self._release(f"operator {self._controller_op} silent")
+            cmd = None
+        fresh = cmd is not None and self._command_fresh(cmd, now_ns)
+        scan = self._scan
+        scan_fresh = scan is not None and now_ns - scan.rx_ns <= cfg.scan_timeout_s * NS_PER_S
+        tol = cfg.centre_tolerance
+        inputs = Inputs(
+            operator_present=self._controller_op is not None,
+            command_fresh=fresh,
+            deadman=cmd is not None and cmd.deadman,
+            centred=cmd is not None and abs(cmd.x) <= tol and abs(cmd.y) <= tol,
+            scan_fresh=scan_fresh,
+            estop=self._estop_pending,
+            reset=cmd is not None and cmd.reset,
+            base_stopped=max(abs(self._previous[0]), abs(self._previous[1])) < _STOPPED_EPS,
+            no_operator_reason=self._no_operator_reason,
+        )
+        self._estop_pending = False
+        before = self._transition
+        self._transition = next_state(before, inputs)
+        changed = self._transition is not before
+        if changed:
+            self._state_since_ns = now_ns
+
+        result: PipelineResult | None = None
+        state = self._transition.state
+        if state is State.DRIVING and cmd is not None and scan is not None:
+            result = step_command(
+                cfg.pipeline, cmd.x, cmd.y, cmd.mode, scan.points, self._previous, dt_s
+            )
+            v, w, limiter = result.v_cmd_mps, result.w_cmd_radps, result.limiter
+        elif state is State.ESTOP:
+            v, w, limiter = 0.0, 0.0, Limiter.ESTOP
+        else:
+            v, w = decelerate(self._previous, dt_s, cfg.pipeline.profile)
+            limiter = Limiter.WATCHDOG if self.reason == "command timeout" else Limiter.HOLD
+        self._previous = (v, w)
+
+        base = BaseCommand(stamp_ns=now_ns, seq=self.counters.cycles, linear_mps=v, angular_radps=w)
+        telemetry = self._telemetry(now_ns, cmd, fresh, v, w, limiter, result)
+        return CycleOutput(base, telemetry, self.state_message(now_ns) if changed else None, result)
+
+    def state_message(self, now_ns: int) -> StateMessage:
+        return StateMessage(
+            stamp_ns=now_ns,
+            state=self.state.value,
+            reason=self.reason,
+            operator=self._controller_op,
+            rejected=self.counters.rejected_total,
+        )
+
+    # -- helpers ------------------------------------------------------------------------------
+
+    def _command_fresh(self, cmd: OperatorCommand, now_ns: int) -> bool:
+        cfg = self.config
+        if now_ns - self._command_rx_ns > cfg.command_timeout_s * NS_PER_S:
+            return False
+        return cmd.stamp_ns == 0 or now_ns - cmd.stamp_ns <= cfg.max_command_age_s * NS_PER_S
+
+    def _telemetry(
+        self,
+        now_ns: int,
+        cmd: OperatorCommand | None,
+        fresh: bool,
+        v: float,
+        w: float,
+        limiter: Limiter,
+        result: PipelineResult | None,
+    ) -> Telemetry:
+        filtered = result.filtered if result is not None else None
+        if cmd is None:
+            cmd_age_ms = None
+        else:
+            since = cmd.stamp_ns if cmd.stamp_ns else self._command_rx_ns
+            cmd_age_ms = (now_ns - since) / 1e6
+        scan = self._scan
+        return Telemetry(
+            seq=cmd.seq if cmd is not None else 0,
+            stamp_ns=now_ns,
+            state=self.state.value,
+            mode=cmd.mode if cmd is not None else "shared",
+            v_ref=result.v_ref_mps if result is not None else 0.0,
+            w_ref=result.w_ref_radps if result is not None else 0.0,
+            v_cmd=v,
+            w_cmd=w,
+            w_si=result.w_si if result is not None else (1.0 if fresh else 0.0),
+            region=result.region.value if result is not None else "safe",
+            side=result.side.value if result is not None and result.side is not None else None,
+            limiter=limiter.value,
+            igc=filtered.igc if filtered is not None else None,
+            agc=filtered.agc if filtered is not None else None,
+            egc=filtered.egc if filtered is not None else None,
+            r_rc=filtered.r_rc_m if filtered is not None else 0.0,
+            scan_xy=self._telemetry_xy,
+            pose=self._pose,
+            cmd_age_ms=cmd_age_ms,
+            scan_age_ms=None if scan is None else (now_ns - scan.rx_ns) / 1e6,
+            operator=self._controller_op,
+            profile=self.config.pipeline.profile.name,
+            rejected=self.counters.rejected_total,
+            cycle=self.counters.cycles,
+        )
+
+    def _reject(self, cmd: OperatorCommand | None, rejection: Rejection) -> CommandVerdict:
+        self.counters.rejected[rejection.reason.value] += 1
+        return CommandVerdict(cmd, rejection)
+
+    def _track(self, operator_id: str, seq: int, now_ns: int) -> None:
+        self._tracks[operator_id] = _OperatorTrack(seq, now_ns)
+        self._tracks.move_to_end(operator_id)
+        while len(self._tracks) > _MAX_TRACKED_OPERATORS:  # bounded against hostile op ids
+            oldest = next(k for k in self._tracks if k != self._controller_op)
+            del self._tracks[oldest]
+
+    def _release(self, reason: str) -> None:
+        self._controller_op = None
+        self._command = None
+        self._no_operator_reason = reason

@@ -1,0 +1,53 @@
+"""The base-and-sensor driver seam of the robot process (DESIGN 1, issue 4).
+
+The robot's loop talks to its base and sensor through one small Protocol, polled once per
+control cycle: ``poll(now_ns)`` hands over what arrived since the last poll (the newest scan with
+its arrival time, the newest odometry) and ``send`` drives the base. Implementations:
+
+- ``egc_robot.zenoh_driver.ZenohDriver``: the base and sensor are another process speaking the
+  pinned ``scan`` / ``base/cmd`` / ``base/odom`` keys (``egc-teleop sim``, or a real robot bridge);
+- the in-process simulator wrapper in ``egc_app.robot_cmd`` (egc_robot may not import egc_sim).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from egc_common.messages import BaseCommand, Odometry, ScanMessage
+from egc_common.scan import Scan
+
+
+@dataclass(frozen=True, slots=True)
+class SensorUpdate:
+    """What a driver received since the previous poll; None where nothing new arrived."""
+
+    scan: Scan | None = None
+    scan_rx_ns: int = 0
+    odometry: Odometry | None = None
+
+
+class Driver(Protocol):
+    def poll(self, now_ns: int) -> SensorUpdate:
+        """The newest scan and odometry since the previous poll."""
+        ...
+
+    def send(self, command: BaseCommand) -> None:
+        """Drive the base with this velocity until the next command."""
+        ...
+
+    def close(self) -> None: ...
+
+
+def scan_from_message(message: ScanMessage) -> Scan:
+    """A decoded ``egc/<robot>/scan`` message as a Scan in {R}."""
+    return Scan.uniform(
+        message.ranges_m.astype(np.float64),
+        message.angle_min_rad,
+        message.angle_increment_rad,
+        message.range_min_m,
+        message.range_max_m,
+        stamp_ns=message.stamp_ns,
+        no_return_is_free=message.no_return_is_free,
+    )

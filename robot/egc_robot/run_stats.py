@@ -1,0 +1,70 @@
+"""Run statistics the robot reports when it stops (the demo's summary), pure and clock-free.
+
+- distance: path length integrated from odometry poses;
+- interventions: cycles in which the filter (EGC or the footprint sweep) started limiting the
+  operator's command, counted once per episode of limiting (rising edges);
+- collisions: rising edges of the driver's ``collided`` flag;
+- command latency: arrival on the robot minus the operator's stamp (the operator's estimate of
+  the robot clock, DESIGN 7), for every accepted synchronised command.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from typing import Any
+
+import numpy as np
+from egc_common.messages import Odometry, Telemetry
+
+_INTERVENING = ("egc", "sweep")
+_MAX_LATENCIES = 1_000_000
+
+
+class RunStats:
+    def __init__(self) -> None:
+        self.distance_m = 0.0
+        self.interventions = 0
+        self.collisions = 0
+        self.cycles = 0
+        self.states: Counter[str] = Counter()
+        self._latencies_ms: list[float] = []
+        self._pose: tuple[float, float] | None = None
+        self._collided = False
+        self._limiting = False
+
+    def on_cycle(self, telemetry: Telemetry) -> None:
+        self.cycles += 1
+        self.states[telemetry.state] += 1
+        limiting = telemetry.limiter in _INTERVENING
+        if limiting and not self._limiting:
+            self.interventions += 1
+        self._limiting = limiting
+
+    def on_odometry(self, odometry: Odometry) -> None:
+        if self._pose is not None:
+            self.distance_m += math.hypot(
+                odometry.x_m - self._pose[0], odometry.y_m - self._pose[1]
+            )
+        self._pose = (odometry.x_m, odometry.y_m)
+        if odometry.collided and not self._collided:
+            self.collisions += 1
+        self._collided = odometry.collided
+
+    def on_latency(self, latency_ns: int) -> None:
+        if len(self._latencies_ms) < _MAX_LATENCIES:
+            self._latencies_ms.append(latency_ns / 1e6)
+
+    def summary(self) -> dict[str, Any]:
+        lat = np.asarray(self._latencies_ms, dtype=np.float64)
+        latency: dict[str, float | int | None] = {"n": int(lat.size)}
+        for name, q in (("p50", 50), ("p90", 90), ("p99", 99), ("max", 100)):
+            latency[f"{name}_ms"] = float(np.percentile(lat, q)) if lat.size else None
+        return {
+            "distance_m": round(self.distance_m, 3),
+            "interventions": self.interventions,
+            "collisions": self.collisions,
+            "cycles": self.cycles,
+            "cycles_by_state": dict(self.states),
+            "command_latency": latency,
+        }

@@ -1,0 +1,101 @@
+"""The robot's safety state machine (DESIGN 8), a pure function of the state and one snapshot.
+
+States:
+
+- ``IDLE``: no operator holds control and the base is stopped.
+- ``DRIVING``: the controlling operator's newest command is fresh, its deadman is held and the
+  scan is fresh; the command pipeline drives the base.
+- ``HOLD``: stop, decelerating at the profile's limit: the command is stale or missing
+  (watchdog), the deadman is released, the operator is gone (liveliness lost or silent; the
+  robot holds until the base is stopped, then goes IDLE), or the scan is stale.
+- ``ESTOP``: latched by any e-stop request; the base is sent zero at once. It is left (to
+  HOLD) only when the controlling operator sends a fresh ``reset`` with the deadman held, the
+  stick centred and the e-stop released.
+
+Resuming is the same rule everywhere: from IDLE or HOLD the robot enters DRIVING only on a fresh,
+deadman-held command with the stick **centred**, so an operator who returns (after a crash, a
+hang, a stale link or an e-stop) with the stick deflected cannot make the robot jump.
+
+The function reads no clock: the controller computes the snapshot (freshness, presence) from
+monotonic times it is given.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+
+class State(enum.Enum):
+    IDLE = "IDLE"
+    DRIVING = "DRIVING"
+    HOLD = "HOLD"
+    ESTOP = "ESTOP"
+
+
+@dataclass(frozen=True, slots=True)
+class Inputs:
+    """What the state machine looks at in one control cycle."""
+
+    operator_present: bool
+    command_fresh: bool
+    deadman: bool
+    centred: bool
+    scan_fresh: bool
+    estop: bool
+    reset: bool
+    base_stopped: bool
+    no_operator_reason: str = "no operator"
+
+
+@dataclass(frozen=True, slots=True)
+class Transition:
+    state: State
+    reason: str
+
+
+def hold_reason(inputs: Inputs) -> str | None:
+    """The first DESIGN 8 condition that forbids driving, or None if driving is allowed."""
+    if not inputs.operator_present:
+        return inputs.no_operator_reason
+    if not inputs.command_fresh:
+        return "command timeout"
+    if not inputs.deadman:
+        return "deadman released"
+    if not inputs.scan_fresh:
+        return "sensor stale"
+    return None
+
+
+def next_state(current: Transition, inputs: Inputs) -> Transition:
+    """One step of the DESIGN 8 state machine; returns ``current`` itself when nothing changes."""
+    if inputs.estop:
+        return _keep(current, State.ESTOP, "estop")
+    if current.state is State.ESTOP:
+        if (
+            inputs.operator_present
+            and inputs.command_fresh
+            and inputs.reset
+            and inputs.deadman
+            and inputs.centred
+        ):
+            return Transition(State.HOLD, "estop reset")
+        return current
+    reason = hold_reason(inputs)
+    if not inputs.operator_present:
+        if inputs.base_stopped:
+            return _keep(current, State.IDLE, "no operator")
+        return _keep(current, State.HOLD, inputs.no_operator_reason)
+    if reason is not None:
+        return _keep(current, State.HOLD, reason)
+    if current.state is State.DRIVING:
+        return current
+    if inputs.centred:
+        return Transition(State.DRIVING, "fresh centred command")
+    return _keep(current, State.HOLD, "waiting for a centred stick")
+
+
+def _keep(current: Transition, state: State, reason: str) -> Transition:
+    if current.state is state and current.reason == reason:
+        return current
+    return Transition(state, reason)

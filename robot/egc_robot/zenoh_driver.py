@@ -1,0 +1,86 @@
+"""The remote driver: base and sensor in another process over Zenoh (DESIGN 7 keys).
+
+Subscribes to ``egc/<robot>/scan`` and ``egc/<robot>/base/odom``, publishes
+``egc/<robot>/base/cmd`` with command QoS (high priority, express). Payloads are decoded
+strictly; a rejected payload is counted and logged, never raised. Arrival times are taken in
+the Zenoh callback with the robot's monotonic clock, so scan freshness is measured on the robot.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import Counter
+
+import zenoh
+from egc_common import keys
+from egc_common.messages import (
+    BaseCommand,
+    Odometry,
+    Rejection,
+    ScanMessage,
+    decode_odometry,
+    decode_scan,
+)
+from egc_common.transport import command_publisher, payload_bytes
+
+from egc_robot.drivers import SensorUpdate, scan_from_message
+
+log = logging.getLogger("egc.robot.driver")
+
+
+class ZenohDriver:
+    def __init__(self, session: zenoh.Session, robot_id: str) -> None:
+        self._lock = threading.Lock()
+        self._scan: ScanMessage | None = None
+        self._scan_rx_ns = 0
+        self._odometry: Odometry | None = None
+        self.rejected: Counter[str] = Counter()
+        self._publisher = command_publisher(session, keys.base_cmd(robot_id))
+        self._subscribers = [
+            session.declare_subscriber(keys.scan(robot_id), self._on_scan),
+            session.declare_subscriber(keys.base_odom(robot_id), self._on_odometry),
+        ]
+
+    def _on_scan(self, sample: zenoh.Sample) -> None:
+        now_ns = time.monotonic_ns()
+        decoded = decode_scan(payload_bytes(sample))
+        if isinstance(decoded, Rejection):
+            self._count(decoded, "scan")
+            return
+        with self._lock:
+            self._scan, self._scan_rx_ns = decoded, now_ns
+
+    def _on_odometry(self, sample: zenoh.Sample) -> None:
+        decoded = decode_odometry(payload_bytes(sample))
+        if isinstance(decoded, Rejection):
+            self._count(decoded, "odometry")
+            return
+        with self._lock:
+            self._odometry = decoded
+
+    def _count(self, rejection: Rejection, what: str) -> None:
+        with self._lock:
+            self.rejected[rejection.reason.value] += 1
+            n = self.rejected[rejection.reason.value]
+        if n == 1 or n % 100 == 0:
+            log.warning("rejected %s from the driver (%d so far): %s", what, n, rejection)
+
+    def poll(self, now_ns: int) -> SensorUpdate:
+        with self._lock:
+            scan, rx_ns, odometry = self._scan, self._scan_rx_ns, self._odometry
+            self._scan, self._odometry = None, None
+        return SensorUpdate(
+            scan=None if scan is None else scan_from_message(scan),
+            scan_rx_ns=rx_ns,
+            odometry=odometry,
+        )
+
+    def send(self, command: BaseCommand) -> None:
+        self._publisher.put(command.encode())
+
+    def close(self) -> None:
+        for subscriber in self._subscribers:
+            subscriber.undeclare()
+        self._publisher.undeclare()

@@ -1,0 +1,261 @@
+"""The robot process's IO shell around ``RobotController`` (DESIGN 1, 7, 8; issue 4).
+
+Zenoh callbacks only time-stamp what arrives (robot monotonic clock) and queue it; one thread
+owns the controller and runs it:
+
+- a fixed-rate control cycle on a monotonic deadline schedule (``rate_hz``, default 20; the
+  deadline advances by whole periods, so the rate does not drift with the work done per cycle),
+- plus an immediate cycle whenever a command from the operator in control is accepted, so the
+  base sees a new command within the pipeline's run time rather than up to one period later,
+- telemetry on every cycle (congestion DROP), state on change and at 1 Hz,
+- the clock queryable ``egc/<robot>/clock`` answered straight from the callback,
+- the liveliness token ``egc/<robot>/alive/robot`` and a liveliness subscriber (with history)
+  on ``egc/<robot>/alive/operator/*``,
+- every rejected command counted by reason (in the controller) and logged, rate-limited per
+  reason so a flood cannot flood the log.
+
+Nothing received from the network can raise out of a callback or the loop: the decoders are
+non-raising, and the callbacks guard the little they do.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import zenoh
+from egc_common import keys
+from egc_common.messages import BaseCommand, StateMessage, encode_clock_reply
+from egc_common.scan import Scan
+from egc_common.transport import data_publisher, payload_bytes
+
+from egc_robot.controller import CommandVerdict, RobotController
+from egc_robot.drivers import Driver
+from egc_robot.run_stats import RunStats
+
+log = logging.getLogger("egc.robot")
+
+_QUEUE_SIZE = 4096
+_STATE_PERIOD_NS = 1_000_000_000
+_LOG_PERIOD_NS = 1_000_000_000
+
+
+class Recorder(Protocol):
+    """The black box's interface (``egc_robot.blackbox.BlackBox``)."""
+
+    def on_command(
+        self, raw_payload: bytes, accepted: bool, reason: str | None, now_ns: int
+    ) -> None: ...
+    def on_base_command(self, command: BaseCommand) -> None: ...
+    def on_scan(self, scan: Scan, now_ns: int) -> None: ...
+    def on_state(self, state: StateMessage) -> None: ...
+    def close(self) -> None: ...
+
+
+@dataclass(frozen=True, slots=True)
+class _Received:
+    kind: str  # "cmd" or "alive"
+    payload: bytes
+    rx_ns: int
+    alive: bool = True
+
+
+class RejectionLog:
+    """Logs each rejection reason at most once per second, with the count since the last line."""
+
+    def __init__(self) -> None:
+        self._last_ns: dict[str, int] = {}
+        self._pending: Counter[str] = Counter()
+
+    def log(self, verdict: CommandVerdict, total: int, now_ns: int) -> None:
+        assert verdict.rejection is not None
+        reason = verdict.rejection.reason.value
+        last = self._last_ns.get(reason)
+        if last is not None and now_ns - last < _LOG_PERIOD_NS:
+            self._pending[reason] += 1
+            return
+        more = self._pending.pop(reason, 0)
+        self._last_ns[reason] = now_ns
+        log.warning(
+            "rejected command (%s) from %s: %s%s [rejected so far: %d]",
+            reason,
+            verdict.command.op if verdict.command is not None else "?",
+            verdict.rejection.detail,
+            f" (+{more} more {reason} since the last line)" if more else "",
+            total,
+        )
+
+
+class RobotNode:
+    """Runs a RobotController against a driver and a Zenoh session until ``stop`` is set."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        robot_id: str,
+        controller: RobotController,
+        driver: Driver,
+        rate_hz: float,
+        recorder: Recorder | None = None,
+        stats: RunStats | None = None,
+        clock: Callable[[], int] = time.monotonic_ns,
+    ) -> None:
+        self._controller = controller
+        self._driver = driver
+        self._period_ns = round(1e9 / rate_hz)
+        self._recorder = recorder
+        self._stats = stats
+        self._clock = clock
+        self._queue: queue.Queue[_Received] = queue.Queue(maxsize=_QUEUE_SIZE)
+        self._overflow = 0
+        self._rejections = RejectionLog()
+        self._telemetry = data_publisher(session, keys.telemetry(robot_id))
+        self._state = data_publisher(session, keys.state(robot_id))
+        liveliness = session.liveliness()
+        self._token = liveliness.declare_token(keys.alive_robot(robot_id))
+        self._entities = [
+            session.declare_subscriber(keys.cmd(robot_id), self._on_command),
+            session.declare_queryable(keys.clock(robot_id), self._on_clock_query),
+            liveliness.declare_subscriber(
+                keys.alive_operators(robot_id), self._on_liveliness, history=True
+            ),
+        ]
+
+    # -- Zenoh callbacks (Zenoh's threads) ------------------------------------------------------
+
+    def _on_command(self, sample: zenoh.Sample) -> None:
+        self._put(_Received("cmd", payload_bytes(sample), self._clock()))
+
+    def _on_liveliness(self, sample: zenoh.Sample) -> None:
+        alive = sample.kind == zenoh.SampleKind.PUT
+        self._put(_Received("alive", str(sample.key_expr).encode(), self._clock(), alive))
+
+    def _on_clock_query(self, query: zenoh.Query) -> None:
+        try:
+            query.reply(query.key_expr, encode_clock_reply(self._clock()))
+        except Exception as exc:  # a querier that went away must not kill the callback
+            log.debug("clock reply failed: %s", exc)
+
+    def _put(self, item: _Received) -> None:
+        try:
+            self._queue.put_nowait(item)
+        except queue.Full:
+            self._overflow += 1  # counted; the controller's watchdog covers what is lost
+
+    # -- the loop (one thread owns the controller) ----------------------------------------------
+
+    def run(self, stop: threading.Event) -> None:
+        period = self._period_ns
+        deadline = self._clock() + period
+        last_state_ns = 0
+        while not stop.is_set():
+            command_arrived = self._drain(max(0, deadline - self._clock()) / 1e9)
+            now = self._clock()
+            self._poll_driver(now)
+            tick = now >= deadline
+            if tick or command_arrived:
+                last_state_ns = self._cycle(now, last_state_ns)
+            if tick:
+                deadline += period
+                if deadline <= now:  # overran a whole period: skip, do not burst
+                    deadline = now + period
+
+    def shutdown(self) -> None:
+        """Stop the base, announce it, and undeclare everything."""
+        now = self._clock()
+        stop_cmd = BaseCommand(stamp_ns=now, seq=0, linear_mps=0.0, angular_radps=0.0)
+        self._driver.send(stop_cmd)
+        state = StateMessage(
+            stamp_ns=now,
+            state="HOLD",
+            reason="robot shutting down",
+            operator=None,
+            rejected=self._controller.counters.rejected_total,
+        )
+        self._state.put(state.encode())
+        for entity in self._entities:
+            entity.undeclare()
+        self._token.undeclare()
+        if self._recorder is not None:
+            self._recorder.close()
+
+    def _drain(self, timeout_s: float) -> bool:
+        """Handle everything queued, waiting up to ``timeout_s`` for the first item.
+
+        Returns True if a command from the operator in control was accepted.
+        """
+        try:
+            item = self._queue.get(timeout=timeout_s) if timeout_s > 0 else self._queue.get_nowait()
+        except queue.Empty:
+            return False
+        accepted = False
+        while True:
+            accepted |= self._handle(item)
+            try:
+                item = self._queue.get_nowait()
+            except queue.Empty:
+                return accepted
+
+    def _handle(self, item: _Received) -> bool:
+        controller = self._controller
+        if item.kind == "alive":
+            operator_id = keys.operator_id_from_alive_key(item.payload.decode())
+            if operator_id is not None:
+                controller.on_operator_alive(operator_id, item.alive)
+                log.info("operator %s %s", operator_id, "alive" if item.alive else "lost")
+            return False
+        verdict = controller.on_command(item.payload, item.rx_ns)
+        if self._recorder is not None:
+            reason = None if verdict.rejection is None else str(verdict.rejection)
+            self._recorder.on_command(item.payload, verdict.accepted, reason, item.rx_ns)
+        if not verdict.accepted:
+            self._rejections.log(verdict, controller.counters.rejected_total, item.rx_ns)
+            return False
+        if verdict.took_control:
+            log.info("operator %s took control", controller.operator)
+        if verdict.latency_ns is not None and self._stats is not None:
+            self._stats.on_latency(verdict.latency_ns)
+        return True
+
+    def _poll_driver(self, now: int) -> None:
+        update = self._driver.poll(now)
+        if update.scan is not None:
+            self._controller.on_scan(update.scan, update.scan_rx_ns)
+            if self._recorder is not None:
+                self._recorder.on_scan(update.scan, update.scan_rx_ns)
+        if update.odometry is not None:
+            self._controller.on_odometry(update.odometry)
+            if self._stats is not None:
+                self._stats.on_odometry(update.odometry)
+
+    def _cycle(self, now: int, last_state_ns: int) -> int:
+        out = self._controller.step(now)
+        self._driver.send(out.base)
+        self._telemetry.put(out.telemetry.encode())
+        if self._recorder is not None:
+            self._recorder.on_base_command(out.base)
+        if self._stats is not None:
+            self._stats.on_cycle(out.telemetry)
+        if out.state_changed is not None:
+            log.info(
+                "state %s (%s)%s",
+                out.state_changed.state,
+                out.state_changed.reason,
+                f", operator {out.state_changed.operator}" if out.state_changed.operator else "",
+            )
+            if self._recorder is not None:
+                self._recorder.on_state(out.state_changed)
+        if out.state_changed is not None or now - last_state_ns >= _STATE_PERIOD_NS:
+            self._state.put(self._controller.state_message(now).encode())
+            return now
+        return last_state_ns
+
+    @property
+    def overflow(self) -> int:
+        return self._overflow

@@ -1,0 +1,255 @@
+"""RobotController: acceptance rules, control ownership, watchdogs and outputs (DESIGN 7, 8).
+
+Time is simulated: every call gets an explicit monotonic time, starting an hour in so that
+stamps are large like a real monotonic clock.
+"""
+
+from __future__ import annotations
+
+import math
+
+import msgpack
+import numpy as np
+import pytest
+from egc_common.messages import decode_telemetry
+from egc_common.profiles import get_profile
+from egc_common.scan import Scan
+from egc_robot.controller import ControllerConfig, RobotController
+from egc_robot.pipeline import PipelineConfig
+from egc_robot.state_machine import State
+
+MS = 1_000_000
+T0 = 3600 * 1000 * MS
+PROFILE = get_profile("pioneer3dx")
+
+
+def raw(seq: int, stamp_ns: int, x: float = 0.0, y: float = 0.0, **kw: object) -> bytes:
+    msg = {"v": 1, "seq": seq, "stamp_ns": stamp_ns, "x": x, "y": y, "mode": "shared"}
+    msg |= {"deadman": True, "estop": False, "reset": False, "op": "alice"}
+    msg |= kw
+    return msgpack.packb(msg)
+
+
+def open_scan(n: int = 360, r: float = 5.0) -> Scan:
+    return Scan.uniform(np.full(n, r), -math.pi, 2 * math.pi / n, 0.05, 10.0)
+
+
+class Rig:
+    """A controller plus a simulated clock and an operator that stamps correctly."""
+
+    def __init__(self, **config: object) -> None:
+        cfg = ControllerConfig(PipelineConfig(PROFILE), **config)  # type: ignore[arg-type]
+        self.now = T0
+        self.c = RobotController(cfg, self.now)
+        self.seq = 0
+
+    def send(self, x: float = 0.0, y: float = 0.0, delay_ms: float = 1.0, **kw: object):
+        self.seq += 1
+        kw.setdefault("seq", self.seq)
+        payload = raw(stamp_ns=self.now - int(delay_ms * MS), x=x, y=y, **kw)
+        return self.c.on_command(payload, self.now)
+
+    def cycle(self, dt_ms: float = 20.0, scan: bool = True):
+        self.now += int(dt_ms * MS)
+        if scan:
+            self.c.on_scan(open_scan(), self.now)
+        return self.c.step(self.now)
+
+    def drive(self, x: float, cycles: int = 5):
+        out = None
+        for _ in range(cycles):
+            self.send(x=x)
+            out = self.cycle()
+        return out
+
+
+def driving_rig(**config: object) -> Rig:
+    rig = Rig(**config)
+    rig.send()
+    assert rig.cycle().telemetry.state == "DRIVING"
+    rig.drive(1.0, cycles=30)
+    return rig
+
+
+def test_centred_deadman_command_drives_and_telemetry_has_pinned_keys():
+    rig = driving_rig()
+    out = rig.drive(1.0)
+    assert out.base.linear_mps == pytest.approx(PROFILE.v_max_mps)
+    t = out.telemetry
+    assert (t.state, t.mode, t.operator) == ("DRIVING", "shared", "alice")
+    assert t.v_ref == pytest.approx(PROFILE.v_max_mps)
+    assert t.w_si == 1.0
+    decoded = msgpack.unpackb(t.encode())
+    for key in (
+        "v",
+        "seq",
+        "stamp_ns",
+        "state",
+        "v_ref",
+        "w_ref",
+        "v_cmd",
+        "w_cmd",
+        "w_si",
+        "mode",
+    ):
+        assert key in decoded
+    assert not isinstance(decode_telemetry(t.encode()), Exception)
+
+
+def test_deflected_first_command_does_not_drive():
+    rig = Rig()
+    rig.send(x=1.0)
+    out = rig.cycle()
+    assert out.telemetry.state == "HOLD"
+    assert out.base.linear_mps == 0.0
+    assert rig.c.reason == "waiting for a centred stick"
+
+
+@pytest.mark.parametrize(
+    ("kw", "reason"),
+    [
+        ({"delay_ms": 400}, "stale"),
+        ({"delay_ms": -400}, "stale"),
+    ],
+)
+def test_age_rule(kw, reason):
+    rig = Rig()
+    verdict = rig.send(**kw)
+    assert verdict.rejection is not None and verdict.rejection.reason.value == reason
+    assert rig.c.counters.rejected[reason] == 1
+
+
+def test_unsynchronised_stamp_is_accepted_unless_sync_required():
+    assert Rig().c.on_command(raw(1, 0), T0).accepted
+    strict = Rig(require_clock_sync=True)
+    assert strict.c.on_command(raw(1, 0), T0).rejection.reason.value == "stale"
+
+
+def test_duplicate_and_out_of_order_seq():
+    rig = Rig()
+    assert rig.send(seq=10).accepted
+    assert rig.send(seq=10).rejection.reason.value == "duplicate_seq"
+    assert rig.send(seq=9).rejection.reason.value == "out_of_order"
+    assert rig.send(seq=11).accepted
+    assert rig.c.counters.rejected_total == 2
+
+
+def test_restarted_operator_after_release_timeout_starts_a_new_seq_session():
+    rig = Rig()
+    assert rig.send(seq=500).accepted
+    rig.now += 1200 * MS
+    assert rig.send(seq=1).accepted
+
+
+@pytest.mark.parametrize(
+    "payload",
+    [
+        b"\xc1garbage",
+        msgpack.packb([1, 2, 3]),
+        raw(1, T0, x=float("nan")),
+        raw(1, T0, x="fast"),
+        raw(1, T0, x=2.0),
+        raw(1, T0, op="x" * 1000),
+        b"\x00" * 100_000,
+    ],
+)
+def test_malformed_payloads_are_counted_and_change_nothing(payload):
+    rig = driving_rig()
+    before = rig.c.counters.accepted
+    verdict = rig.c.on_command(payload, rig.now)
+    assert not verdict.accepted
+    assert rig.c.counters.rejected_total == 1
+    assert rig.c.counters.accepted == before
+    assert rig.cycle().telemetry.state == "DRIVING"
+
+
+def test_second_operator_is_not_in_control():
+    rig = driving_rig()
+    verdict = rig.send(x=-1.0, op="mallory", seq=1)
+    assert verdict.rejection.reason.value == "not_in_control"
+    out = rig.cycle()
+    assert out.base.linear_mps > 0
+    assert out.telemetry.operator == "alice"
+
+
+def test_control_needs_the_deadman():
+    rig = Rig()
+    assert rig.send(deadman=False).rejection.reason.value == "not_in_control"
+    assert rig.c.operator is None
+    assert rig.send().took_control
+
+
+def test_watchdog_holds_and_decelerates_at_the_profile_limit():
+    rig = driving_rig()
+    v = rig.cycle(dt_ms=0).base.linear_mps
+    out = rig.cycle(dt_ms=260)  # no command for 260 ms > command_timeout
+    assert out.telemetry.state == "HOLD" and rig.c.reason == "command timeout"
+    assert out.telemetry.limiter == "watchdog"
+    assert out.base.linear_mps == pytest.approx(max(0.0, v - PROFILE.decel_max_mps2 * 0.26))
+    for _ in range(20):
+        out = rig.cycle()
+    assert out.base.linear_mps == 0.0
+
+
+def test_resume_after_hold_needs_a_centred_stick():
+    rig = driving_rig()
+    rig.cycle(dt_ms=300)
+    rig.send(x=1.0)
+    assert rig.cycle().telemetry.state == "HOLD"
+    rig.send(x=0.0)
+    assert rig.cycle().telemetry.state == "DRIVING"
+
+
+def test_deadman_release_holds():
+    rig = driving_rig()
+    rig.send(x=1.0, deadman=False)
+    assert rig.cycle().telemetry.state == "HOLD"
+    assert rig.c.reason == "deadman released"
+
+
+def test_sensor_stale_holds():
+    rig = driving_rig()
+    rig.send(x=1.0)
+    rig.cycle(dt_ms=250, scan=False)
+    assert rig.c.state is State.HOLD and rig.c.reason == "sensor stale"
+
+
+def test_operator_liveliness_lost_holds_at_once_and_releases_control():
+    rig = driving_rig()
+    rig.c.on_operator_alive("alice", True)
+    rig.c.on_operator_alive("alice", False)
+    out = rig.cycle()
+    assert out.telemetry.state == "HOLD" and out.telemetry.operator is None
+    assert "alice lost" in rig.c.reason
+    assert rig.send(op="bob", seq=1).took_control
+
+
+def test_silent_operator_loses_control_and_robot_goes_idle():
+    rig = driving_rig()
+    for _ in range(60):
+        out = rig.cycle()
+    assert out.telemetry.state == "IDLE" and out.base.linear_mps == 0.0
+
+
+def test_estop_from_anyone_latches_and_reset_needs_centred_deadman():
+    rig = driving_rig()
+    verdict = rig.send(op="watcher", seq=1, estop=True, deadman=False)
+    assert not verdict.accepted  # not in control, but the e-stop is honoured
+    out = rig.cycle()
+    assert out.telemetry.state == "ESTOP" and out.base.linear_mps == 0.0
+    rig.drive(1.0, cycles=3)
+    assert rig.c.state is State.ESTOP
+    rig.send(x=1.0, reset=True)
+    assert rig.cycle().telemetry.state == "ESTOP"
+    rig.send(reset=True)
+    assert rig.cycle().telemetry.state == "HOLD"
+    rig.send()
+    assert rig.cycle().telemetry.state == "DRIVING"
+
+
+def test_state_message_only_on_change():
+    rig = Rig()
+    rig.send()
+    assert rig.cycle().state_changed.state == "DRIVING"
+    rig.send()
+    assert rig.cycle().state_changed is None
