@@ -5,10 +5,10 @@ processes and the tests agree on it:
 
 - Peer mode by default, with **multicast scouting off** and explicit endpoints: a process only
   talks to the endpoints it is told about (``--connect``/``--listen``), so tests on loopback can
-  run in parallel on free ports without finding each other. Client mode (``--mode client``)
+  run in parallel on free ports without finding each other. Client mode (``--zenoh-mode client``)
   connects to a router (``deploy/``).
 - ``--zenoh-config FILE`` loads a full Zenoh JSON5 configuration (TLS, access control, ...);
-  ``--mode``, ``--connect`` and ``--listen`` given on the command line still override it.
+  ``--zenoh-mode``, ``--connect`` and ``--listen`` given on the command line still override it.
 - Lease 1000 ms with 4 keep-alives per lease: a hung peer (SIGSTOP, its TCP link still open) is
   declared dead within 1 s, which drops its liveliness tokens (DESIGN 8: operator lost -> HOLD).
   Each side advertises its own lease, so every process of this project uses the same value.
@@ -66,26 +66,41 @@ def add_zenoh_arguments(
     default_listen: Sequence[str] = (),
     default_connect: Sequence[str] = (),
 ) -> None:
-    """Add --zenoh-config, --mode, --connect, --listen and --lease-ms to a subcommand."""
+    """Add --zenoh-config, --zenoh-mode, --connect, --listen and --lease-ms to a subcommand.
+
+    ``--connect``/``--listen`` are also spelled ``--zenoh-connect``/``--zenoh-listen``; where a
+    subcommand already uses the short spelling for something else (the operator view's
+    ``--connect URL``), only the ``--zenoh-`` spelling is added.
+    """
+    taken = set(parser._option_string_actions)
+
+    def spellings(name: str) -> list[str]:
+        return [s for s in (f"--{name}", f"--zenoh-{name}") if s not in taken]
+
     group = parser.add_argument_group("zenoh")
     group.add_argument(
         "--zenoh-config",
         metavar="FILE",
         help="Zenoh JSON5 configuration file (TLS, access control, router, ...); "
-        "--mode/--connect/--listen still override it",
+        "--zenoh-mode/--connect/--listen still override it",
     )
     group.add_argument(
-        "--mode", choices=MODES, default=None, help="Zenoh mode (default: peer, or the file's)"
+        "--zenoh-mode",
+        choices=MODES,
+        default=None,
+        help="peer, or client of a router (default: peer, or the file's)",
     )
     group.add_argument(
-        "--connect",
+        *spellings("connect"),
+        dest="zenoh_connect",
         action="append",
         metavar="ENDPOINT",
         help="endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable; default: "
         f"{', '.join(default_connect) or 'none'})",
     )
     group.add_argument(
-        "--listen",
+        *spellings("listen"),
+        dest="zenoh_listen",
         action="append",
         metavar="ENDPOINT",
         help=f"endpoint to listen on (repeatable; default: {', '.join(default_listen) or 'none'})",
@@ -105,10 +120,10 @@ def add_zenoh_arguments(
 def options_from_args(args: argparse.Namespace) -> ZenohOptions:
     """The options given on the command line; role defaults apply only without a config file."""
     from_file = args.zenoh_config is not None
-    connect = args.connect or ([] if from_file else list(args._zenoh_default_connect))
-    listen = args.listen or ([] if from_file else list(args._zenoh_default_listen))
+    connect = args.zenoh_connect or ([] if from_file else list(args._zenoh_default_connect))
+    listen = args.zenoh_listen or ([] if from_file else list(args._zenoh_default_listen))
     return ZenohOptions(
-        mode=args.mode,
+        mode=args.zenoh_mode,
         connect=tuple(connect),
         listen=tuple(listen),
         config_file=args.zenoh_config,

@@ -257,5 +257,10 @@ class RobotNode:
         return last_state_ns
 
     @property
+    def controller(self) -> RobotController:
+        return self._controller
+
+    @property
     def overflow(self) -> int:
+        """Messages dropped because the loop fell behind (counted, never silently lost)."""
         return self._overflow

@@ -1,0 +1,232 @@
+"""``egc-teleop robot``: the robot process (DESIGN 1, 7, 8; issue 4).
+
+Wires the pure ``RobotController`` to a driver and a Zenoh session and runs the
+``RobotNode`` loop until SIGINT/SIGTERM. Drivers: ``sim`` runs sim_robot in this process
+(``SimDriver`` below; egc_robot may not import egc_sim, the entry point may), ``zenoh`` talks
+to a base-and-sensor process over ``scan`` / ``base/cmd`` / ``base/odom`` (``egc-teleop sim``).
+
+Configuration: defaults < ``--config FILE`` (TOML) < ``--set section.key=value`` < explicit
+flags. Tables and keys (units in the names):
+
+    [robot]    rate_hz, telemetry_scan_decimation
+    [safety]   max_command_age_s, command_timeout_s, scan_timeout_s, release_timeout_s,
+               centre_tolerance, require_clock_sync
+    [pipeline] horizon_s, gamma_v, gamma_w, no_return_is_free
+    [sim]      scan_hz, beams, seed
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import signal
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from egc_common import config as config_mod
+from egc_common import keys
+from egc_common.errors import UsageError
+from egc_common.joystick import JoystickMapping
+from egc_common.messages import BaseCommand
+from egc_common.profiles import PROFILES, get_profile
+from egc_common.transport import (
+    DEFAULT_ENDPOINT,
+    add_zenoh_arguments,
+    open_session,
+    options_from_args,
+)
+from egc_robot.controller import ControllerConfig, RobotController
+from egc_robot.drivers import Driver, SensorUpdate
+from egc_robot.pipeline import FILTERS, PipelineConfig
+from egc_robot.run_stats import RunStats
+from egc_robot.zenoh_node import Recorder, RobotNode
+
+log = logging.getLogger("egc.robot")
+
+SECTIONS: dict[str, tuple[str, ...]] = {
+    "robot": ("rate_hz", "telemetry_scan_decimation"),
+    "safety": (
+        "max_command_age_s",
+        "command_timeout_s",
+        "scan_timeout_s",
+        "release_timeout_s",
+        "centre_tolerance",
+        "require_clock_sync",
+    ),
+    "pipeline": ("horizon_s", "gamma_v", "gamma_w", "no_return_is_free"),
+    "sim": ("scan_hz", "beams", "seed"),
+}
+
+
+class SimDriver:
+    """sim_robot in this process, stepped in real time on every poll."""
+
+    def __init__(self, rt: Any) -> None:
+        self._rt = rt
+
+    def poll(self, now_ns: int) -> SensorUpdate:
+        self._rt.advance(now_ns)
+        scan = self._rt.scan_if_due(now_ns)
+        return SensorUpdate(scan=scan, scan_rx_ns=now_ns, odometry=self._rt.odometry(now_ns))
+
+    def send(self, command: BaseCommand) -> None:
+        self._rt.set_command(command.linear_mps, command.angular_radps)
+
+    def close(self) -> None:
+        pass
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--robot", default=keys.DEFAULT_ROBOT_ID, metavar="ID")
+    parser.add_argument("--driver", choices=("sim", "zenoh"), default="sim")
+    parser.add_argument(
+        "--map", default="hallway", metavar="SPEC", help="world for --driver sim (default: hallway)"
+    )
+    parser.add_argument(
+        "--profile",
+        default="pioneer3dx",
+        metavar="NAME",
+        help=f"{', '.join(sorted(PROFILES))} (default: pioneer3dx)",
+    )
+    parser.add_argument("--filter", choices=FILTERS, default="egc")
+    parser.add_argument("--rate-hz", type=float, default=None, help="control rate (default: 20)")
+    parser.add_argument("--start", metavar="X,Y,YAW", help="start pose for --driver sim")
+    parser.add_argument("--config", metavar="FILE", help="robot TOML configuration")
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key"
+    )
+    parser.add_argument("--record", metavar="FILE.rrd", help="keep a Rerun black box")
+    parser.add_argument("--record-scan-every", type=int, default=1, metavar="N")
+    parser.add_argument("--summary", metavar="FILE.json", help="write run statistics at exit")
+    parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
+    add_zenoh_arguments(parser, default_listen=(DEFAULT_ENDPOINT,))
+
+
+def _number(table: dict[str, Any], key: str, default: float) -> float:
+    value = table.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise UsageError(f"config key {key} must be a number, got {value!r}")
+    return float(value)
+
+
+def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> ControllerConfig:
+    robot = config_mod.section(cfg, "robot", SECTIONS["robot"])
+    safety = config_mod.section(cfg, "safety", SECTIONS["safety"])
+    pipe = config_mod.section(cfg, "pipeline", SECTIONS["pipeline"])
+    try:
+        profile = get_profile(args.profile)
+        horizon = pipe.get("horizon_s")
+        pipeline = PipelineConfig(
+            profile=profile,
+            mapping=JoystickMapping(
+                gamma_v=_number(pipe, "gamma_v", 1.0), gamma_w=_number(pipe, "gamma_w", 1.0)
+            ),
+            filter=args.filter,
+            horizon_s=None if horizon is None else _number(pipe, "horizon_s", 0.0),
+            no_return_is_free=bool(pipe.get("no_return_is_free", False)),
+        )
+        rate_hz = args.rate_hz if args.rate_hz is not None else _number(robot, "rate_hz", 20.0)
+        if not 1.0 <= rate_hz <= 1000.0:
+            raise UsageError("--rate-hz must be within [1, 1000]")
+        defaults = ControllerConfig(pipeline)
+        return ControllerConfig(
+            pipeline=pipeline,
+            max_command_age_s=_number(safety, "max_command_age_s", defaults.max_command_age_s),
+            command_timeout_s=_number(safety, "command_timeout_s", defaults.command_timeout_s),
+            scan_timeout_s=_number(safety, "scan_timeout_s", defaults.scan_timeout_s),
+            release_timeout_s=_number(safety, "release_timeout_s", defaults.release_timeout_s),
+            centre_tolerance=_number(safety, "centre_tolerance", defaults.centre_tolerance),
+            require_clock_sync=bool(safety.get("require_clock_sync", False)),
+            telemetry_scan_decimation=int(
+                _number(robot, "telemetry_scan_decimation", defaults.telemetry_scan_decimation)
+            ),
+            nominal_period_s=1.0 / rate_hz,
+        )
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _open_driver(args: argparse.Namespace, cfg: dict[str, Any], session: Any) -> Driver:
+    if args.driver == "zenoh":
+        from egc_robot.zenoh_driver import ZenohDriver
+
+        return ZenohDriver(session, args.robot)
+    from egc_sim.bridge import RealTimeSim, open_simulator, parse_pose
+
+    sim_cfg = config_mod.section(cfg, "sim", SECTIONS["sim"])
+    beams = sim_cfg.get("beams")
+    sim = open_simulator(
+        args.map,
+        get_profile(args.profile),
+        parse_pose(args.start),
+        int(_number(sim_cfg, "seed", 0)),
+        None if beams is None else int(beams),
+    )
+    scan_hz = _number(sim_cfg, "scan_hz", 20.0)
+    return SimDriver(RealTimeSim(sim, time.monotonic_ns(), 1.0 / scan_hz))
+
+
+def _open_recorder(args: argparse.Namespace) -> Recorder | None:
+    if args.record is None:
+        return None
+    try:
+        from egc_robot.blackbox import BlackBox
+    except ImportError:
+        raise UsageError("--record needs egc_robot.blackbox, which is not available") from None
+    recorder: Recorder = BlackBox(args.record, scan_decimation=args.record_scan_every)
+    return recorder
+
+
+def run(args: argparse.Namespace) -> int:
+    logging.basicConfig(level=args.log_level, format="robot: %(message)s")
+    try:
+        keys.validate_id(args.robot)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if args.record_scan_every < 1:
+        raise UsageError("--record-scan-every must be >= 1")
+    try:
+        cfg = config_mod.load(args.config, args.set)
+    except config_mod.ConfigError as exc:
+        raise UsageError(str(exc)) from None
+    controller_config = build_controller_config(args, cfg)
+    rate_hz = 1.0 / controller_config.nominal_period_s
+    session = open_session(options_from_args(args))
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    driver = _open_driver(args, cfg, session)
+    stats = RunStats()
+    node = RobotNode(
+        session,
+        args.robot,
+        RobotController(controller_config, time.monotonic_ns()),
+        driver,
+        rate_hz,
+        recorder=_open_recorder(args),
+        stats=stats,
+    )
+    log.info(
+        "robot %r ready: driver %s, profile %s, filter %s, %.0f Hz",
+        args.robot,
+        args.driver,
+        args.profile,
+        args.filter,
+        rate_hz,
+    )
+    try:
+        node.run(stop)
+    finally:
+        node.shutdown()
+        driver.close()
+        session.close()
+        summary = stats.summary()
+        summary["rejected"] = dict(node.controller.counters.rejected)
+        summary["queue_overflow"] = node.overflow
+        log.info("stopped: %s", json.dumps(summary))
+        if args.summary:
+            Path(args.summary).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    return 0

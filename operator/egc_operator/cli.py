@@ -1,0 +1,175 @@
+"""``egc-teleop operator``: joystick in, commands out (DESIGN 1, 4, 7; issue 4).
+
+Exactly one source: ``--joystick /dev/input/eventN`` (evdev gamepad), ``--joystick-file FILE``
+(the recorded-joystick CSV of ``egc_common.joystick_file``) or ``--script NAME`` (a CSV shipped
+in ``egc_operator/scripts/``; ``--script list`` lists them). A file or script ends with the
+deadman released and the process exits 0 (``--loop`` repeats it instead).
+
+Configuration: ``--config FILE`` (TOML) and ``--set key=value``, tables
+
+    [operator]  rate_hz, deadzone, gamepad ("xbox" | "ps" | "generic")
+    [joystick]  forward_axis, forward_invert, turn_axis, turn_invert, deadman, mode_toggle,
+                estop, reset   (evdev code names such as "BTN_TL", or numbers)
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import re
+import signal
+import socket
+import sys
+import threading
+import time
+from typing import Any
+
+from egc_common import config as config_mod
+from egc_common import keys
+from egc_common.errors import UsageError
+from egc_common.joystick_file import JoystickFileError
+from egc_common.transport import (
+    DEFAULT_ENDPOINT,
+    add_zenoh_arguments,
+    open_session,
+    options_from_args,
+)
+
+from egc_operator.command_source import (
+    CommandSource,
+    TrackSource,
+    load_file,
+    load_script,
+    script_names,
+)
+from egc_operator.joystick_evdev import PRESETS, ButtonMap, EvdevJoystick, open_device
+from egc_operator.operator_node import OperatorNode, View
+from egc_operator.status_line import StatusLine
+
+try:  # the Rerun operator view (issue 5); the operator runs without it
+    from egc_operator import view as view_mod
+except ImportError:
+    view_mod = None  # type: ignore[assignment]
+
+log = logging.getLogger("egc.operator")
+
+OPERATOR_KEYS = ("rate_hz", "deadzone", "gamepad")
+JOYSTICK_KEYS = tuple(ButtonMap.__dataclass_fields__)
+
+
+def default_operator_id() -> str:
+    host = re.sub(r"[^A-Za-z0-9_-]", "-", socket.gethostname())[:40] or "host"
+    return f"{host}-{os.getpid()}"
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--robot", default=keys.DEFAULT_ROBOT_ID, metavar="ID")
+    parser.add_argument(
+        "--operator-id", metavar="ID", help="this operator's id (default: HOST-PID)"
+    )
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--joystick", metavar="DEVICE", help="evdev device, /dev/input/eventN")
+    source.add_argument("--joystick-file", metavar="FILE", help="recorded joystick CSV")
+    source.add_argument("--script", metavar="NAME", help="built-in script ('list' lists them)")
+    parser.add_argument("--loop", action="store_true", help="repeat a file or script forever")
+    parser.add_argument("--rate-hz", type=float, default=None, help="command rate (default: 50)")
+    parser.add_argument("--gamepad", choices=sorted(PRESETS), default=None)
+    parser.add_argument("--deadzone", type=float, default=None, help="(default: 0.05)")
+    parser.add_argument("--mode", choices=("direct", "shared"), default="shared")
+    parser.add_argument("--config", metavar="FILE", help="operator TOML configuration")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    parser.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S")
+    parser.add_argument("--no-status", action="store_true", help="no terminal status line")
+    parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
+    # Test hook: shift this process's clock to check clock sync across machines (issue 4).
+    parser.add_argument("--clock-offset-s", type=float, default=0.0, help=argparse.SUPPRESS)
+    if view_mod is not None:
+        view_mod.add_view_arguments(parser)
+    add_zenoh_arguments(parser, default_connect=(DEFAULT_ENDPOINT,))
+
+
+def _number(table: dict[str, Any], key: str, default: float) -> float:
+    value = table.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise UsageError(f"config key {key} must be a number, got {value!r}")
+    return float(value)
+
+
+def _open_source(args: argparse.Namespace, cfg: dict[str, Any]) -> CommandSource:
+    op_cfg = config_mod.section(cfg, "operator", OPERATOR_KEYS)
+    try:
+        if args.joystick_file is not None:
+            return TrackSource(load_file(args.joystick_file), loop=args.loop)
+        if args.script is not None:
+            return TrackSource(load_script(args.script), loop=args.loop)
+        preset = args.gamepad or str(op_cfg.get("gamepad", "xbox"))
+        if preset not in PRESETS:
+            raise UsageError(f"unknown gamepad preset {preset!r} ({', '.join(PRESETS)})")
+        mapping = ButtonMap.from_table(
+            config_mod.section(cfg, "joystick", JOYSTICK_KEYS), PRESETS[preset]
+        )
+        deadzone = args.deadzone if args.deadzone is not None else _number(op_cfg, "deadzone", 0.05)
+        if not 0.0 <= deadzone < 1.0:
+            raise UsageError("--deadzone must be in [0, 1)")
+        path = args.joystick
+        return EvdevJoystick(
+            open_device(path, mapping),
+            mapping,
+            deadzone=deadzone,
+            mode=args.mode,
+            reopen=lambda: open_device(path, mapping),
+        )
+    except (JoystickFileError, ValueError) as exc:
+        raise UsageError(str(exc)) from None
+
+
+def run(args: argparse.Namespace) -> int:
+    logging.basicConfig(level=args.log_level, format="operator: %(message)s", stream=sys.stderr)
+    if args.script == "list":
+        print("\n".join(script_names()))
+        return 0
+    try:
+        robot_id = keys.validate_id(args.robot)
+        operator_id = keys.validate_id(args.operator_id or default_operator_id(), "operator id")
+        cfg = config_mod.load(args.config, args.set)
+    except (ValueError, config_mod.ConfigError) as exc:
+        raise UsageError(str(exc)) from None
+    op_cfg = config_mod.section(cfg, "operator", OPERATOR_KEYS)
+    rate_hz = args.rate_hz if args.rate_hz is not None else _number(op_cfg, "rate_hz", 50.0)
+    if not 1.0 <= rate_hz <= 1000.0:
+        raise UsageError("--rate-hz must be within [1, 1000]")
+    if args.duration is not None and not args.duration > 0:
+        raise UsageError("--duration must be positive")
+    source = _open_source(args, cfg)
+    session = open_session(options_from_args(args))
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    if args.duration is not None:
+        timer = threading.Timer(args.duration, stop.set)
+        timer.daemon = True
+        timer.start()
+    view: View | None = None
+    if view_mod is not None:
+        view = view_mod.open_view(args, robot_id)
+    offset_ns = round(args.clock_offset_s * 1e9)
+    node = OperatorNode(
+        session,
+        robot_id,
+        operator_id,
+        source,
+        rate_hz=rate_hz,
+        local_clock=lambda: time.monotonic_ns() + offset_ns,
+        view=view,
+        status=None if args.no_status else StatusLine(sys.stdout),
+    )
+    log.info("operator %r driving robot %r at %.0f Hz", operator_id, robot_id, rate_hz)
+    try:
+        node.run(stop)
+    finally:
+        node.close()
+        source.close()
+        session.close()
+        log.info("stopped after %d commands", node.published)
+    return 0

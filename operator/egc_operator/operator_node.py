@@ -1,0 +1,232 @@
+"""The operator process's IO shell (DESIGN 1, 4, 7; issue 4).
+
+- Publishes an OperatorCommand on ``egc/<robot>/cmd`` at a fixed rate (default 50 Hz) on a
+  monotonic deadline schedule, whether the stick moves or not, with command QoS (priority
+  INTERACTIVE_HIGH, express). ``seq`` increases by one per command; ``stamp_ns`` is the robot's
+  clock as estimated by ``ClockSync`` (0 until the first clock reply).
+- Queries ``egc/<robot>/clock`` from its own thread (10 Hz until synchronised, then 1 Hz).
+- Holds the liveliness token ``egc/<robot>/alive/operator/<id>``; closing the session (or the
+  process dying) withdraws it, which releases control on the robot at once.
+- Subscribes to telemetry and state for the status line and the operator view.
+
+``local_clock`` is the operator's monotonic clock; the hidden ``--clock-offset-s`` flag shifts it
+to test clock sync against a machine whose clock differs by an hour.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import Any, Protocol
+
+import zenoh
+from egc_common import keys
+from egc_common.joystick_file import RELEASED
+from egc_common.messages import (
+    OperatorCommand,
+    Rejection,
+    StateMessage,
+    Telemetry,
+    decode_clock_reply,
+    decode_state,
+    decode_telemetry,
+)
+from egc_common.transport import command_publisher, payload_bytes
+
+from egc_operator.clock_sync import ClockSync
+from egc_operator.command_source import CommandSource
+from egc_operator.status_line import Status, StatusLine
+
+log = logging.getLogger("egc.operator")
+
+NS_PER_S = 1_000_000_000
+_STATUS_PERIOD_NS = 200_000_000
+_RELEASE_AFTER_END_NS = 300_000_000
+_CLOCK_TIMEOUT_S = 0.5
+
+
+class View(Protocol):
+    """The operator view's interface (``egc_operator.view.OperatorView``)."""
+
+    def on_telemetry(self, t: Telemetry) -> None: ...
+    def on_state(self, s: StateMessage) -> None: ...
+    def on_text(self, level: str, text: str) -> None: ...
+    def on_link(self, rtt_ms: float, offset_ns: int) -> None: ...
+    def close(self) -> None: ...
+
+
+class OperatorNode:
+    def __init__(
+        self,
+        session: zenoh.Session,
+        robot_id: str,
+        operator_id: str,
+        source: CommandSource,
+        rate_hz: float = 50.0,
+        local_clock: Callable[[], int] = time.monotonic_ns,
+        view: View | None = None,
+        status: StatusLine | None = None,
+    ) -> None:
+        self._session = session
+        self._robot = robot_id
+        self._op = operator_id
+        self._source = source
+        self._period_ns = round(NS_PER_S / rate_hz)
+        self._clock = local_clock
+        self._view = view
+        self._status = status
+        self._sync = ClockSync()
+        self._lock = threading.Lock()
+        self._telemetry: Telemetry | None = None
+        self._state: StateMessage | None = None
+        self._robot_alive = False
+        self.published = 0
+        self._publisher = command_publisher(session, keys.cmd(robot_id))
+        liveliness = session.liveliness()
+        self._token = liveliness.declare_token(keys.alive_operator(robot_id, operator_id))
+        self._entities: list[Any] = [
+            session.declare_subscriber(keys.telemetry(robot_id), self._on_telemetry),
+            session.declare_subscriber(keys.state(robot_id), self._on_state),
+            liveliness.declare_subscriber(
+                keys.alive_robot(robot_id), self._on_robot_alive, history=True
+            ),
+        ]
+
+    # -- callbacks ----------------------------------------------------------------------------
+
+    def _on_telemetry(self, sample: zenoh.Sample) -> None:
+        t = decode_telemetry(payload_bytes(sample))
+        if isinstance(t, Rejection):
+            log.debug("bad telemetry: %s", t)
+            return
+        with self._lock:
+            self._telemetry = t
+        if self._view is not None:
+            self._view.on_telemetry(t)
+
+    def _on_state(self, sample: zenoh.Sample) -> None:
+        s = decode_state(payload_bytes(sample))
+        if isinstance(s, Rejection):
+            log.debug("bad state: %s", s)
+            return
+        with self._lock:
+            previous, self._state = self._state, s
+        if previous is None or (previous.state, previous.reason) != (s.state, s.reason):
+            text = f"robot {s.state}: {s.reason}"
+            log.info("%s", text)
+            if self._view is not None:
+                self._view.on_text("WARN" if s.state in ("HOLD", "ESTOP") else "INFO", text)
+        if self._view is not None:
+            self._view.on_state(s)
+
+    def _on_robot_alive(self, sample: zenoh.Sample) -> None:
+        alive = sample.kind == zenoh.SampleKind.PUT
+        with self._lock:
+            self._robot_alive = alive
+        log.info("robot %s", "present" if alive else "gone")
+
+    # -- clock sync thread --------------------------------------------------------------------
+
+    def _clock_sync(self, stop: threading.Event) -> None:
+        key = keys.clock(self._robot)
+        while not stop.is_set():
+            try:
+                sent = self._clock()
+                replies = self._session.get(
+                    key,
+                    timeout=_CLOCK_TIMEOUT_S,
+                    priority=zenoh.Priority.INTERACTIVE_HIGH,
+                    express=True,
+                )
+                for reply in replies:
+                    received = self._clock()
+                    ok = reply.ok
+                    stamp = None if ok is None else decode_clock_reply(payload_bytes(ok))
+                    if isinstance(stamp, int):
+                        with self._lock:
+                            sample = self._sync.add(sent, stamp, received)
+                        if sample is not None and self._view is not None:
+                            self._view.on_link(sample.rtt_ns / 1e6, sample.offset_ns)
+            except Exception as exc:  # a closing session must not kill the thread noisily
+                if stop.is_set():
+                    return
+                log.debug("clock query failed: %s", exc)
+            with self._lock:
+                synced = self._sync.synchronised
+            stop.wait(1.0 if synced else 0.1)
+
+    # -- the publishing loop --------------------------------------------------------------------
+
+    def run(self, stop: threading.Event) -> None:
+        """Publish until ``stop`` is set or a finite source ends (then release the deadman)."""
+        sync_thread = threading.Thread(
+            target=self._clock_sync, args=(stop,), name="clock-sync", daemon=True
+        )
+        sync_thread.start()
+        start = self._clock()
+        deadline = start
+        next_status = start
+        ended_at: int | None = None
+        seq = 0
+        while not stop.is_set():
+            stop.wait(max(0, deadline - self._clock()) / NS_PER_S)
+            now = self._clock()
+            sample = self._source.sample((now - start) / NS_PER_S)
+            if self._source.finished:
+                ended_at = now if ended_at is None else ended_at
+                sample = RELEASED
+                if now - ended_at >= _RELEASE_AFTER_END_NS:
+                    break
+            seq += 1
+            with self._lock:
+                stamp = self._sync.robot_now(now)
+            command = OperatorCommand(
+                seq=seq,
+                stamp_ns=stamp,
+                x=sample.x,
+                y=sample.y,
+                mode=sample.mode,
+                deadman=sample.deadman,
+                estop=sample.estop,
+                reset=sample.reset,
+                op=self._op,
+            )
+            self._publisher.put(command.encode())
+            self.published += 1
+            if self._status is not None and now >= next_status:
+                self._status.show(self._status_of(command), now / NS_PER_S)
+                next_status = now + _STATUS_PERIOD_NS
+            deadline += self._period_ns
+            if deadline <= now:
+                deadline = now + self._period_ns
+        stop.set()
+        sync_thread.join(timeout=2 * _CLOCK_TIMEOUT_S)
+
+    def _status_of(self, command: OperatorCommand) -> Status:
+        with self._lock:
+            t, s, alive = self._telemetry, self._state, self._robot_alive
+            latest = self._sync.latest
+            synced = self._sync.synchronised
+        return Status(
+            rtt_ms=None if latest is None else latest.rtt_ns / 1e6,
+            synchronised=synced,
+            robot_state=None if s is None or not alive else s.state,
+            reason=None if s is None or not alive else s.reason,
+            w_si=None if t is None else t.w_si,
+            rejected=None if s is None else s.rejected,
+            mode=command.mode,
+            deadman=command.deadman,
+            in_control=None if s is None else s.operator == self._op,
+        )
+
+    def close(self) -> None:
+        for entity in self._entities:
+            entity.undeclare()
+        self._token.undeclare()
+        self._publisher.undeclare()
+        if self._status is not None:
+            self._status.close()
+        if self._view is not None:
+            self._view.close()
