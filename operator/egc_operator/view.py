@@ -1,0 +1,365 @@
+"""The operator view (paper Fig. 8) in Rerun, fed with decoded telemetry and state messages.
+
+The operator process decodes ``egc/<robot>/telemetry`` and ``egc/<robot>/state`` and calls
+``OperatorView.on_telemetry`` / ``on_state``; a headless episode calls the same methods, so live
+runs and episodes produce the same recording. What is drawn is computed by the pure functions of
+``view_scene``; this module only turns them into Rerun log calls on an explicit
+``rr.RecordingStream`` (several views can coexist in one process). Entity paths, timelines and
+the default layout are in ``view_blueprint``; viewer targets in ``viewer_target``.
+
+Every method is thread-safe (Zenoh delivers on its own threads) and never raises on a message:
+a view must not take the operator process down.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import threading
+import time
+import uuid
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import rerun as rr
+from egc_common.messages import StateMessage, Telemetry
+
+from egc_operator import view_blueprint as paths
+from egc_operator.view_blueprint import operator_blueprint
+from egc_operator.view_scene import (
+    CIRCLE_COLOURS,
+    CIRCLE_NAMES,
+    GOAL_GREEN,
+    LANE_COLOURS,
+    REFERENCE_BLUE,
+    ROBOT_TO_SCREEN,
+    SCAN_INK,
+    SENT_RED,
+    TRAJECTORY_TEAL,
+    WORLD_TO_SCREEN,
+    footprint_strip,
+    map_image,
+    pose_moved,
+    profile_named,
+    robot_frame_scene,
+    status_changes,
+    time_series,
+)
+from egc_operator.viewer_target import ViewerTarget, attach, choose_target
+
+TRAJECTORY_STEP_M = 0.02
+LINE_WIDTH = rr.Radius.ui_points(1.0)
+SCAN_RADIUS_M = 0.02
+TEXT_LEVELS = {
+    "trace": "TRACE",
+    "debug": "DEBUG",
+    "info": "INFO",
+    "warn": "WARN",
+    "warning": "WARN",
+    "error": "ERROR",
+    "critical": "CRITICAL",
+}
+STATE_LEVELS = {"IDLE": "INFO", "DRIVING": "INFO", "HOLD": "WARN", "ESTOP": "ERROR"}
+# (series path under plots/, legend name, colour): the paper's Fig. 11 has the operator's
+# reference in blue and the modified command in red.
+SERIES_STYLE = (
+    ("v/ref", "v_ref (operator)", REFERENCE_BLUE),
+    ("v/cmd", "v_cmd (sent)", SENT_RED),
+    ("w/ref", "w_ref (operator)", REFERENCE_BLUE),
+    ("w/cmd", "w_cmd (sent)", SENT_RED),
+    ("w_si", "w_SI", (90, 90, 90)),
+    ("latency/cmd_age_ms", "command age on arrival", (200, 120, 0)),
+    ("latency/scan_age_ms", "scan age", (120, 120, 120)),
+    ("latency/link_rtt_ms", "link round trip", (0, 130, 160)),
+)
+
+
+def add_view_arguments(parser: argparse.ArgumentParser) -> None:
+    """The viewer-target options: --serve-web PORT, --connect URL, --save FILE.rrd, --no-view."""
+    group = parser.add_argument_group(
+        "operator view (Rerun)",
+        "default: spawn a local viewer when a display exists, else save to "
+        "./egc-operator-<robot>-<time>.rrd",
+    )
+    group.add_argument(
+        "--serve-web",
+        metavar="PORT",
+        type=int,
+        help="serve the web viewer on PORT (data on gRPC port PORT+1)",
+    )
+    group.add_argument(
+        "--connect",
+        metavar="URL",
+        help="stream to a running viewer, e.g. rerun+http://HOST:9876/proxy",
+    )
+    group.add_argument("--save", metavar="FILE.rrd", help="save the view to a recording file")
+    group.add_argument("--no-view", action="store_true", help="no operator view at all")
+
+
+def open_view(
+    args: argparse.Namespace,
+    robot_id: str,
+    *,
+    application_id: str = "egc-teleop",
+    recording_name: str | None = None,
+) -> OperatorView:
+    """The operator view at the target chosen by ``add_view_arguments``' options.
+
+    Prints one line on stderr saying where the view is. Raises ``UsageError`` for a bad
+    combination of options or a malformed URL (the CLI turns it into exit code 2).
+    """
+    target = choose_target(
+        save=args.save,
+        connect=args.connect,
+        serve_web=args.serve_web,
+        no_view=args.no_view,
+        env=os.environ,
+        robot_id=robot_id,
+        stamp=time.strftime("%Y%m%d-%H%M%S"),
+    )
+    view = _open(target, robot_id, application_id, recording_name)
+    print(f"egc-teleop: {view.where}", file=sys.stderr)
+    return view
+
+
+def record_episode(
+    path: str | Path,
+    robot_id: str,
+    *,
+    application_id: str = "egc-teleop",
+    recording_name: str | None = None,
+) -> OperatorView:
+    """The operator view saved to ``path`` (.rrd), for headless episodes (``--record``)."""
+    return _open(ViewerTarget("save", path=Path(path)), robot_id, application_id, recording_name)
+
+
+def _open(
+    target: ViewerTarget, robot_id: str, application_id: str, recording_name: str | None
+) -> OperatorView:
+    if target.kind == "none":
+        return OperatorView(None, robot_id, where="operator view disabled (--no-view)")
+    rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
+    where = attach(rec, target, operator_blueprint(robot_id))
+    rec.send_recording_name(recording_name or f"{robot_id}: operator view")
+    return OperatorView(rec, robot_id, where=where)
+
+
+class OperatorView:
+    """Logs telemetry, state, text and link statistics of one robot to one recording.
+
+    ``recording`` None makes a view that drops everything (``--no-view``).
+    """
+
+    def __init__(
+        self, recording: rr.RecordingStream | None, robot_id: str, where: str = ""
+    ) -> None:
+        self.robot_id = robot_id
+        self.where = where
+        self._rec = recording
+        self._lock = threading.Lock()
+        self._last: Telemetry | None = None
+        self._world_profile: str | None = None
+        self._trajectory_end: tuple[float, float] | None = None
+        self._state_key: tuple[str, str, str | None] | None = None
+        self._rejected_seen = 0
+        self._offset_ns: int | None = None
+        if recording is not None:
+            self._log_static(recording)
+
+    # -- public API ------------------------------------------------------------------------------
+
+    def on_telemetry(self, t: Telemetry) -> None:
+        """One control cycle: robot-frame view, time series, status lanes, world frame (pose)."""
+        with self._lock:
+            rec = self._rec
+            if rec is None:
+                return
+            _set_time(rec, t.stamp_ns, t.cycle)
+            self._log_robot_frame(rec, t)
+            for name, value in time_series(t).items():
+                rec.log(paths.plot_path(name), rr.Scalars(value))
+            for lane, state in status_changes(self._last, t).items():
+                rec.log(paths.lane_path(lane), rr.StateChange(state=state))
+            self._note_rejections(rec, t.rejected)
+            if t.pose is not None:
+                self._log_pose(rec, t)
+            self._last = t
+
+    def on_state(self, s: StateMessage) -> None:
+        """A state message: logged to the text log when state, reason or operator changed."""
+        with self._lock:
+            rec = self._rec
+            if rec is None:
+                return
+            _set_time(rec, s.stamp_ns, self._cycle)
+            key = (s.state, s.reason, s.operator)
+            if key != self._state_key:
+                who = f" (operator {s.operator})" if s.operator else ""
+                text = f"robot state {s.state}: {s.reason}{who}"
+                rec.log(paths.TEXT_LOG, rr.TextLog(text, level=STATE_LEVELS.get(s.state, "INFO")))
+                self._state_key = key
+            self._note_rejections(rec, s.rejected)
+
+    def on_text(self, level: str, text: str) -> None:
+        """An operator-side event (a rejected message, a link event) for the text log."""
+        with self._lock:
+            rec = self._rec
+            if rec is None:
+                return
+            _set_time(rec, self._robot_now(), self._cycle)
+            rec.log(paths.TEXT_LOG, rr.TextLog(text, level=TEXT_LEVELS.get(level.lower(), "INFO")))
+
+    def on_link(self, rtt_ms: float, offset_ns: int) -> None:
+        """A clock-sync round trip; ``offset_ns`` = robot clock - this process's monotonic clock."""
+        with self._lock:
+            rec = self._rec
+            if rec is None:
+                return
+            self._offset_ns = int(offset_ns)
+            _set_time(rec, self._robot_now(), self._cycle)
+            rec.log(paths.LINK_RTT, rr.Scalars(float(rtt_ms)))
+
+    def set_world(
+        self,
+        occupancy: npt.ArrayLike,
+        resolution_m: float,
+        origin_xy_m: tuple[float, float],
+        goal_xy_m: tuple[float, float] | None = None,
+    ) -> None:
+        """The static map of the world-frame view (bool H x W, row 0 = top; origin = lower-left)."""
+        image = map_image(occupancy, resolution_m, origin_xy_m)
+        with self._lock:
+            rec = self._rec
+            if rec is None:
+                return
+            rec.log(
+                paths.MAP,
+                rr.Transform3D(translation=image.translation, mat3x3=image.mat3x3),
+                rr.Image(image.pixels, color_model="L", draw_order=-100.0),
+                static=True,
+            )
+            goal = [] if goal_xy_m is None else [goal_xy_m]
+            rec.log(
+                paths.GOAL,
+                rr.Points2D(goal, radii=0.12, colors=GOAL_GREEN, labels=["goal"] * len(goal)),
+                static=True,
+            )
+
+    def close(self) -> None:
+        """Flush and close the sink; a saved .rrd is complete and readable afterwards."""
+        with self._lock:
+            rec, self._rec = self._rec, None
+        if rec is not None:
+            rec.flush()
+            rec.disconnect()
+
+    # -- internals -------------------------------------------------------------------------------
+
+    @property
+    def _cycle(self) -> int:
+        return 0 if self._last is None else self._last.cycle
+
+    def _robot_now(self) -> int:
+        """The robot's clock now: from the link offset once known, else the latest telemetry."""
+        if self._offset_ns is not None:
+            return max(0, time.monotonic_ns() + self._offset_ns)
+        return 0 if self._last is None else self._last.stamp_ns
+
+    def _log_static(self, rec: rr.RecordingStream) -> None:
+        rec.send_property("robot", rr.AnyValues(robot_id=self.robot_id))
+        rec.log(paths.ROBOT, rr.Transform3D(mat3x3=ROBOT_TO_SCREEN), static=True)
+        rec.log(paths.WORLD, rr.Transform3D(mat3x3=WORLD_TO_SCREEN), static=True)
+        for name, label, colour in SERIES_STYLE:
+            rec.log(
+                paths.plot_path(name),
+                rr.SeriesLines(colors=[colour], names=[label], widths=[1.5]),
+                static=True,
+            )
+        for lane, styles in LANE_COLOURS.items():
+            rec.log(
+                paths.lane_path(lane),
+                rr.StateConfiguration(values=[v for v, _ in styles], colors=[c for _, c in styles]),
+                static=True,
+            )
+
+    def _log_robot_frame(self, rec: rr.RecordingStream, t: Telemetry) -> None:
+        scene = robot_frame_scene(t)
+        rec.log(paths.SCAN, rr.Points2D(scene.scan_xy, radii=SCAN_RADIUS_M, colors=SCAN_INK))
+        rec.log(
+            paths.FOOTPRINT,
+            rr.LineStrips2D(
+                _strips(scene.footprint), radii=rr.Radius.ui_points(2.0), colors=scene.region_colour
+            ),
+        )
+        rec.log(
+            paths.STATUS,
+            rr.Points2D(
+                [scene.status_anchor], radii=0.03, colors=scene.region_colour, labels=[scene.status]
+            ),
+        )
+        for name in CIRCLE_NAMES:
+            strip = scene.circles[name]
+            rec.log(
+                paths.circle_path(name),
+                rr.LineStrips2D(_strips(strip), radii=LINE_WIDTH, colors=CIRCLE_COLOURS[name]),
+            )
+        for path, vector, colour in (
+            (paths.REFERENCE_ARROW, scene.reference_vector, REFERENCE_BLUE),
+            (paths.SENT_ARROW, scene.sent_vector, SENT_RED),
+        ):
+            rec.log(path, rr.Arrows2D(origins=[(0.0, 0.0)], vectors=[vector], colors=colour))
+
+    def _log_pose(self, rec: rr.RecordingStream, t: Telemetry) -> None:
+        assert t.pose is not None
+        x, y, theta = t.pose
+        rec.log(
+            paths.ROBOT_POSE,
+            rr.Transform3D(
+                translation=(x, y, 0.0),
+                rotation_axis_angle=rr.RotationAxisAngle(axis=(0.0, 0.0, 1.0), radians=theta),
+            ),
+        )
+        profile = profile_named(t.profile)
+        if profile is not None and t.profile != self._world_profile:
+            strip = footprint_strip(profile)
+            rec.log(
+                paths.POSE_FOOTPRINT,
+                rr.LineStrips2D([strip], radii=rr.Radius.ui_points(2.0), colors=SCAN_INK),
+                rr.Arrows2D(
+                    origins=[(0.0, 0.0)], vectors=[(profile.length_m, 0.0)], colors=SCAN_INK
+                ),
+                static=True,
+            )
+            self._world_profile = t.profile
+        if pose_moved(self._trajectory_end, t.pose, TRAJECTORY_STEP_M):
+            if self._trajectory_end is not None:
+                segment = [self._trajectory_end, (x, y)]
+                rec.log(
+                    paths.TRAJECTORY,
+                    rr.LineStrips2D(
+                        [segment], radii=rr.Radius.ui_points(1.5), colors=TRAJECTORY_TEAL
+                    ),
+                )
+            self._trajectory_end = (x, y)
+
+    def _note_rejections(self, rec: rr.RecordingStream, total: int) -> None:
+        """Text-log how many more commands the robot rejected since the last report."""
+        if total > self._rejected_seen:
+            new = total - self._rejected_seen
+            text = f"robot rejected {new} more command(s) ({total} in total)"
+            rec.log(paths.TEXT_LOG, rr.TextLog(text, level="WARN"))
+        self._rejected_seen = max(self._rejected_seen, total)
+
+
+def _set_time(rec: rr.RecordingStream, robot_ns: int, cycle: int) -> None:
+    """Both timelines for the rows logged next on this thread (Rerun's time is per thread)."""
+    rec.reset_time()
+    rec.set_time(paths.ROBOT_TIME, duration=np.timedelta64(robot_ns, "ns"))
+    rec.set_time(paths.CYCLE, sequence=cycle)
+
+
+def _strips(strip: npt.NDArray[np.float32]) -> list[npt.NDArray[np.float32]]:
+    """A one-strip batch, or an empty batch (which clears what was drawn last cycle)."""
+    return [strip] if strip.size else []

@@ -1,0 +1,116 @@
+"""Where the operator view logs things (entity paths, timelines) and its default layout.
+
+Layout (paper Fig. 8 as a Rerun blueprint)::
+
+    +---------------------------+----------------------+------------------+
+    | robot frame {R}           | world frame          | v: ref vs sent   |
+    | scan, footprint, circles, | map, trajectory,     | w: ref vs sent   |
+    | command arrows, status    | goal, robot          | w_SI             |
+    +---------------------------+----------------------+ latency          |
+    | state / mode / limiter /  | text log             |                  |
+    | region lanes              |                      |                  |
+    +---------------------------+----------------------+------------------+
+
+Two timelines carry every row logged from telemetry: ``robot_time`` (a duration: the robot's
+monotonic clock, ``Telemetry.stamp_ns``) and ``cycle`` (a sequence: the robot's control cycle,
+``Telemetry.cycle``). The robot's black box uses the same two, so the recordings line up.
+"""
+
+from __future__ import annotations
+
+import rerun.blueprint as rrb
+
+ROBOT_TIME = "robot_time"
+CYCLE = "cycle"
+
+# Robot-frame view: ``robot`` carries the {R} -> screen transform, children are in {R}.
+ROBOT = "robot"
+SCAN = "robot/scan"
+FOOTPRINT = "robot/footprint"
+STATUS = "robot/status"
+CIRCLES = "robot/circles"  # + /reachable, /igc, /agc, /egc
+REFERENCE_ARROW = "robot/command/reference"
+SENT_ARROW = "robot/command/sent"
+
+# World-frame view: ``world`` carries the world -> screen transform.
+WORLD = "world"
+MAP = "world/map"
+GOAL = "world/goal"
+TRAJECTORY = "world/trajectory"
+ROBOT_POSE = "world/robot"  # Transform3D per cycle; its children are static, in {R}
+POSE_FOOTPRINT = "world/robot/footprint"
+
+PLOTS = "plots"  # + /v/ref, /v/cmd, /w/ref, /w/cmd, /w_si, /latency/...
+LINK_RTT = "plots/latency/link_rtt_ms"
+LANES = "status"  # + /state, /mode, /limiter, /region
+TEXT_LOG = "log"
+
+
+def circle_path(name: str) -> str:
+    return f"{CIRCLES}/{name}"
+
+
+def plot_path(name: str) -> str:
+    return f"{PLOTS}/{name}"
+
+
+def lane_path(name: str) -> str:
+    return f"{LANES}/{name}"
+
+
+def _whole_history() -> list[rrb.VisibleTimeRange]:
+    """Show everything up to the time cursor (the trajectory is logged one segment per row)."""
+    return [
+        rrb.VisibleTimeRange(
+            timeline,
+            start=rrb.TimeRangeBoundary.infinite(),
+            end=rrb.TimeRangeBoundary.cursor_relative(),
+        )
+        for timeline in (ROBOT_TIME, CYCLE, "log_time")
+    ]
+
+
+def operator_blueprint(robot_id: str, view_radius_m: float = 3.0) -> rrb.Blueprint:
+    """The default layout; ``view_radius_m`` frames the robot-frame view (forward is up)."""
+    r = view_radius_m
+    robot_view = rrb.Spatial2DView(
+        name=f"{robot_id}: robot frame, forward up (blue: operator, initial GC; red: sent, expanded GC)",
+        origin="/",
+        contents=f"{ROBOT}/**",
+        # Screen coordinates: x = -y_R, y = -x_R; show more ahead than behind.
+        visual_bounds=rrb.VisualBounds2D(x_range=[-r, r], y_range=[-1.5 * r, 0.5 * r]),
+    )
+    world_view = rrb.Spatial2DView(
+        name="world frame",
+        origin="/",
+        contents=f"{WORLD}/**",
+        time_ranges=_whole_history(),
+    )
+    plots = rrb.Vertical(
+        rrb.TimeSeriesView(name="v (m/s): reference vs sent", origin=f"{PLOTS}/v"),
+        rrb.TimeSeriesView(name="w (rad/s): reference vs sent", origin=f"{PLOTS}/w"),
+        rrb.TimeSeriesView(
+            name="w_SI (safety index)",
+            origin=plot_path("w_si"),
+            axis_y=rrb.ScalarAxis(range=(0.0, 1.05)),
+        ),
+        rrb.TimeSeriesView(name="latency (ms)", origin=f"{PLOTS}/latency"),
+    )
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(
+                robot_view,
+                rrb.StateTimelineView(name="state, mode, limiter, region", origin=LANES),
+                row_shares=[3, 1],
+            ),
+            rrb.Vertical(
+                world_view,
+                rrb.TextLogView(name="log: state changes, rejections, link", origin=TEXT_LOG),
+                row_shares=[3, 2],
+            ),
+            plots,
+            column_shares=[4, 3, 3],
+        ),
+        rrb.TimePanel(timeline=ROBOT_TIME, state="collapsed"),
+        collapse_panels=True,
+    )
