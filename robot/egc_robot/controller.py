@@ -66,7 +66,7 @@ class ControllerConfig:
     max_command_age_s: float = 0.3
     command_timeout_s: float = 0.25
     scan_timeout_s: float = 0.2
-    release_timeout_s: float = 1.0
+    release_timeout_s: float = 2.0
     centre_tolerance: float = 0.05
     require_clock_sync: bool = False
     telemetry_scan_decimation: int = 2
@@ -144,6 +144,8 @@ class RobotController:
         self._transition = Transition(State.IDLE, "no operator")
         self._state_since_ns = start_ns
         self._controller_op: str | None = None
+        self._control_epoch = 0  # incremented whenever control is taken or released
+        self._driving_epoch = -1
         self._no_operator_reason = "no operator"
         self._command: OperatorCommand | None = None
         self._command_rx_ns = 0
@@ -212,6 +214,7 @@ class RobotController:
         took_control = False
         if self._controller_op is None and cmd.deadman:
             self._controller_op = cmd.op
+            self._control_epoch += 1
             took_control = True
         if self._controller_op != cmd.op:
             holder = self._controller_op or "nobody (hold the deadman to take control)"
@@ -277,6 +280,7 @@ class RobotController:
             estop=self._estop_pending,
             reset=cmd is not None and cmd.reset,
             base_stopped=max(abs(self._previous[0]), abs(self._previous[1])) < _STOPPED_EPS,
+            same_control=self._driving_epoch == self._control_epoch,
             no_operator_reason=self._no_operator_reason,
         )
         self._estop_pending = False
@@ -288,6 +292,7 @@ class RobotController:
 
         result: PipelineResult | None = None
         state = self._transition.state
+        self._driving_epoch = self._control_epoch if state is State.DRIVING else -1
         if state is State.DRIVING and cmd is not None and scan is not None:
             result = step_command(
                 cfg.pipeline, cmd.x, cmd.y, cmd.mode, scan.points, self._previous, dt_s
@@ -378,5 +383,6 @@ class RobotController:
 
     def _release(self, reason: str) -> None:
         self._controller_op = None
+        self._control_epoch += 1
         self._command = None
         self._no_operator_reason = reason

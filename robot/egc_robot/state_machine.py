@@ -2,7 +2,8 @@
 
 States:
 
-- ``IDLE``: no operator holds control and the base is stopped.
+- ``IDLE``: no operator holds control and the base is stopped (the reason says why: none came
+  yet, or the last one was lost or fell silent).
 - ``DRIVING``: the controlling operator's newest command is fresh, its deadman is held and the
   scan is fresh; the command pipeline drives the base.
 - ``HOLD``: stop, decelerating at the profile's limit: the command is stale or missing
@@ -14,7 +15,9 @@ States:
 
 Resuming is the same rule everywhere: from IDLE or HOLD the robot enters DRIVING only on a fresh,
 deadman-held command with the stick **centred**, so an operator who returns (after a crash, a
-hang, a stale link or an e-stop) with the stick deflected cannot make the robot jump.
+hang, a stale link or an e-stop) with the stick deflected cannot make the robot jump. The same
+holds when control changes hands between two cycles (``same_control`` false): DRIVING is never
+inherited by the next operator.
 
 The function reads no clock: the controller computes the snapshot (freshness, presence) from
 monotonic times it is given.
@@ -45,6 +48,7 @@ class Inputs:
     estop: bool
     reset: bool
     base_stopped: bool
+    same_control: bool = True  # control has not changed hands since the previous cycle
     no_operator_reason: str = "no operator"
 
 
@@ -84,11 +88,11 @@ def next_state(current: Transition, inputs: Inputs) -> Transition:
     reason = hold_reason(inputs)
     if not inputs.operator_present:
         if inputs.base_stopped:
-            return _keep(current, State.IDLE, "no operator")
+            return _keep(current, State.IDLE, inputs.no_operator_reason)
         return _keep(current, State.HOLD, inputs.no_operator_reason)
     if reason is not None:
         return _keep(current, State.HOLD, reason)
-    if current.state is State.DRIVING:
+    if current.state is State.DRIVING and inputs.same_control:
         return current
     if inputs.centred:
         return Transition(State.DRIVING, "fresh centred command")

@@ -102,3 +102,8 @@ def test_hold_reason_order():
 def test_unchanged_transition_is_the_same_object():
     t = Transition(State.HOLD, "deadman released")
     assert next_state(t, with_(deadman=False)) is t
+
+
+def test_driving_is_not_inherited_when_control_changed_hands():
+    t = next_state(at(State.DRIVING), with_(centred=False, same_control=False))
+    assert t == Transition(State.HOLD, "waiting for a centred stick")

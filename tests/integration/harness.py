@@ -1,0 +1,316 @@
+"""Helpers for the integration tests: real processes, real Zenoh sessions, an outside observer.
+
+- ``Processes`` starts ``python -m egc_app.cli ...`` children with their output in files and
+  kills every one of them at teardown, even stopped (SIGSTOP) ones, even when a test fails.
+- ``Observer`` is a Zenoh peer in the test process, connected to the robot's port: it records
+  the robot's telemetry, state and base commands with arrival times, publishes scans (the
+  sensor half of a remote driver), and can act as an outside operator that publishes the
+  pinned OperatorCommand maps as plain msgpack dicts.
+
+All times are ``time.monotonic_ns()``: on Linux CLOCK_MONOTONIC is shared by all processes of
+the machine, so the test's times are comparable with the robot's stamps.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import msgpack
+import numpy as np
+import zenoh
+from egc_common import keys
+from egc_common.messages import (
+    BaseCommand,
+    Rejection,
+    ScanMessage,
+    StateMessage,
+    Telemetry,
+    decode_base_command,
+    decode_clock_reply,
+    decode_state,
+    decode_telemetry,
+)
+from egc_common.transport import ZenohOptions, loopback_endpoint, open_session
+
+ROBOT = "itest"
+MS = 1_000_000
+ROOT = Path(__file__).resolve().parents[2]
+
+
+class Processes:
+    def __init__(self, workdir: Path) -> None:
+        self.workdir = workdir
+        self.children: dict[str, subprocess.Popen[bytes]] = {}
+
+    def start(self, name: str, *args: str) -> subprocess.Popen[bytes]:
+        out = (self.workdir / f"{name}.log").open("wb")
+        env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONFAULTHANDLER="1")
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "egc_app.cli", *args],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            cwd=self.workdir,
+            env=env,
+        )
+        out.close()
+        self.children[name] = proc
+        return proc
+
+    def log(self, name: str) -> str:
+        return (self.workdir / f"{name}.log").read_text(errors="replace")
+
+    def alive(self, name: str) -> bool:
+        return self.children[name].poll() is None
+
+    def stop(self, name: str, sig: int = signal.SIGTERM, timeout_s: float = 5.0) -> int:
+        proc = self.children[name]
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGCONT)
+            proc.send_signal(sig)
+            try:
+                proc.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                proc.send_signal(signal.SIGABRT)  # faulthandler dumps every thread to the log
+                try:
+                    proc.wait(2)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+        return proc.returncode
+
+    def cleanup(self) -> None:
+        for proc in self.children.values():
+            if proc.poll() is None:
+                proc.kill()  # SIGKILL also ends a SIGSTOPped process
+        for proc in self.children.values():
+            proc.wait(5)
+
+
+def robot_args(port: int, *extra: str) -> list[str]:
+    return [
+        "robot",
+        "--robot",
+        ROBOT,
+        "--driver",
+        "zenoh",
+        "--listen",
+        loopback_endpoint(port),
+        *extra,
+    ]
+
+
+def operator_args(port: int, op_id: str, joystick_file: Path, *extra: str) -> list[str]:
+    return [
+        "operator",
+        "--robot",
+        ROBOT,
+        "--operator-id",
+        op_id,
+        "--joystick-file",
+        str(joystick_file),
+        "--no-view",
+        "--no-status",
+        "--zenoh-connect",
+        loopback_endpoint(port),
+        *extra,
+    ]
+
+
+def joystick_file(path: Path, rows: list[tuple[float, float, float, int]]) -> Path:
+    """rows of (t_s, x, y, deadman) in the recorded-joystick CSV format."""
+    lines = ["t_s,x,y,deadman,mode"] + [f"{t},{x},{y},{d},shared" for t, x, y, d in rows]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@dataclass
+class Record:
+    telemetry: list[tuple[int, Telemetry, dict[Any, Any]]] = field(default_factory=list)
+    state: list[tuple[int, StateMessage]] = field(default_factory=list)
+    base: list[tuple[int, BaseCommand]] = field(default_factory=list)
+
+
+def open_scan_message(stamp_ns: int, beams: int = 360, range_m: float = 5.0) -> ScanMessage:
+    return ScanMessage(
+        stamp_ns=stamp_ns,
+        angle_min_rad=-math.pi,
+        angle_increment_rad=2 * math.pi / beams,
+        range_min_m=0.05,
+        range_max_m=10.0,
+        ranges_m=np.full(beams, range_m, np.float32),
+    )
+
+
+class Observer:
+    """The test's own Zenoh peer (see the module docstring)."""
+
+    def __init__(self, port: int) -> None:
+        self.session = open_session(ZenohOptions(connect=(loopback_endpoint(port),)))
+        self.rec = Record()
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        s = self.session
+        self._subs = [
+            s.declare_subscriber(keys.telemetry(ROBOT), self._on_telemetry),
+            s.declare_subscriber(keys.state(ROBOT), self._on_state),
+            s.declare_subscriber(keys.base_cmd(ROBOT), self._on_base),
+        ]
+        self.scans_on = threading.Event()
+        self.stick: dict[str, Any] = {}
+        self.seq = 0
+        self.op_lock = threading.Lock()  # held by the operator loop while it publishes
+        self.offset_ns = 0
+
+    def _on_telemetry(self, sample: zenoh.Sample) -> None:
+        now = time.monotonic_ns()
+        raw = sample.payload.to_bytes()
+        t = decode_telemetry(raw)
+        assert not isinstance(t, Rejection), t
+        with self._lock:
+            self.rec.telemetry.append((now, t, msgpack.unpackb(raw)))
+
+    def _on_state(self, sample: zenoh.Sample) -> None:
+        now = time.monotonic_ns()
+        s = decode_state(sample.payload.to_bytes())
+        assert not isinstance(s, Rejection), s
+        with self._lock:
+            self.rec.state.append((now, s))
+
+    def _on_base(self, sample: zenoh.Sample) -> None:
+        now = time.monotonic_ns()
+        b = decode_base_command(sample.payload.to_bytes())
+        assert not isinstance(b, Rejection), b
+        with self._lock:
+            self.rec.base.append((now, b))
+
+    # -- reading what was recorded --------------------------------------------------------------
+
+    def telemetry(self, since_ns: int = 0) -> list[Telemetry]:
+        with self._lock:
+            return [t for rx, t, _ in self.rec.telemetry if rx >= since_ns]
+
+    def base(self, since_ns: int = 0) -> list[tuple[int, BaseCommand]]:
+        with self._lock:
+            return [(rx, b) for rx, b in self.rec.base if rx >= since_ns]
+
+    def last_telemetry(self) -> Telemetry | None:
+        with self._lock:
+            return self.rec.telemetry[-1][1] if self.rec.telemetry else None
+
+    def wait_for(self, what: str, predicate: Callable[[], Any], timeout_s: float = 10.0) -> Any:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            value = predicate()
+            if value:
+                return value
+            time.sleep(0.01)
+        last = self.last_telemetry()
+        raise AssertionError(
+            f"timed out after {timeout_s} s waiting for {what}; last telemetry: "
+            f"{None if last is None else (last.state, last.operator, last.v_cmd, last.rejected)}"
+        )
+
+    def wait_state(self, state: str, timeout_s: float = 10.0, since_ns: int = 0) -> Telemetry:
+        def found() -> Telemetry | None:
+            return next((t for t in self.telemetry(since_ns) if t.state == state), None)
+
+        result: Telemetry = self.wait_for(f"state {state}", found, timeout_s)
+        return result
+
+    # -- acting as a driver (scans) and as an outside operator ----------------------------------
+
+    def start_scans(self, period_s: float = 0.05) -> None:
+        self.scans_on.set()
+        self._spawn(self._scan_loop, period_s)
+
+    def _scan_loop(self, period_s: float) -> None:
+        while not self._stop.wait(period_s):
+            if self.scans_on.is_set():
+                now = time.monotonic_ns()
+                self.session.put(keys.scan(ROBOT), open_scan_message(now).encode())
+
+    def robot_clock_offset_ns(self) -> int:
+        """Offset of the robot's clock from ours, by the min-RTT of a few clock queries."""
+        best: tuple[int, int] | None = None
+        for _ in range(5):
+            sent = time.monotonic_ns()
+            for reply in self.session.get(keys.clock(ROBOT), timeout=1.0):
+                received = time.monotonic_ns()
+                stamp = decode_clock_reply(reply.ok.payload.to_bytes())
+                assert isinstance(stamp, int)
+                sample = (received - sent, stamp - (sent + received) // 2)
+                best = sample if best is None or sample < best else best
+        assert best is not None, "the robot's clock queryable did not answer"
+        return best[1]
+
+    def command(self, seq: int, stamp_ns: int, **kw: Any) -> bytes:
+        """A pinned OperatorCommand as a plain msgpack map (DESIGN 7)."""
+        msg = {"v": 1, "seq": seq, "stamp_ns": stamp_ns, "x": 0.0, "y": 0.0, "mode": "shared"}
+        msg |= {"deadman": True, "estop": False, "reset": False, "op": "outside"}
+        msg |= kw
+        data: bytes = msgpack.packb(msg)
+        return data
+
+    def put_cmd(self, payload: bytes) -> None:
+        self.session.put(
+            keys.cmd(ROBOT), payload, priority=zenoh.Priority.INTERACTIVE_HIGH, express=True
+        )
+
+    def start_operator(self, period_s: float = 0.02, **stick: Any) -> None:
+        """Publish commands at 50 Hz from ``self.stick`` (changed by the test as it goes)."""
+        self.stick = {"x": 0.0, "deadman": True, **stick}
+        self.offset_ns = self.robot_clock_offset_ns()
+        self._spawn(self._operator_loop, period_s, self.offset_ns)
+
+    def _operator_loop(self, period_s: float, offset_ns: int) -> None:
+        while not self._stop.wait(period_s):
+            stick = dict(self.stick)
+            if stick.pop("paused", False):
+                continue
+            age_ns = int(stick.pop("age_ms", 0) * MS)
+            with self.op_lock:
+                self.seq += 1
+                now = time.monotonic_ns()
+                self.put_cmd(self.command(self.seq, now + offset_ns - age_ns, **stick))
+
+    def _spawn(self, target: Callable[..., None], *args: Any) -> None:
+        thread = threading.Thread(target=target, args=args, daemon=True)
+        thread.start()
+        self._threads.append(thread)
+
+    def close(self) -> None:
+        self._stop.set()
+        for thread in self._threads:
+            thread.join(2)
+        for sub in self._subs:
+            sub.undeclare()
+        self.session.close()
+
+
+def assert_no_jump(telemetry: list[Telemetry]) -> None:
+    """Every entry into DRIVING happened on a centred command (v_ref = w_ref = 0)."""
+    previous = None
+    for t in telemetry:
+        if t.state == "DRIVING" and previous is not None and previous != "DRIVING":
+            assert t.v_ref == 0.0 and t.w_ref == 0.0, f"robot entered DRIVING on a deflection {t}"
+        previous = t.state
+
+
+def first_zero_after(base: list[tuple[int, BaseCommand]], since_ns: int) -> int | None:
+    """Arrival time of the first all-zero base command after ``since_ns``."""
+    for rx, b in base:
+        if rx >= since_ns and b.linear_mps == 0.0 and b.angular_radps == 0.0:
+            return rx
+    return None
