@@ -1,0 +1,175 @@
+"""The pure part of the operator view: geometry and styling computed from telemetry."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from egc_common.profiles import JACKAL, PIONEER3DX
+from egc_operator.view_scene import (
+    CIRCLE_NAMES,
+    FALLBACK_HORIZON_S,
+    REGION_COLOURS,
+    ROBOT_TO_SCREEN,
+    WORLD_TO_SCREEN,
+    circle_strip,
+    command_vector,
+    footprint_strip,
+    map_image,
+    pose_moved,
+    robot_frame_scene,
+    status_changes,
+    status_text,
+    time_series,
+)
+from egc_robot.filters.egc import EgcParams, egc_filter, predicted_position
+
+from tests.view.conftest import telemetry
+
+
+def test_circle_strip_is_a_closed_circle_of_the_right_radius() -> None:
+    strip = circle_strip(0.5, -0.25, 0.3, segments=48)
+    assert strip.shape == (49, 2)
+    assert np.array_equal(strip[0], strip[-1])
+    radii = np.hypot(strip[:, 0] - 0.5, strip[:, 1] + 0.25)
+    np.testing.assert_allclose(radii, 0.3, rtol=1e-6)
+
+
+@pytest.mark.parametrize("r", [0.0, -1.0, math.nan, math.inf])
+def test_degenerate_circles_draw_nothing(r: float) -> None:
+    assert circle_strip(0.0, 0.0, r).shape == (0, 2)
+
+
+@pytest.mark.parametrize("profile", [PIONEER3DX, JACKAL])
+def test_footprint_is_the_profiles_rectangle_centred_on_the_robot(profile) -> None:  # type: ignore[no-untyped-def]
+    strip = footprint_strip(profile)
+    assert strip.shape == (5, 2) and np.array_equal(strip[0], strip[-1])
+    np.testing.assert_allclose(strip[:, 0].max() - strip[:, 0].min(), profile.length_m, rtol=1e-6)
+    np.testing.assert_allclose(strip[:, 1].max() - strip[:, 1].min(), profile.width_m, rtol=1e-6)
+    np.testing.assert_allclose(strip[:4].mean(axis=0), 0.0, atol=1e-7)
+
+
+def test_operator_arrow_ends_at_the_initial_guide_circle_centre() -> None:
+    """With the profile's default horizon the blue arrow's tip is the filter's P_IGC (eq. 6)."""
+    p = PIONEER3DX
+    params = EgcParams.from_profile(p.r_min_m, p.r_max_m, p.v_max_mps)
+    v, w = 0.12, -0.3
+    result = egc_filter(v, w, np.array([[0.8, -0.3], [1.5, 0.4]]), params)
+    assert command_vector(v, w, p.horizon_s) == pytest.approx(result.p_igc)
+    assert command_vector(v, w, p.horizon_s) == pytest.approx(predicted_position(v, w, p.horizon_s))
+
+
+def test_robot_frame_scene_from_telemetry() -> None:
+    t = telemetry(3)
+    scene = robot_frame_scene(t)
+    np.testing.assert_array_equal(scene.scan_xy, t.scan_xy)
+    assert scene.footprint.shape == (5, 2)
+    assert scene.region_colour == REGION_COLOURS["conditional"]
+    assert set(scene.circles) == set(CIRCLE_NAMES)
+    for name, circle in (("igc", t.igc), ("agc", t.agc), ("egc", t.egc)):
+        assert circle is not None
+        centre_to_rim = np.hypot(*(scene.circles[name][0] - np.array(circle[:2])))
+        assert centre_to_rim == pytest.approx(circle[2], rel=1e-6)
+    assert np.hypot(*scene.circles["reachable"][0]) == pytest.approx(t.r_rc, rel=1e-6)
+    horizon = PIONEER3DX.horizon_s
+    assert scene.reference_vector == pytest.approx(command_vector(t.v_ref, t.w_ref, horizon))
+    assert scene.sent_vector == pytest.approx(command_vector(t.v_cmd, t.w_cmd, horizon))
+    assert scene.status_anchor[0] < -PIONEER3DX.length_m / 2  # behind the robot
+
+
+def test_absent_circles_and_unknown_profile() -> None:
+    t = telemetry(1, igc=None, agc=None, egc=None, r_rc=0.0, profile="", region="weird")
+    scene = robot_frame_scene(t)
+    assert all(scene.circles[name].shape == (0, 2) for name in CIRCLE_NAMES)
+    assert scene.footprint.shape == (0, 2)
+    assert scene.sent_vector == pytest.approx(command_vector(t.v_cmd, t.w_cmd, FALLBACK_HORIZON_S))
+
+
+def test_status_text_names_the_limiter_and_region() -> None:
+    assert status_text(telemetry(1, limiter="sweep", region="unsafe", w_si=0.0)) == (
+        "DRIVING · shared · limit: footprint sweep · unsafe · w_SI 0.00"
+    )
+    assert "limit: e-stop" in status_text(telemetry(1, state="ESTOP", limiter="estop"))
+    assert "limit: something_new" in status_text(telemetry(1, limiter="something_new"))
+
+
+def test_time_series_follow_paper_fig_11_and_skip_unknown_ages() -> None:
+    t = telemetry(2)
+    assert time_series(t) == {
+        "v/ref": t.v_ref,
+        "v/cmd": t.v_cmd,
+        "w/ref": t.w_ref,
+        "w/cmd": t.w_cmd,
+        "w_si": t.w_si,
+        "latency/cmd_age_ms": 20.0,
+        "latency/scan_age_ms": 30.0,
+    }
+    assert "latency/cmd_age_ms" not in time_series(telemetry(2, cmd_age_ms=None))
+
+
+def test_status_changes_reports_only_what_changed() -> None:
+    first = telemetry(1)
+    assert status_changes(None, first) == {
+        "state": "DRIVING",
+        "mode": "shared",
+        "limiter": "egc",
+        "region": "conditional",
+    }
+    assert status_changes(first, telemetry(2)) == {}
+    assert status_changes(first, telemetry(2, state="HOLD", limiter="watchdog")) == {
+        "state": "HOLD",
+        "limiter": "watchdog",
+    }
+
+
+def test_trajectory_grows_by_steps() -> None:
+    assert pose_moved(None, (0.0, 0.0, 0.0), 0.02)
+    assert not pose_moved((0.0, 0.0), (0.01, 0.01, 1.0), 0.02)
+    assert pose_moved((0.0, 0.0), (0.02, 0.0, 0.0), 0.02)
+
+
+def _apply(mat: tuple[tuple[float, ...], ...], xy: tuple[float, float]) -> tuple[float, float]:
+    m = np.array(mat)
+    out = m @ np.array([xy[0], xy[1], 0.0])
+    return float(out[0]), float(out[1])
+
+
+def test_screen_transforms_show_forward_up_and_north_up() -> None:
+    """Rerun's 2D views have +y down: forward must come out up, left out left."""
+    assert _apply(ROBOT_TO_SCREEN, (1.0, 0.0)) == (0.0, -1.0)  # forward -> up
+    assert _apply(ROBOT_TO_SCREEN, (0.0, 1.0)) == (-1.0, 0.0)  # left -> left
+    assert _apply(WORLD_TO_SCREEN, (1.0, 0.0)) == (1.0, 0.0)  # east -> right
+    assert _apply(WORLD_TO_SCREEN, (0.0, 1.0)) == (0.0, -1.0)  # north -> up
+
+
+def test_map_image_places_cells_at_their_world_position() -> None:
+    occ = np.zeros((4, 6), bool)
+    occ[0, 0] = True  # top-left cell
+    occ[3, 5] = True  # bottom-right cell
+    image = map_image(occ, 0.5, (-1.0, 2.0))
+    assert image.pixels.shape == (4, 6) and image.pixels.dtype == np.uint8
+    assert image.pixels[0, 0] < image.pixels[1, 1]  # occupied is dark
+
+    def world(col: float, row: float) -> tuple[float, float]:
+        x, y = _apply(image.mat3x3, (col, row))
+        return x + image.translation[0], y + image.translation[1]
+
+    # Pixel (col, row) spans [col, col + 1] x [row, row + 1] in image space.
+    assert world(0, 4) == pytest.approx((-1.0, 2.0))  # lower-left corner = origin
+    assert world(6, 0) == pytest.approx((2.0, 4.0))  # upper-right corner
+    assert world(0.5, 0.5) == pytest.approx((-0.75, 3.75))  # centre of the top-left cell
+
+
+@pytest.mark.parametrize(
+    ("occupancy", "resolution", "origin"),
+    [
+        (np.zeros((0, 3), bool), 0.1, (0.0, 0.0)),
+        (np.zeros(5, bool), 0.1, (0.0, 0.0)),
+        (np.zeros((2, 2), bool), 0.0, (0.0, 0.0)),
+        (np.zeros((2, 2), bool), 0.1, (math.nan, 0.0)),
+    ],
+)
+def test_map_image_rejects_bad_maps(occupancy, resolution, origin) -> None:  # type: ignore[no-untyped-def]
+    with pytest.raises(ValueError):
+        map_image(occupancy, resolution, origin)

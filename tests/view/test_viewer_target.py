@@ -1,0 +1,166 @@
+"""Choosing where the operator view goes (issue 5, viewer targets)."""
+
+from __future__ import annotations
+
+import argparse
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+from egc_common.errors import UsageError
+from egc_common.transport import free_tcp_port
+from egc_operator import view_blueprint as paths
+from egc_operator.view import add_view_arguments, open_view
+from egc_operator.viewer_target import ViewerTarget, choose_target
+
+from tests.view.conftest import telemetry
+from tests.view.rrd import read_recording
+
+HEADLESS: dict[str, str] = {}
+
+
+def _choose(env: dict[str, str] | None = None, **options: object) -> ViewerTarget:
+    kwargs: dict[str, object] = {"save": None, "connect": None, "serve_web": None, "no_view": False}
+    kwargs.update(options)
+    return choose_target(
+        env=HEADLESS if env is None else env,
+        robot_id="sim",
+        stamp="20250101-120000",
+        **kwargs,  # type: ignore[arg-type]
+    )
+
+
+def test_each_option_picks_its_target() -> None:
+    assert _choose(save="out.rrd") == ViewerTarget("save", path=Path("out.rrd"))
+    url = "rerun+http://10.0.0.5:9876/proxy"
+    assert _choose(connect=url) == ViewerTarget("connect", url=url)
+    target = _choose(serve_web=9090)
+    assert (target.kind, target.web_port, target.grpc_port) == ("serve_web", 9090, 9091)
+    assert _choose(no_view=True).kind == "none"
+
+
+def test_display_spawns_a_viewer_and_headless_saves_to_a_named_file() -> None:
+    assert _choose(env={"DISPLAY": ":0"}).kind == "spawn"
+    assert _choose(env={"WAYLAND_DISPLAY": "wayland-0"}).kind == "spawn"
+    headless = _choose(env={"DISPLAY": ""})
+    assert headless == ViewerTarget(
+        "save", path=Path("egc-operator-sim-20250101-120000.rrd"), defaulted=True
+    )
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"save": "a.rrd", "connect": "rerun+http://h:1/proxy"}, "--save and --connect"),
+        ({"serve_web": 9090, "no_view": True}, "--serve-web and --no-view"),
+        ({"save": "view.txt"}, ".rrd"),
+        ({"connect": "http://h:9876"}, "rerun+http"),
+        ({"serve_web": 0}, "1..65534"),
+        ({"serve_web": 65535}, "1..65534"),
+    ],
+)
+def test_bad_options_are_a_usage_error(options: dict[str, object], message: str) -> None:
+    with pytest.raises(UsageError, match=message.replace(".", r"\.").replace("+", r"\+")):
+        _choose(**options)
+
+
+def _args(*argv: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser()
+    add_view_arguments(parser)
+    return parser.parse_args(list(argv))
+
+
+def test_arguments_parse() -> None:
+    args = _args("--serve-web", "9090")
+    assert (args.serve_web, args.connect, args.save, args.no_view) == (9090, None, None, False)
+    assert _args("--no-view").no_view
+    with pytest.raises(SystemExit):
+        _args("--serve-web", "http")
+
+
+def test_open_view_saves_and_says_where(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "sub" / "op.rrd"
+    view = open_view(_args("--save", str(out)), "sim")
+    view.on_telemetry(telemetry(0))
+    view.close()
+    assert str(out.resolve()) in capsys.readouterr().err
+    assert len(read_recording(out)["/" + paths.SCAN]) == 1
+
+
+def test_headless_default_saves_in_the_working_directory(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    view = open_view(_args(), "sim")
+    view.close()
+    saved = list(tmp_path.glob("egc-operator-sim-*.rrd"))
+    assert len(saved) == 1
+    err = capsys.readouterr().err
+    assert "no display" in err and str(saved[0].resolve()) in err
+
+
+def test_no_view(capsys: pytest.CaptureFixture[str]) -> None:
+    view = open_view(_args("--no-view"), "sim")
+    view.on_telemetry(telemetry(0))
+    view.close()
+    assert "disabled" in capsys.readouterr().err
+
+
+def _wait_for(check: Callable[[], bool], timeout_s: float = 20.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not check():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.1)
+
+
+def _answers(url: str) -> bool:
+    try:
+        with urllib.request.urlopen(url, timeout=2) as reply:
+            return b"<html" in reply.read(4096).lower()
+    except OSError:
+        return False
+
+
+@pytest.mark.filterwarnings("ignore:RRD file has no footer")  # the server's file is still open
+def test_connect_streams_to_a_running_viewer(tmp_path: Path) -> None:
+    """A headless `rerun` server that saves what it receives stands in for the viewer."""
+    port = free_tcp_port()
+    received = tmp_path / "received.rrd"
+    server = subprocess.Popen(
+        [sys.executable, "-m", "rerun", "--port", str(port), "--save", str(received)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        _wait_for(received.exists)
+        view = open_view(_args("--connect", f"rerun+http://127.0.0.1:{port}/proxy"), "sim")
+        for i in range(5):
+            view.on_telemetry(telemetry(i))
+        view.close()
+        _wait_for(lambda: "/" + paths.SCAN in read_recording(received))
+        _wait_for(lambda: len(read_recording(received)["/" + paths.SCAN]) == 5)
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
+
+
+def test_serve_web_hosts_the_viewer_and_the_data(capsys: pytest.CaptureFixture[str]) -> None:
+    web_port = free_tcp_port()
+    view = open_view(_args("--serve-web", str(web_port)), "sim")
+    try:
+        view.on_telemetry(telemetry(0))
+        _wait_for(lambda: _answers(f"http://127.0.0.1:{web_port}/"))
+        with socket.create_connection(("127.0.0.1", web_port + 1), timeout=5):
+            pass  # the gRPC server the page reads from
+        err = capsys.readouterr().err
+        assert f"http://127.0.0.1:{web_port}/?url=rerun%2Bhttp%3A%2F%2F" in err
+        assert f"%3A{web_port + 1}%2Fproxy" in err
+    finally:
+        view.close()
