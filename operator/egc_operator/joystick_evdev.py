@@ -105,17 +105,17 @@ class ButtonMap:
     @staticmethod
     def from_table(table: Mapping[str, Any], base: ButtonMap | None = None) -> ButtonMap:
         """Override a preset with a ``[joystick]`` table (codes by name or number)."""
-        out = base or ButtonMap()
+        changes: dict[str, Any] = {}
         for key, value in table.items():
             if key in ("forward_invert", "turn_invert"):
                 if not isinstance(value, bool):
                     raise ValueError(f"joystick.{key} must be true or false")
-                out = replace(out, **{key: value})
+                changes[key] = value
             elif key in ButtonMap.__dataclass_fields__:
-                out = replace(out, **{key: resolve_code(value)})
+                changes[key] = resolve_code(value)
             else:
                 raise ValueError(f"unknown joystick key {key!r}")
-        return out
+        return replace(base or ButtonMap(), **changes)
 
 
 PRESETS: dict[str, ButtonMap] = {
@@ -265,7 +265,7 @@ def open_device(path: str, mapping: ButtonMap) -> Device:
         device = evdev.InputDevice(path)
     except OSError as exc:
         raise ValueError(f"cannot open joystick {path}: {exc.strerror}") from None
-    axes = {code for code, _ in device.capabilities().get(EV_ABS, [])}
+    axes = set(device.capabilities(absinfo=False).get(EV_ABS, []))
     missing = [a for a in (mapping.forward_axis, mapping.turn_axis) if a not in axes]
     if missing:
         device.close()

@@ -118,7 +118,8 @@ class RealTimeSim:
         return self.sim.scan(now_ns)
 
     def odometry(self, now_ns: int) -> Odometry:
-        x, y, theta = self.sim.pose
+        """What a real base reports: wheel odometry (the simulator's, noisy if configured)."""
+        x, y, theta = self.sim.odometry
         v, w = self.sim.twist
         return Odometry(
             stamp_ns=now_ns,
@@ -182,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
         if not (math.isfinite(getattr(args, name)) and getattr(args, name) > 0):
             raise UsageError(f"--{name.replace('_', '-')} must be positive")
     sim = open_simulator(args.map, profile, parse_pose(args.start), args.seed, args.beams)
-    session = open_session(options_from_args(args))
+    session: Any = open_session(options_from_args(args))  # zenoh's stubs leave close() untyped
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
@@ -199,7 +200,7 @@ def run(args: argparse.Namespace) -> int:
         with lock:
             last_cmd[0], last_cmd[1] = (decoded.linear_mps, decoded.angular_radps), now
 
-    subscriber = session.declare_subscriber(keys.base_cmd(robot_id), on_base_cmd)
+    subscriber: Any = session.declare_subscriber(keys.base_cmd(robot_id), on_base_cmd)
     scan_pub = data_publisher(session, keys.scan(robot_id))
     odom_pub = data_publisher(session, keys.base_odom(robot_id))
     now = time.monotonic_ns()
