@@ -1,0 +1,438 @@
+"""``egc-teleop episode``: headless episodes in the simulator, printed as JSON (pinned CLI).
+
+    egc-teleop episode --map PATH --start X,Y,YAW --goal X,Y [--operator goal|forward|FILE]
+        [--filter none|egc] [--profile NAME] [--max-time S] [--goal-tolerance M] [--seed N]
+        [--stall-time S] [--record OUT.rrd] --json
+    egc-teleop episode --batch SUITE.jsonl | --random-worlds N  [...] [--jobs J] [--out FILE]
+
+This module is wiring (DESIGN 2): ``egc_sim`` supplies the world, the simulated robot, the
+scripted operator and the episode loop; the controller is the robot's own command pipeline,
+``egc_robot.pipeline.step_command`` (eq. 4 mapping, EGC in shared mode, anti-dead-lock,
+profile limits, footprint sweep), called here, never copied. When the operator releases the
+deadman or presses e-stop the robot's stop rule applies (``egc_robot.safety.decelerate``).
+
+- ``--filter egc`` runs the pipeline with the EGC filter and the scripted operators select
+  ``shared`` mode; ``--filter none`` turns the filter off and they select ``direct``. A joystick
+  file selects its mode per row, and with ``--filter none`` shared rows are not filtered.
+- ``--map`` takes a map.yaml, a .toml or .npy world, or a built-in name (``hallway``,
+  ``office02``, ``random:SEED``); ``--start``/``--goal``/``--goal-tolerance`` default to the
+  world's own where it has them.
+- Control runs at 1 / ``--dt`` Hz (20 Hz); the simulator sub-steps within a cycle.
+- ``--stall-time S`` ends an episode as ``stalled`` once the robot has stood still for S
+  simulated seconds (``egc_sim.episodes``); off by default, so that an episode ends only at the
+  goal, at a contact or at ``--max-time``.
+
+JSON keys: ``reached``, ``collided``, ``time_s`` (simulated), ``path_m``, ``min_clearance_m``
+(smallest footprint clearance, 0 after a contact, capped at 1 m), ``interventions``, ``steps``
+(control cycles), ``wall_s`` (wall-clock seconds of the episode loop, world loading excluded),
+plus ``outcome`` (reached | collided | stalled | timeout), ``goal_distance_m``, ``final_pose`` and the
+settings. An **intervention** is a control cycle in which the pipeline's limiter was ``egc``
+(the filter changed the operator's command) or ``sweep`` (the footprint check scaled it down).
+Cycles limited only by the profile's velocity/acceleration limits, stopped by the deadman or
+passed through by the anti-dead-lock rule do not count; in direct mode the count is 0.
+
+The batch form runs episodes in parallel worker processes (``--jobs``, default: all cores),
+shows a progress bar on stderr and writes one JSON object per line to ``--out`` (or stdout), in
+input order. A suite file holds one JSON object per line with the single-episode options as
+keys: ``map`` (required), ``start`` ([x, y, yaw]), ``goal`` ([x, y]), ``operator``, ``filter``,
+``profile``, ``max_time``, ``goal_tolerance``, ``seed``, ``dt``, ``stall_time``; missing keys take the command
+line's values. ``--random-worlds N`` runs ``random:SEED`` for N seeds from ``--seed`` on.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import multiprocessing
+import os
+import sys
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from egc_common.errors import UsageError
+from egc_common.profiles import PROFILES, get_profile
+from egc_common.scan import Scan
+from egc_robot.pipeline import FILTERS, Limiter, PipelineConfig, step_command
+from egc_robot.safety import decelerate
+from egc_sim.episodes import ControlOutput, EpisodeResult, run_episode
+from egc_sim.operators import Stick, make_operator
+from egc_sim.simulator import Simulator
+from egc_sim.worlds import WorldError, load_world
+
+DEFAULT_GOAL_TOLERANCE_M = 0.3
+INTERVENTIONS = (Limiter.EGC, Limiter.SWEEP)
+SUITE_KEYS = {
+    "map",
+    "start",
+    "goal",
+    "operator",
+    "filter",
+    "profile",
+    "max_time",
+    "goal_tolerance",
+    "seed",
+    "dt",
+    "stall_time",
+}
+
+
+@dataclass(frozen=True, slots=True)
+class EpisodeSettings:
+    """Everything one episode needs; plain values so that it crosses process boundaries."""
+
+    map: str
+    start: tuple[float, float, float] | None = None
+    goal: tuple[float, float] | None = None
+    operator: str = "goal"
+    filter: str = "egc"
+    profile: str = "pioneer3dx"
+    max_time_s: float = 300.0
+    goal_tolerance_m: float | None = None
+    seed: int = 0
+    dt_s: float = 0.05
+    stall_time_s: float | None = None
+
+
+class PipelineController:
+    """The robot's command pipeline as an episode controller (module docstring)."""
+
+    def __init__(self, config: PipelineConfig) -> None:
+        self.config = config
+        self.previous = (0.0, 0.0)
+
+    def __call__(self, stick: Stick, scan: Scan, dt_s: float) -> ControlOutput:
+        if stick.deadman and not stick.estop:
+            r = step_command(
+                self.config, stick.x_o, stick.y_o, stick.mode, scan.points(), self.previous, dt_s
+            )
+            out = ControlOutput(
+                r.v_cmd_mps,
+                r.w_cmd_radps,
+                r.v_ref_mps,
+                r.w_ref_radps,
+                r.limiter in INTERVENTIONS,
+                r.limiter.value,
+                None if r.side is None else r.side.value,
+            )
+        else:
+            v, w = decelerate(self.previous, dt_s, self.config.profile)
+            limiter = Limiter.ESTOP if stick.estop else Limiter.HOLD
+            out = ControlOutput(v, w, 0.0, 0.0, False, limiter.value)
+        self.previous = (out.v_mps, out.w_radps)
+        return out
+
+
+def run_settings(
+    settings: EpisodeSettings, record_trace: bool = False
+) -> tuple[EpisodeResult, dict[str, Any]]:
+    """Run one episode; returns the result and its JSON summary. Bad settings -> UsageError."""
+    try:
+        world = load_world(settings.map, seed=settings.seed)
+    except WorldError as exc:
+        raise UsageError(f"cannot load map {settings.map!r}: {exc}") from None
+    try:
+        profile = get_profile(settings.profile)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    start = settings.start or world.start_pose
+    if start is None:
+        raise UsageError(f"map {settings.map!r} suggests no start pose: give --start X,Y,YAW")
+    goal = settings.goal or world.goal
+    if goal is None:
+        raise UsageError(f"map {settings.map!r} suggests no goal: give --goal X,Y")
+    tolerance = settings.goal_tolerance_m or world.goal_tolerance_m or DEFAULT_GOAL_TOLERANCE_M
+    mode = "shared" if settings.filter == "egc" else "direct"
+    try:
+        sim = Simulator(world, profile, start, seed=settings.seed)
+        operator = make_operator(settings.operator, goal, mode)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    # The simulated lidar declares "no return" as free: within its range it truly is.
+    config = PipelineConfig(profile, filter=settings.filter, no_return_is_free=True)
+    t0 = time.perf_counter()
+    result = run_episode(
+        sim,
+        operator,
+        PipelineController(config),
+        goal,
+        tolerance,
+        settings.max_time_s,
+        settings.dt_s,
+        record_trace,
+        settings.stall_time_s,
+    )
+    wall_s = time.perf_counter() - t0
+    summary = {
+        **result.summary(),
+        "wall_s": round(wall_s, 4),
+        "map": settings.map,
+        "world": world.name,
+        "start": list(start),
+        "goal": list(goal),
+        "goal_tolerance_m": tolerance,
+        "operator": settings.operator,
+        "filter": settings.filter,
+        "profile": settings.profile,
+        "seed": settings.seed,
+    }
+    return result, summary
+
+
+# ---------------------------------------------------------------------------------------------
+# Command line
+
+
+def _floats(text: str, n: int, what: str) -> tuple[float, ...]:
+    parts = str(text).split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != n or not all(math.isfinite(v) for v in values):
+        raise UsageError(f"{what} must be {n} comma-separated finite numbers, got {text!r}")
+    return values
+
+
+def parse_start(text: str) -> tuple[float, float, float]:
+    x, y, yaw = _floats(text, 3, "--start X,Y,YAW")
+    return x, y, yaw
+
+
+def parse_goal(text: str) -> tuple[float, float]:
+    x, y = _floats(text, 2, "--goal X,Y")
+    return x, y
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--map", help="map.yaml, .toml or .npy world, or a built-in name")
+    parser.add_argument("--start", help="start pose X,Y,YAW (m, m, rad); default: the map's")
+    parser.add_argument("--goal", help="goal X,Y (m); default: the map's")
+    parser.add_argument(
+        "--operator", default="goal", help="goal | forward | a joystick CSV file (default goal)"
+    )
+    parser.add_argument("--filter", default="egc", help="none (direct mode) | egc (default)")
+    parser.add_argument(
+        "--profile", default="pioneer3dx", help=f"robot profile: {', '.join(sorted(PROFILES))}"
+    )
+    parser.add_argument("--max-time", type=float, default=300.0, help="simulated seconds (300)")
+    parser.add_argument(
+        "--goal-tolerance",
+        type=float,
+        help=f"metres (default: the map's or {DEFAULT_GOAL_TOLERANCE_M})",
+    )
+    parser.add_argument("--seed", type=int, default=0, help="world and noise seed (0)")
+    parser.add_argument("--dt", type=float, default=0.05, help="control period in s (0.05, 20 Hz)")
+    parser.add_argument(
+        "--stall-time", type=float, help="end as 'stalled' after S s standing still (default off)"
+    )
+    parser.add_argument(
+        "--record", metavar="OUT.rrd", help="record the episode for the Rerun viewer"
+    )
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    batch = parser.add_argument_group("batch")
+    batch.add_argument("--batch", metavar="SUITE.jsonl", help="run the episodes of a suite file")
+    batch.add_argument(
+        "--random-worlds", type=int, metavar="N", help="run N random worlds, seeds --seed..."
+    )
+    batch.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes")
+    batch.add_argument("--out", help="write JSON lines here (default stdout)")
+
+
+def _settings_from_args(args: argparse.Namespace) -> EpisodeSettings:
+    if args.filter not in FILTERS:
+        raise UsageError(f"--filter must be one of {', '.join(FILTERS)}, got {args.filter!r}")
+    if args.profile not in PROFILES:
+        raise UsageError(
+            f"--profile must be one of {', '.join(sorted(PROFILES))}, got {args.profile!r}"
+        )
+    for name, value in (
+        ("--max-time", args.max_time),
+        ("--dt", args.dt),
+        ("--stall-time", 1.0 if args.stall_time is None else args.stall_time),
+    ):
+        if not (math.isfinite(value) and value > 0):
+            raise UsageError(f"{name} must be a positive number, got {value}")
+    if args.goal_tolerance is not None and not (
+        math.isfinite(args.goal_tolerance) and args.goal_tolerance > 0
+    ):
+        raise UsageError(f"--goal-tolerance must be a positive number, got {args.goal_tolerance}")
+    return EpisodeSettings(
+        map=args.map or "",
+        start=parse_start(args.start) if args.start else None,
+        goal=parse_goal(args.goal) if args.goal else None,
+        operator=args.operator,
+        filter=args.filter,
+        profile=args.profile,
+        max_time_s=args.max_time,
+        goal_tolerance_m=args.goal_tolerance,
+        seed=args.seed,
+        dt_s=args.dt,
+        stall_time_s=args.stall_time,
+    )
+
+
+def _check_record(path: str) -> None:
+    """--record needs the operator view's episode recorder, which does not exist yet."""
+    raise UsageError(
+        f"--record {path}: not available yet (the Rerun operator view has no episode recorder)"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    base = _settings_from_args(args)
+    if args.record:
+        _check_record(args.record)
+    if args.batch or args.random_worlds is not None:
+        return _run_batch(args, base)
+    if not base.map:
+        raise UsageError("--map is required (a map.yaml, a .toml world or a built-in name)")
+    _, summary = run_settings(base)
+    if args.json:
+        print(json.dumps(summary, allow_nan=False))
+    else:
+        print(
+            f"{summary['outcome']} after {summary['time_s']:.1f} s simulated, "
+            f"{summary['path_m']:.2f} m, min clearance {summary['min_clearance_m']:.3f} m, "
+            f"{summary['interventions']} interventions in {summary['steps']} cycles "
+            f"({summary['wall_s']:.2f} s wall)"
+        )
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# Batch
+
+
+def _suite_settings(path: str, base: EpisodeSettings) -> list[EpisodeSettings]:
+    try:
+        lines = Path(path).read_text(encoding="utf-8").splitlines()
+    except OSError as exc:
+        raise UsageError(f"cannot read suite {path}: {exc.strerror or exc}") from None
+    out = []
+    for no, line in enumerate(lines, start=1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        where = f"{path}:{no}"
+        try:
+            item = json.loads(line)
+        except json.JSONDecodeError as exc:
+            raise UsageError(f"{where}: not JSON ({exc.msg})") from None
+        if not isinstance(item, dict) or "map" not in item:
+            raise UsageError(f"{where}: expected an object with at least a 'map' key")
+        unknown = sorted(set(item) - SUITE_KEYS)
+        if unknown:
+            raise UsageError(f"{where}: unknown key(s) {', '.join(unknown)}")
+        try:
+            out.append(_apply_suite_item(item, base))
+        except (TypeError, ValueError) as exc:
+            raise UsageError(f"{where}: {exc}") from None
+    if not out:
+        raise UsageError(f"suite {path} holds no episodes")
+    return out
+
+
+def _apply_suite_item(item: dict[str, Any], base: EpisodeSettings) -> EpisodeSettings:
+    def numbers(key: str, n: int) -> tuple[float, ...]:
+        value = item[key]
+        if isinstance(value, str):
+            return _floats(value, n, key)
+        if not isinstance(value, list) or len(value) != n:
+            raise ValueError(f"{key} must be a list of {n} numbers")
+        return _floats(",".join(str(v) for v in value), n, key)
+
+    s = replace(base, map=str(item["map"]))
+    if "start" in item:
+        x, y, yaw = numbers("start", 3)
+        s = replace(s, start=(x, y, yaw))
+    if "goal" in item:
+        gx, gy = numbers("goal", 2)
+        s = replace(s, goal=(gx, gy))
+    for key, field in (("operator", "operator"), ("filter", "filter"), ("profile", "profile")):
+        if key in item:
+            s = replace(s, **{field: str(item[key])})
+    if s.filter not in FILTERS:
+        raise ValueError(f"filter must be one of {', '.join(FILTERS)}")
+    for key, field in (
+        ("max_time", "max_time_s"),
+        ("goal_tolerance", "goal_tolerance_m"),
+        ("dt", "dt_s"),
+        ("stall_time", "stall_time_s"),
+    ):
+        if key in item:
+            value = float(item[key])
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{key} must be a positive number")
+            s = replace(s, **{field: value})
+    if "seed" in item:
+        s = replace(s, seed=int(item["seed"]))
+    return s
+
+
+def _run_one_safely(settings: EpisodeSettings) -> dict[str, Any]:
+    """Worker: one episode; a bad episode becomes an error record instead of ending the batch."""
+    try:
+        return run_settings(settings)[1]
+    except UsageError as exc:
+        return {"error": str(exc), **{k: v for k, v in asdict(settings).items() if v is not None}}
+
+
+def run_batch(
+    settings: Sequence[EpisodeSettings], jobs: int, progress: bool = True
+) -> Iterator[dict[str, Any]]:
+    """Summaries of the episodes, in input order, computed by ``jobs`` worker processes."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(settings), unit="episode", file=sys.stderr, disable=not progress)
+    try:
+        if jobs <= 1 or len(settings) <= 1:
+            for s in settings:
+                yield _run_one_safely(s)
+                bar.update()
+            return
+        ctx = multiprocessing.get_context("fork" if sys.platform == "linux" else "spawn")
+        with ctx.Pool(min(jobs, len(settings))) as pool:
+            for summary in pool.imap(_run_one_safely, settings):
+                yield summary
+                bar.update()
+    finally:
+        bar.close()
+
+
+def _run_batch(args: argparse.Namespace, base: EpisodeSettings) -> int:
+    if args.batch and args.random_worlds is not None:
+        raise UsageError("give either --batch or --random-worlds, not both")
+    if args.jobs < 1:
+        raise UsageError(f"--jobs must be at least 1, got {args.jobs}")
+    if args.batch:
+        suite = _suite_settings(args.batch, base)
+    else:
+        if args.random_worlds < 1:
+            raise UsageError(f"--random-worlds must be at least 1, got {args.random_worlds}")
+        if args.map or args.start or args.goal:
+            raise UsageError("--random-worlds makes its own maps: drop --map/--start/--goal")
+        suite = [
+            replace(base, map=f"random:{seed}", seed=seed)
+            for seed in range(base.seed, base.seed + args.random_worlds)
+        ]
+    out = open(args.out, "w", encoding="utf-8") if args.out else sys.stdout  # noqa: SIM115
+    counts = {"reached": 0, "collided": 0, "stalled": 0, "timeout": 0, "error": 0}
+    t0 = time.perf_counter()
+    try:
+        for summary in run_batch(suite, args.jobs):
+            counts[summary.get("outcome", "error")] += 1
+            out.write(json.dumps(summary, allow_nan=False) + "\n")
+            out.flush()
+    finally:
+        if out is not sys.stdout:
+            out.close()
+    print(
+        f"{len(suite)} episodes: {counts['reached']} reached, {counts['collided']} collided, "
+        f"{counts['stalled']} stalled, {counts['timeout']} timed out, {counts['error']} failed "
+        f"({time.perf_counter() - t0:.1f} s wall, {args.jobs} jobs)",
+        file=sys.stderr,
+    )
+    return 2 if counts["error"] else 0
