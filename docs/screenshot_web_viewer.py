@@ -1,0 +1,318 @@
+"""Screenshot of the Rerun web viewer showing a recording, taken in headless Chromium.
+
+    python docs/screenshot_web_viewer.py                 # synthetic corridor run -> docs/web_viewer.png
+    python docs/screenshot_web_viewer.py --rrd demo.rrd  # any recording
+
+Steps: serve the .rrd through the web viewer bundled with rerun-sdk (``python -m rerun
+--serve-web``), start ``chromium --headless`` with a DevTools port, open the viewer URL over the
+DevTools protocol, give the wasm viewer time to load (25 s by default) and save
+``Page.captureScreenshot`` as a PNG.
+
+Without ``--rrd`` the recording is made here from synthetic telemetry through the operator view's
+own API: a Pioneer 3-DX drives forward down a corridor with two boxes in it, the command pipeline
+(EGC + footprint sweep) filters the constant forward command, and the resulting telemetry (with
+720-beam scans) is fed to ``egc_operator.view.record_episode``. This script may import the robot
+package because it is a documentation tool, not part of the operator.
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import contextlib
+import itertools
+import json
+import math
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.parse
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import websocket  # websocket-client (test extra): the DevTools protocol runs over a websocket
+from egc_common.messages import Telemetry
+
+DOCS = Path(__file__).resolve().parent
+DEFAULT_PNG = DOCS / "web_viewer.png"
+CHROMIUM_FLAGS = (
+    "--headless",
+    "--no-sandbox",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+)
+
+
+# ---------------------------------------------------------------------------------------------
+# A synthetic corridor run (the recording shown when no --rrd is given)
+
+# Axis-aligned boxes (x0, y0, x1, y1) in the world frame, metres: a closed corridor 2.8 m wide
+# with a box ahead and one on the right.
+CORRIDOR_BOXES = (
+    (-0.6, -1.5, 9.0, -1.4),  # right wall
+    (-0.6, 1.4, 9.0, 1.5),  # left wall
+    (-0.6, -1.5, -0.5, 1.5),  # back wall
+    (8.9, -1.5, 9.0, 1.5),  # end wall
+    (1.5, 0.15, 1.9, 0.9),  # a box ahead, to the left
+    (5.0, -1.4, 5.4, -0.3),  # a box on the right
+)
+GOAL_XY = (8.0, 0.0)
+BEAMS = 720
+CYCLE_S = 0.05
+
+
+def raycast(
+    pose: tuple[float, float, float], beams: int = BEAMS, max_range_m: float = 12.0
+) -> np.ndarray:
+    """Ranges of a 360-degree lidar at ``pose`` against CORRIDOR_BOXES (slab method)."""
+    angles = np.linspace(-math.pi, math.pi, beams, endpoint=False)
+    dx, dy = np.cos(angles + pose[2]), np.sin(angles + pose[2])
+    best = np.full(beams, max_range_m)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for x0, y0, x1, y1 in CORRIDOR_BOXES:
+            tx0, tx1 = (x0 - pose[0]) / dx, (x1 - pose[0]) / dx
+            ty0, ty1 = (y0 - pose[1]) / dy, (y1 - pose[1]) / dy
+            t_in = np.maximum(np.minimum(tx0, tx1), np.minimum(ty0, ty1))
+            t_out = np.minimum(np.maximum(tx0, tx1), np.maximum(ty0, ty1))
+            hit = (t_in <= t_out) & (t_out > 0)
+            best = np.where(hit & (t_in > 0) & (t_in < best), t_in, best)
+    return best
+
+
+def corridor_map(resolution_m: float = 0.05) -> tuple[np.ndarray, tuple[float, float]]:
+    """CORRIDOR_BOXES rasterised: (occupancy bool H x W with row 0 = top, lower-left origin)."""
+    x_min, y_min, x_max, y_max = -0.7, -1.6, 9.1, 1.6
+    w, h = round((x_max - x_min) / resolution_m), round((y_max - y_min) / resolution_m)
+    xs = x_min + (np.arange(w) + 0.5) * resolution_m
+    ys = y_max - (np.arange(h) + 0.5) * resolution_m  # row 0 = top
+    gx, gy = np.meshgrid(xs, ys)
+    occ = np.zeros((h, w), bool)
+    for x0, y0, x1, y1 in CORRIDOR_BOXES:
+        occ |= (gx >= x0) & (gx <= x1) & (gy >= y0) & (gy <= y1)
+    return occ, (x_min, y_min)
+
+
+def corridor_run(seconds: float, start_ns: int = 1_000_000_000) -> list[Telemetry]:
+    """Telemetry of a Pioneer 3-DX driven straight ahead (full stick) in shared mode.
+
+    The robot's own command pipeline (EGC, limits, footprint sweep) filters the command against
+    a 720-beam scan each 50 ms cycle; the pose integrates the filtered command exactly.
+    """
+    from egc_common.kinematics import integrate_arc
+    from egc_common.profiles import PIONEER3DX
+    from egc_robot.pipeline import PipelineConfig, filter_velocity
+
+    config = PipelineConfig(profile=PIONEER3DX)
+    angles = np.linspace(-math.pi, math.pi, BEAMS, endpoint=False)
+    pose, previous = (0.0, 0.0, 0.0), (0.0, 0.0)
+    out: list[Telemetry] = []
+    for i in range(round(seconds / CYCLE_S)):
+        ranges = raycast(pose)
+        points = np.column_stack([ranges * np.cos(angles), ranges * np.sin(angles)])
+        driving = i >= 10  # 0.5 s idle, then full stick forward
+        v_ref = PIONEER3DX.v_max_mps if driving else 0.0
+        r = filter_velocity(config, v_ref, 0.0, "shared", points, previous, CYCLE_S)
+        f = r.filtered
+        out.append(
+            Telemetry(
+                seq=i,
+                stamp_ns=start_ns + i * round(CYCLE_S * 1e9),
+                state="DRIVING" if driving else "IDLE",
+                mode="shared",
+                v_ref=r.v_ref_mps,
+                w_ref=r.w_ref_radps,
+                v_cmd=r.v_cmd_mps,
+                w_cmd=r.w_cmd_radps,
+                w_si=r.w_si,
+                region=r.region.value,
+                side=None if r.side is None else r.side.value,
+                limiter=r.limiter.value,
+                igc=None if f is None else f.igc,
+                agc=None if f is None else f.agc,
+                egc=None if f is None else f.egc,
+                r_rc=0.0 if f is None else f.r_rc_m,
+                scan_xy=points.astype(np.float32),
+                pose=pose,
+                cmd_age_ms=18.0 + 6.0 * math.sin(i / 7.0),
+                scan_age_ms=25.0,
+                operator="op1" if driving else None,
+                profile=PIONEER3DX.name,
+                cycle=i,
+            )
+        )
+        previous = (r.v_cmd_mps, r.w_cmd_radps)
+        pose = integrate_arc(pose, r.v_cmd_mps, r.w_cmd_radps, CYCLE_S)
+    return out
+
+
+def record_corridor_run(path: Path, seconds: float = 20.0) -> Path:
+    """Feed ``corridor_run`` through the operator view's API into ``path`` (a demo-like .rrd)."""
+    from egc_common.messages import StateMessage
+    from egc_operator.view import record_episode
+
+    view = record_episode(path, "sim", recording_name="corridor demo (synthetic)")
+    occupancy, origin = corridor_map()
+    view.set_world(occupancy, 0.05, origin, GOAL_XY)
+    view.on_text("info", "operator op1: connected to robot sim")
+    state = None
+    for t in corridor_run(seconds):
+        if t.state != state:
+            reason = "operator op1 in control" if t.state == "DRIVING" else "no operator"
+            view.on_state(StateMessage(t.stamp_ns, t.state, reason, t.operator))
+            state = t.state
+        if t.cycle % 20 == 0:
+            view.on_link(4.0 + (t.cycle % 60) / 20.0, t.stamp_ns - time.monotonic_ns())
+        view.on_telemetry(t)
+    view.close()
+    return path
+
+
+def find_chromium() -> str | None:
+    """Path of a Chromium binary on PATH, or None."""
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        path = shutil.which(name)
+        if path:
+            return path
+    return None
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+def _wait_http(url: str, timeout_s: float) -> bytes:
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            with urllib.request.urlopen(url, timeout=2) as reply:
+                body: bytes = reply.read()
+                return body
+        except OSError:
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"nothing answered at {url} within {timeout_s:.0f} s") from None
+            time.sleep(0.2)
+
+
+@contextlib.contextmanager
+def _process(cmd: list[str], log: Path) -> Iterator[subprocess.Popen[bytes]]:
+    """Run ``cmd`` with output to ``log``; terminate it (and only it) on exit."""
+    with log.open("wb") as out:
+        proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT)
+        try:
+            yield proc
+        finally:
+            proc.terminate()
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+@contextlib.contextmanager
+def serve_recording(rrd: Path, workdir: Path) -> Iterator[str]:
+    """Serve ``rrd`` through the bundled web viewer; yields the URL that opens it."""
+    web_port, grpc_port = free_port(), free_port()
+    cmd = [sys.executable, "-m", "rerun", "--serve-web", "--bind", "127.0.0.1"]
+    cmd += ["--web-viewer-port", str(web_port), "--port", str(grpc_port), str(rrd)]
+    with _process(cmd, workdir / "rerun.log"):
+        _wait_http(f"http://127.0.0.1:{web_port}/", 30)
+        proxy = f"rerun+http://127.0.0.1:{grpc_port}/proxy"
+        yield f"http://127.0.0.1:{web_port}/?url={urllib.parse.quote(proxy, safe='')}"
+
+
+class DevTools:
+    """A minimal DevTools-protocol session on one page target."""
+
+    def __init__(self, ws_url: str) -> None:
+        self._ws = websocket.create_connection(ws_url, timeout=60, suppress_origin=True)
+        self._ids = itertools.count(1)
+
+    def call(self, method: str, **params: object) -> dict[str, object]:
+        msg_id = next(self._ids)
+        self._ws.send(json.dumps({"id": msg_id, "method": method, "params": params}))
+        while True:
+            reply = json.loads(self._ws.recv())
+            if reply.get("id") == msg_id:  # skip events
+                if "error" in reply:
+                    raise RuntimeError(f"{method}: {reply['error']}")
+                result: dict[str, object] = reply.get("result", {})
+                return result
+
+    def close(self) -> None:
+        self._ws.close()
+
+
+def screenshot(
+    chromium: str,
+    url: str,
+    png: Path,
+    workdir: Path,
+    wait_s: float,
+    size: tuple[int, int] = (1600, 1000),
+) -> None:
+    """Open ``url`` in headless Chromium, wait ``wait_s`` seconds and save a PNG of the page."""
+    port = free_port()
+    cmd = [chromium, *CHROMIUM_FLAGS, f"--user-data-dir={workdir / 'profile'}"]
+    cmd += [f"--remote-debugging-port={port}", f"--window-size={size[0]},{size[1]}", "about:blank"]
+    with _process(cmd, workdir / "chromium.log"):
+        _wait_http(f"http://127.0.0.1:{port}/json/version", 30)
+        targets = json.loads(_wait_http(f"http://127.0.0.1:{port}/json/list", 10))
+        page = next(t for t in targets if t.get("type") == "page")
+        tools = DevTools(page["webSocketDebuggerUrl"])
+        try:
+            tools.call(
+                "Emulation.setDeviceMetricsOverride",
+                width=size[0],
+                height=size[1],
+                deviceScaleFactor=1,
+                mobile=False,
+            )
+            tools.call("Page.enable")
+            tools.call("Page.navigate", url=url)
+            time.sleep(wait_s)
+            shot = tools.call("Page.captureScreenshot", format="png")
+        finally:
+            tools.close()
+    png.write_bytes(base64.b64decode(str(shot["data"])))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rrd", type=Path, help="recording to show (default: a synthetic run)")
+    parser.add_argument("--out", type=Path, default=DEFAULT_PNG, help="PNG to write")
+    parser.add_argument("--wait", type=float, default=25.0, help="seconds for the viewer to load")
+    parser.add_argument("--seconds", type=float, default=14.0, help="length of the synthetic run")
+    args = parser.parse_args(argv)
+    chromium = find_chromium()
+    if chromium is None:
+        print(
+            "screenshot_web_viewer: chromium is not installed (apt-get install chromium)",
+            file=sys.stderr,
+        )
+        return 2
+    with tempfile.TemporaryDirectory(prefix="egc-shot-") as tmp:
+        workdir = Path(tmp)
+        rrd = args.rrd or record_corridor_run(workdir / "corridor.rrd", args.seconds)
+        with serve_recording(rrd, workdir) as url:
+            screenshot(chromium, url, args.out, workdir, args.wait)
+    print(
+        f"wrote {args.out} ({args.out.stat().st_size} bytes) showing {args.rrd or 'a synthetic corridor run'}"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
