@@ -1,0 +1,136 @@
+"""``egc-teleop demo``: the simulated robot, a scripted operator and the operator view, as
+separate processes talking Zenoh on loopback (DESIGN 1; issue 4, the README's main job).
+
+- ``egc-teleop robot --driver sim --map WORLD`` listens on a free loopback port and writes its
+  run statistics at exit (``--summary``);
+- ``egc-teleop operator --script demo`` connects to it and opens the operator view: the Rerun
+  viewer when there is a display, otherwise (or with ``--save``) a ``.rrd`` recording, and it
+  says where on stderr.
+
+The demo ends when the script ends (or after ``--duration``), or on SIGINT/SIGTERM, which it
+forwards. The children are asked to stop (SIGTERM), killed if they do not, and die with the demo
+if it is killed itself (PR_SET_PDEATHSIG), so nothing is left behind. Then it prints a summary:
+distance, interventions, collisions, command latency percentiles.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ctypes
+import json
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+from pathlib import Path
+from typing import Any
+
+from egc_common.errors import UsageError
+from egc_common.transport import free_tcp_port, loopback_endpoint
+
+STOP_TIMEOUT_S = 10.0
+_PR_SET_PDEATHSIG = 1
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--duration", type=float, default=None, metavar="S", help="(default: the script's length)"
+    )
+    parser.add_argument("--save", metavar="FILE.rrd", help="save the operator view to a file")
+    parser.add_argument("--no-view", action="store_true", help="run without the operator view")
+    parser.add_argument("--world", default="hallway", help="built-in world or map file")
+    parser.add_argument("--profile", default="pioneer3dx")
+    parser.add_argument("--script", default="demo", help="built-in operator script")
+
+
+def _die_with_parent() -> None:
+    """In the child: receive SIGTERM when the demo process dies (Linux), so no orphans."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    except (OSError, AttributeError):
+        pass
+
+
+def _start(args: list[str]) -> subprocess.Popen[bytes]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "egc_app.cli", *args],
+        stdin=subprocess.DEVNULL,
+        preexec_fn=_die_with_parent,
+    )
+
+
+def _stop(proc: subprocess.Popen[bytes]) -> int:
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(STOP_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    return proc.returncode
+
+
+def format_summary(summary: dict[str, Any]) -> str:
+    lat = summary.get("command_latency", {})
+
+    def ms(key: str) -> str:
+        value = lat.get(key)
+        return "n/a" if value is None else f"{value:.2f} ms"
+
+    lines = [
+        "demo summary",
+        f"  distance        {summary['distance_m']:.2f} m",
+        f"  interventions   {summary['interventions']} (times EGC or the footprint "
+        "sweep started limiting the command)",
+        f"  collisions      {summary['collisions']}",
+        f"  command latency p50 {ms('p50_ms')}, p90 {ms('p90_ms')}, p99 {ms('p99_ms')}, "
+        f"max {ms('max_ms')} (operator publish -> robot, {lat.get('n', 0)} commands)",
+        f"  robot cycles    {summary['cycles']} {summary.get('cycles_by_state', {})}",
+        f"  rejected        {summary.get('rejected') or 'none'}",
+    ]
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.duration is not None and not args.duration > 0:
+        raise UsageError("--duration must be positive")
+    if args.save is not None and args.no_view:
+        raise UsageError("--save and --no-view exclude each other")
+    endpoint = loopback_endpoint(free_tcp_port())
+    workdir = Path(tempfile.mkdtemp(prefix="egc-demo-"))
+    summary_path = workdir / "robot-summary.json"
+    robot_cmd = ["robot", "--driver", "sim", "--map", args.world, "--profile", args.profile]
+    robot_cmd += ["--listen", endpoint, "--summary", str(summary_path)]
+    operator_cmd = ["operator", "--script", args.script, "--operator-id", "demo-operator"]
+    operator_cmd += ["--zenoh-connect", endpoint]
+    if args.duration is not None:
+        operator_cmd += ["--loop", "--duration", str(args.duration)]
+    if args.no_view:
+        operator_cmd.append("--no-view")
+    elif args.save is not None:
+        operator_cmd += ["--save", str(Path(args.save).resolve())]
+
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    robot = _start(robot_cmd)
+    operator = _start(operator_cmd)
+    try:
+        while not stop.wait(0.1):
+            if operator.poll() is not None or robot.poll() is not None:
+                break
+    finally:
+        operator_rc = _stop(operator)
+        robot_rc = _stop(robot)
+    if robot_rc != 0 or operator_rc not in (0, -signal.SIGTERM):
+        print(f"demo: robot exited {robot_rc}, operator {operator_rc}", file=sys.stderr)
+        return 1
+    try:
+        summary = json.loads(summary_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        print(f"demo: no robot summary ({exc})", file=sys.stderr)
+        return 1
+    print(format_summary(summary), flush=True)
+    return 0
