@@ -308,7 +308,11 @@ def main() -> int:
     print(f"operator SIGKILL -> zero command (stop from full speed takes {STOP_MS:.0f} ms):")
     print("  " + "  ".join(f"{v:.0f}" for v in kill_zero) + " ms")
     print("operator SIGSTOP -> first braking command (HOLD) / zero command:")
-    print("  " + "  ".join(f"{b:.0f}/{z:.0f}" for b, z in zip(stop_brake, stop_zero)) + " ms")
+    print(
+        "  "
+        + "  ".join(f"{b:.0f}/{z:.0f}" for b, z in zip(stop_brake, stop_zero, strict=True))
+        + " ms"
+    )
     for name, ok in targets.items():
         print(f"  [{'ok' if ok else 'MISSED'}] {name}")
     out = Path(args.out)
