@@ -1,0 +1,39 @@
+"""deploy/: every Zenoh file loads through the transport adapter, and the TOML files are the
+robot's and operator's real parameters (an unknown key fails loudly, so these stay in sync)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import pytest
+from egc_common import config as config_mod
+from egc_common.transport import ZenohOptions, build_config
+from egc_operator.cli import JOYSTICK_KEYS, OPERATOR_KEYS
+from egc_operator.joystick_evdev import ButtonMap
+
+from egc_app.robot_cmd import build_controller_config
+
+DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
+
+
+@pytest.mark.parametrize("name", sorted(p.name for p in DEPLOY.glob("*.json5")))
+def test_zenoh_files_load_with_a_1s_lease(name):
+    config = build_config(ZenohOptions(config_file=str(DEPLOY / name)))
+    assert config.get_json("transport/link/tx/lease") == "1000"
+    assert config.get_json("scouting/multicast/enabled") == "false"
+
+
+def test_robot_toml_matches_the_defaults():
+    cfg = config_mod.load(DEPLOY / "robot.toml")
+    args = argparse.Namespace(profile="pioneer3dx", filter="egc", rate_hz=None)
+    c = build_controller_config(args, cfg)
+    assert (c.max_command_age_s, c.command_timeout_s, c.scan_timeout_s) == (0.3, 0.25, 0.2)
+    assert c.nominal_period_s == pytest.approx(0.05)
+
+
+def test_operator_toml_is_the_default_mapping():
+    cfg = config_mod.load(DEPLOY / "operator.toml")
+    config_mod.section(cfg, "operator", OPERATOR_KEYS)
+    table = config_mod.section(cfg, "joystick", JOYSTICK_KEYS)
+    assert ButtonMap.from_table(table) == ButtonMap()
