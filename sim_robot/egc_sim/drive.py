@@ -55,13 +55,13 @@ def achievable_twist(
     profile: RobotProfile,
 ) -> tuple[float, float]:
     """The twist the base reaches after dt from ``current`` toward the command (docstring)."""
-    v = max(-profile.v_max_mps, min(profile.v_max_mps, v_cmd_mps))
-    w = max(-profile.w_max_radps, min(profile.w_max_radps, w_cmd_radps))
-    v = _ramp(v, current[0], profile.accel_max_mps2 * dt_s, profile.decel_max_mps2 * dt_s)
-    w = _ramp(
-        w,
-        current[1],
-        profile.angular_accel_max_radps2 * dt_s,
-        profile.angular_accel_max_radps2 * dt_s,
+    v_max, w_max = profile.v_max_mps, profile.w_max_radps
+    v = _ramp(
+        max(-v_max, min(v_max, v_cmd_mps)),
+        current[0],
+        profile.accel_max_mps2 * dt_s,
+        profile.decel_max_mps2 * dt_s,
     )
-    return v, w
+    dw = profile.angular_accel_max_radps2 * dt_s
+    w = _ramp(max(-w_max, min(w_max, w_cmd_radps)), current[1], dw, dw)
+    return max(-v_max, min(v_max, v)), max(-w_max, min(w_max, w))

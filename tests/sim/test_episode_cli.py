@@ -1,0 +1,165 @@
+"""``egc-teleop episode``: pinned JSON keys, errors, batch, and that it runs the robot's pipeline."""
+
+from __future__ import annotations
+
+import json
+
+import egc_robot.pipeline
+import pytest
+from egc_sim.episodes import OUTCOMES
+
+import egc_app.episode as episode
+from egc_app.cli import main
+
+PINNED = {
+    "reached",
+    "collided",
+    "time_s",
+    "path_m",
+    "min_clearance_m",
+    "interventions",
+    "steps",
+    "wall_s",
+}
+
+
+def run_cli(capsys, *argv):
+    code = main(["episode", *argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_single_episode_prints_one_json_object(capsys):
+    code, out, err = run_cli(
+        capsys,
+        "--map",
+        "hallway",
+        "--start",
+        "0.6,0.6,0",
+        "--goal",
+        "4,2",
+        "--operator",
+        "forward",
+        "--filter",
+        "none",
+        "--max-time",
+        "30",
+        "--json",
+    )
+    assert code == 0 and err == ""
+    lines = out.strip().splitlines()
+    assert len(lines) == 1
+    result = json.loads(lines[0])
+    assert set(result) >= PINNED
+    # Straight into obstacle A (x = 3.2 - 0.3 at y 0.6): contact after ~2.1 m.
+    assert result["collided"] and not result["reached"] and result["outcome"] == "collided"
+    assert result["min_clearance_m"] == 0.0 and result["interventions"] == 0
+    assert 2.0 < result["path_m"] < 2.4
+    assert result["steps"] == round(result["time_s"] / 0.05)
+
+
+def test_egc_episode_counts_interventions_and_stays_clear(capsys):
+    code, out, _ = run_cli(
+        capsys, "--map", "hallway", "--operator", "forward", "--max-time", "40", "--json"
+    )
+    result = json.loads(out)
+    assert code == 0 and not result["collided"]
+    assert result["filter"] == "egc" and result["interventions"] > 10
+    assert result["min_clearance_m"] > 0.2 and result["outcome"] == "timeout"
+
+
+def test_the_controller_is_the_robots_pipeline():
+    assert episode.step_command is egc_robot.pipeline.step_command
+
+
+def test_deadman_released_means_no_motion(tmp_path, capsys):
+    csv = tmp_path / "stick.csv"
+    csv.write_text("t_s,x,y,deadman\n0.0,1.0,0.0,0\n")
+    code, out, _ = run_cli(
+        capsys, "--map", "hallway", "--operator", str(csv), "--max-time", "5", "--json"
+    )
+    result = json.loads(out)
+    assert code == 0 and result["path_m"] == 0.0 and result["steps"] == 100
+
+
+def test_stall_time_ends_a_deadlocked_episode(capsys):
+    # The naive goal operator pushes at the obstacle on the line; EGC stops the robot for good.
+    code, out, _ = run_cli(capsys, "--map", "random:0", "--stall-time", "3", "--json")
+    result = json.loads(out)
+    assert code == 0 and result["outcome"] == "stalled" and result["time_s"] < 30
+    assert not result["reached"] and not result["collided"]
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--map", "no/such/map.yaml"], "cannot load map"),
+        (["--map", "hallway", "--start", "1,2"], "--start X,Y,YAW"),
+        (["--map", "hallway", "--goal", "a,b"], "--goal X,Y"),
+        (["--map", "hallway", "--filter", "dwa"], "--filter"),
+        (["--map", "hallway", "--profile", "roomba"], "--profile"),
+        (["--map", "hallway", "--max-time", "-1"], "--max-time"),
+        (["--map", "hallway", "--goal-tolerance", "0"], "--goal-tolerance"),
+        (["--map", "hallway", "--start", "0.05,0.6,0"], "into an obstacle"),
+        (["--map", "random:1", "--operator", "nope.csv"], "joystick file"),
+        (["--map", "hallway", "--record", "out.rrd"], "not available yet"),
+        ([], "--map is required"),
+        (["--map", "office02"], "no start pose"),
+    ],
+)
+def test_bad_arguments_exit_2_with_one_line(capsys, argv, message):
+    code, out, err = run_cli(capsys, *argv, "--json")
+    assert code == 2 and out == ""
+    assert len(err.strip().splitlines()) == 1 and message in err
+
+
+def test_argparse_errors_exit_2(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["episode", "--max-time", "soon"])
+    assert exc.value.code == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_batch_suite_runs_in_parallel_and_keeps_the_order(tmp_path, capsys):
+    suite = tmp_path / "suite.jsonl"
+    suite.write_text(
+        '{"map": "hallway", "operator": "forward", "filter": "none", "max_time": 30}\n'
+        "# a comment\n"
+        '{"map": "random:3", "filter": "egc", "max_time": 20, "stall_time": 2}\n'
+        '{"map": "hallway", "start": [0.05, 0.6, 0]}\n'
+    )
+    out_file = tmp_path / "results.jsonl"
+    code, _out, err = run_cli(capsys, "--batch", str(suite), "--jobs", "2", "--out", str(out_file))
+    rows = [json.loads(line) for line in out_file.read_text().splitlines()]
+    assert code == 2  # the third episode cannot start
+    assert [r.get("map") for r in rows] == ["hallway", "random:3", "hallway"]
+    assert rows[0]["collided"] and rows[0]["filter"] == "none"
+    assert rows[1]["outcome"] in OUTCOMES and not rows[1]["collided"]
+    assert "into an obstacle" in rows[2]["error"]
+    assert "3 episodes: 0 reached, 1 collided" in err
+
+
+def test_random_worlds_batch_to_stdout(capsys):
+    code, out, _ = run_cli(
+        capsys, "--random-worlds", "3", "--seed", "10", "--filter", "none", "--jobs", "2"
+    )
+    rows = [json.loads(line) for line in out.strip().splitlines()]
+    assert code == 0 and [r["map"] for r in rows] == ["random:10", "random:11", "random:12"]
+    assert all(set(r) >= PINNED for r in rows)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ('{"operator": "goal"}\n', "at least a 'map'"),
+        ('{"map": "hallway", "speed": 3}\n', "unknown key"),
+        ("not json\n", "not JSON"),
+        ('{"map": "hallway", "start": [1, 2]}\n', "start"),
+        ("\n", "no episodes"),
+    ],
+)
+def test_bad_suites(tmp_path, capsys, text, message):
+    suite = tmp_path / "suite.jsonl"
+    suite.write_text(text)
+    code, _, err = run_cli(capsys, "--batch", str(suite))
+    assert code == 2 and message in err

@@ -1,0 +1,201 @@
+"""Differential drive (exact arcs, limits, odometry) and collisions (exact clearance, contact)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from egc_common.kinematics import wheel_speeds
+from egc_common.profiles import JACKAL, PIONEER3DX
+from egc_sim.collision import FootprintChecker
+from egc_sim.drive import OdometryNoise, achievable_twist
+from egc_sim.simulator import Simulator
+from egc_sim.worlds import WorldError, load_world
+
+from tests.sim.helpers import boxed_room, grid_world
+
+# A base that reaches any commanded twist within one step, to test the kinematics alone.
+INSTANT = PIONEER3DX.with_overrides(
+    accel_max_mps2=1e9, decel_max_mps2=1e9, angular_accel_max_radps2=1e9
+)
+
+
+def open_room(size_m: float = 20.0):
+    return grid_world(boxed_room(size_m, size_m), 0.05, (-size_m / 2, -size_m / 2))
+
+
+@pytest.mark.parametrize(
+    ("v", "w"), [(0.14, 0.5), (0.1, -0.3), (-0.12, 0.2), (0.13, 0.0), (0.0, 0.4)]
+)
+def test_constant_twist_follows_the_closed_form_arc(v, w):
+    start = (0.3, -0.2, 0.7)
+    sim = Simulator(open_room(), INSTANT, start)
+    for _ in range(300):
+        sim.step(v, w, 0.05)
+    t = 15.0
+    x0, y0, th0 = start
+    if w == 0.0:
+        expected = (x0 + v * t * math.cos(th0), y0 + v * t * math.sin(th0))
+    else:
+        r = v / w
+        expected = (
+            x0 + r * (math.sin(th0 + w * t) - math.sin(th0)),
+            y0 - r * (math.cos(th0 + w * t) - math.cos(th0)),
+        )
+    x, y, th = sim.pose
+    assert (x, y) == pytest.approx(expected, abs=1e-9)
+    assert math.remainder(th - (th0 + w * t), 2 * math.pi) == pytest.approx(0.0, abs=1e-9)
+    assert sim.path_m == pytest.approx(abs(v) * t, abs=1e-9)
+    assert sim.time_s == pytest.approx(t)
+    assert sim.odometry == sim.pose and sim.twist == pytest.approx((v, w))
+
+
+def test_acceleration_and_velocity_limits_of_the_profile():
+    p = PIONEER3DX
+    v, w = achievable_twist(1.0, 2.0, (0.0, 0.0), 0.05, p)
+    assert v == pytest.approx(p.accel_max_mps2 * 0.05)
+    assert w == pytest.approx(p.angular_accel_max_radps2 * 0.05)
+    v, w = achievable_twist(0.0, 0.0, (0.14, 0.5), 0.05, p)  # braking uses the deceleration
+    assert v == pytest.approx(0.14 - p.decel_max_mps2 * 0.05)
+    assert w == pytest.approx(0.5 - p.angular_accel_max_radps2 * 0.05)
+    v, w = achievable_twist(5.0, -5.0, (0.14, -0.5), 0.05, p)  # clamped to v_max, w_max
+    assert (v, w) == (p.v_max_mps, -p.w_max_radps)
+    for profile in (PIONEER3DX, JACKAL):  # the body limits keep every wheel within its limit
+        for vv, ww in ((9.0, 9.0), (-9.0, 9.0), (9.0, -9.0)):
+            v, w = achievable_twist(vv, ww, (vv, ww), 1.0, profile)
+            left, right = wheel_speeds(v, w, profile.wheel_base_m)
+            assert max(abs(left), abs(right)) <= profile.wheel_speed_max_mps + 1e-12
+    sim = Simulator(open_room(), p, (0.0, 0.0, 0.0))
+    speeds = []
+    for _ in range(20):
+        sim.step(1.0, 0.0, 0.05)
+        speeds.append(sim.twist[0])
+    assert speeds[0] == pytest.approx(0.015) and speeds[-1] == pytest.approx(p.v_max_mps)
+    assert np.all(np.diff(speeds) <= p.accel_max_mps2 * 0.05 + 1e-12)
+
+
+def test_odometry_noise_is_seeded_and_drifts():
+    noise = OdometryNoise(linear_rel_std=0.05, angular_rel_std=0.05)
+    runs = []
+    for seed in (1, 1, 2):
+        sim = Simulator(open_room(), INSTANT, (0.0, 0.0, 0.0), seed=seed, odometry_noise=noise)
+        for _ in range(100):
+            sim.step(0.1, 0.2, 0.05)
+        runs.append((sim.pose, sim.odometry))
+    assert runs[0] == runs[1] and runs[0][1] != runs[2][1]
+    assert runs[0][0] == runs[2][0]  # the true pose does not depend on the odometry noise
+    assert runs[0][1] != pytest.approx(runs[0][0], abs=1e-6)
+    with pytest.raises(ValueError):
+        OdometryNoise(linear_rel_std=-1.0)
+
+
+def _separating_axis_distance(rect: np.ndarray, square: np.ndarray) -> float:
+    """Reference distance between two convex polygons (0 when they overlap)."""
+
+    def overlap(a, b):
+        for poly in (a, b):
+            for i in range(len(poly)):
+                edge = poly[(i + 1) % len(poly)] - poly[i]
+                axis = np.array([-edge[1], edge[0]])
+                pa, pb = a @ axis, b @ axis
+                if pa.max() < pb.min() or pb.max() < pa.min():
+                    return False
+        return True
+
+    if overlap(rect, square):
+        return 0.0
+
+    def point_segment(p, a, b):
+        t = np.clip(np.dot(p - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+        return float(np.linalg.norm(p - (a + t * (b - a))))
+
+    best = math.inf
+    for poly, other in ((rect, square), (square, rect)):
+        for p in poly:
+            for i in range(len(other)):
+                best = min(best, point_segment(p, other[i], other[(i + 1) % len(other)]))
+    return best
+
+
+def test_clearance_is_exact_against_a_polygon_reference():
+    world = load_world("random:5")
+    checker = FootprintChecker(world, PIONEER3DX.length_m, PIONEER3DX.width_m)
+    rng = np.random.default_rng(0)
+    blocked = np.argwhere(world.occupancy)
+    res = world.resolution_m
+    hl, hw = PIONEER3DX.length_m / 2, PIONEER3DX.width_m / 2
+    checked = 0
+    while checked < 25:
+        x, y = rng.uniform(0.3, world.width_m - 0.3), rng.uniform(0.3, world.height_m - 0.3)
+        yaw = rng.uniform(-math.pi, math.pi)
+        got = checker.clearance(x, y, yaw)
+        c, s = math.cos(yaw), math.sin(yaw)
+        rect = np.array(
+            [
+                [x + c * u - s * v, y + s * u + c * v]
+                for u, v in ((hl, hw), (-hl, hw), (-hl, -hw), (hl, -hw))
+            ]
+        )
+        near = blocked[
+            np.hypot((blocked[:, 1] + 0.5) * res - x, (blocked[:, 0] + 0.5) * res - y) < 1.6
+        ]
+        ref = min(
+            (
+                _separating_axis_distance(
+                    rect,
+                    np.array([[cc, rr], [cc + 1, rr], [cc + 1, rr + 1], [cc, rr + 1]], float) * res,
+                )
+                for rr, cc in near
+            ),
+            default=math.inf,
+        )
+        if ref >= 1.0:
+            assert got == 1.0
+            continue
+        if ref == 0.0:
+            assert got <= 0.0
+        else:
+            assert got == pytest.approx(ref, abs=1e-9)
+        checked += 1
+
+
+def test_driving_into_a_wall_stops_at_contact():
+    world = grid_world(boxed_room(4.0, 2.0), 0.05, (0.0, 0.0))
+    sim = Simulator(world, INSTANT, (1.0, 1.0, 0.0))
+    assert sim.min_clearance_m == pytest.approx(1.0 - INSTANT.length_m / 2 - 0.05)  # the back wall
+    for _ in range(400):
+        sim.step(0.14, 0.0, 0.05)
+    x, _, _ = sim.pose
+    front_gap = (4.0 - 0.05) - (x + INSTANT.length_m / 2)  # to the wall's inner face
+    assert sim.collided and sim.in_contact and sim.twist == (0.0, 0.0)
+    assert 0.0 < front_gap < 1e-3  # stopped at the wall, never into it
+    assert sim.min_clearance_m == 0.0
+    sim.step(-0.1, 0.0, 0.05)  # backing away is free again
+    assert not sim.in_contact and sim.collided and sim.pose[0] < x
+
+
+def test_turning_in_place_next_to_a_wall_is_stopped_by_the_corner():
+    world = grid_world(boxed_room(4.0, 2.0), 0.05, (0.0, 0.0))
+    # Parallel to the bottom wall with 5 cm to spare: the front-right corner hits it on a turn.
+    y = 0.05 + PIONEER3DX.width_m / 2 + 0.05
+    sim = Simulator(world, INSTANT, (2.0, y, 0.0))
+    for _ in range(100):
+        sim.step(0.0, 0.5, 0.05)
+    assert sim.collided and 0.0 < sim.pose[2] < 0.5
+
+
+def test_bad_starts_and_steps():
+    world = grid_world(boxed_room(4.0, 2.0), 0.05, (0.0, 0.0))
+    with pytest.raises(WorldError, match="into an obstacle"):
+        Simulator(world, PIONEER3DX, (0.1, 1.0, 0.0))
+    with pytest.raises(WorldError, match="no start pose"):
+        Simulator(world, PIONEER3DX)
+    sim = Simulator(load_world("hallway"), PIONEER3DX)  # the world's own start
+    assert sim.pose == (0.6, 0.6, 0.0)
+    with pytest.raises(ValueError):
+        sim.step(math.nan, 0.0, 0.05)
+    with pytest.raises(ValueError):
+        sim.step(0.1, 0.0, 0.0)
+    with pytest.raises(ValueError, match="wider than a cell"):
+        FootprintChecker(grid_world(boxed_room(40.0, 40.0), 1.0), 1.0, 1.0)
