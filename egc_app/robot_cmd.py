@@ -172,11 +172,9 @@ def _open_driver(args: argparse.Namespace, cfg: dict[str, Any], session: Any) ->
 def _open_recorder(args: argparse.Namespace) -> Recorder | None:
     if args.record is None:
         return None
-    try:
-        from egc_robot.blackbox import BlackBox
-    except ImportError:
-        raise UsageError("--record needs egc_robot.blackbox, which is not available") from None
-    recorder: Recorder = BlackBox(args.record, scan_decimation=args.record_scan_every)
+    from egc_robot.blackbox import BlackBox
+
+    recorder: Recorder = BlackBox(args.record, args.robot, scan_decimation=args.record_scan_every)
     return recorder
 
 

@@ -36,6 +36,7 @@ from egc_common.transport import (
     options_from_args,
 )
 
+from egc_operator import view as view_mod
 from egc_operator.command_source import (
     CommandSource,
     TrackSource,
@@ -46,11 +47,6 @@ from egc_operator.command_source import (
 from egc_operator.joystick_evdev import PRESETS, ButtonMap, EvdevJoystick, open_device
 from egc_operator.operator_node import OperatorNode, View
 from egc_operator.status_line import StatusLine
-
-try:  # the Rerun operator view (issue 5); the operator runs without it
-    from egc_operator import view as view_mod
-except ImportError:
-    view_mod = None  # type: ignore[assignment]
 
 log = logging.getLogger("egc.operator")
 
@@ -84,8 +80,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
     # Test hook: shift this process's clock to check clock sync across machines (issue 4).
     parser.add_argument("--clock-offset-s", type=float, default=0.0, help=argparse.SUPPRESS)
-    if view_mod is not None:
-        view_mod.add_view_arguments(parser)
+    view_mod.add_view_arguments(parser)
     add_zenoh_arguments(parser, default_connect=(DEFAULT_ENDPOINT,))
 
 
@@ -150,9 +145,7 @@ def run(args: argparse.Namespace) -> int:
         timer = threading.Timer(args.duration, stop.set)
         timer.daemon = True
         timer.start()
-    view: View | None = None
-    if view_mod is not None:
-        view = view_mod.open_view(args, robot_id)
+    view: View = view_mod.open_view(args, robot_id)
     offset_ns = round(args.clock_offset_s * 1e9)
     node = OperatorNode(
         session,

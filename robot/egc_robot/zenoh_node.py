@@ -169,8 +169,11 @@ class RobotNode:
     def shutdown(self) -> None:
         """Stop the base, announce it, and undeclare everything."""
         now = self._clock()
-        stop_cmd = BaseCommand(stamp_ns=now, seq=0, linear_mps=0.0, angular_radps=0.0)
+        cycle = self._controller.counters.cycles + 1
+        stop_cmd = BaseCommand(stamp_ns=now, seq=cycle, linear_mps=0.0, angular_radps=0.0)
         self._driver.send(stop_cmd)
+        if self._recorder is not None:
+            self._recorder.on_base_command(stop_cmd)
         state = StateMessage(
             stamp_ns=now,
             state="HOLD",
@@ -179,6 +182,8 @@ class RobotNode:
             rejected=self._controller.counters.rejected_total,
         )
         self._state.put(state.encode())
+        if self._recorder is not None:
+            self._recorder.on_state(state)
         for entity in self._entities:
             entity.undeclare()
         self._token.undeclare()

@@ -264,8 +264,14 @@ class Observer:
         return data
 
     def put_cmd(self, payload: bytes) -> None:
+        """Command QoS, but BLOCK: the tests count what they inject, so nothing may be dropped
+        at our own send queue (the real operator publishes with DROP at a steady 50 Hz)."""
         self.session.put(
-            keys.cmd(ROBOT), payload, priority=zenoh.Priority.INTERACTIVE_HIGH, express=True
+            keys.cmd(ROBOT),
+            payload,
+            priority=zenoh.Priority.INTERACTIVE_HIGH,
+            express=True,
+            congestion_control=zenoh.CongestionControl.BLOCK,
         )
 
     def start_operator(self, period_s: float = 0.02, **stick: Any) -> None:

@@ -79,9 +79,10 @@ def finish(procs, observer):
     assert procs.stop("robot") == 0, procs.log("robot")
 
 
-def test_outside_code_drives_a_robot_started_alone(port, procs, observer):
+def test_outside_code_drives_a_robot_started_alone(port, procs, observer, tmp_path):
     """Must show: pinned OperatorCommand maps from outside code drive; telemetry keys pinned."""
-    start_robot(procs, observer, port)
+    blackbox = tmp_path / "blackbox.rrd"
+    start_robot(procs, observer, port, "--record", str(blackbox))
     offset = observer.robot_clock_offset_ns()
     for seq in range(1, 81):
         x = 0.0 if seq <= 10 else 1.0  # centred first (DESIGN 8), then full forward
@@ -98,6 +99,7 @@ def test_outside_code_drives_a_robot_started_alone(port, procs, observer):
     assert last["w_si"] == 1.0 and last["operator"] == "outside"
     assert last["rejected"] == 0
     finish(procs, observer)
+    assert blackbox.stat().st_size > 0
 
 
 def test_operator_sigkill_stops_the_robot_and_resume_needs_a_centred_stick(
