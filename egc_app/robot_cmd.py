@@ -113,10 +113,10 @@ def _number(table: dict[str, Any], key: str, default: float) -> float:
 
 
 def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> ControllerConfig:
-    robot = config_mod.section(cfg, "robot", SECTIONS["robot"])
-    safety = config_mod.section(cfg, "safety", SECTIONS["safety"])
-    pipe = config_mod.section(cfg, "pipeline", SECTIONS["pipeline"])
     try:
+        robot = config_mod.section(cfg, "robot", SECTIONS["robot"])
+        safety = config_mod.section(cfg, "safety", SECTIONS["safety"])
+        pipe = config_mod.section(cfg, "pipeline", SECTIONS["pipeline"])
         profile = get_profile(args.profile)
         horizon = pipe.get("horizon_s")
         pipeline = PipelineConfig(
@@ -156,7 +156,10 @@ def _open_driver(args: argparse.Namespace, cfg: dict[str, Any], session: Any) ->
         return ZenohDriver(session, args.robot)
     from egc_sim.bridge import RealTimeSim, open_simulator, parse_pose
 
-    sim_cfg = config_mod.section(cfg, "sim", SECTIONS["sim"])
+    try:
+        sim_cfg = config_mod.section(cfg, "sim", SECTIONS["sim"])
+    except config_mod.ConfigError as exc:
+        raise UsageError(str(exc)) from None
     beams = sim_cfg.get("beams")
     sim = open_simulator(
         args.map,

@@ -128,9 +128,9 @@ def run(args: argparse.Namespace) -> int:
         robot_id = keys.validate_id(args.robot)
         operator_id = keys.validate_id(args.operator_id or default_operator_id(), "operator id")
         cfg = config_mod.load(args.config, args.set)
-    except (ValueError, config_mod.ConfigError) as exc:
+        op_cfg = config_mod.section(cfg, "operator", OPERATOR_KEYS)
+    except ValueError as exc:  # includes ConfigError
         raise UsageError(str(exc)) from None
-    op_cfg = config_mod.section(cfg, "operator", OPERATOR_KEYS)
     rate_hz = args.rate_hz if args.rate_hz is not None else _number(op_cfg, "rate_hz", 50.0)
     if not 1.0 <= rate_hz <= 1000.0:
         raise UsageError("--rate-hz must be within [1, 1000]")
