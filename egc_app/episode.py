@@ -18,6 +18,9 @@ deadman or presses e-stop the robot's stop rule applies (``egc_robot.safety.dece
   ``office02``, ``random:SEED``); ``--start``/``--goal``/``--goal-tolerance`` default to the
   world's own where it has them.
 - Control runs at 1 / ``--dt`` Hz (20 Hz); the simulator sub-steps within a cycle.
+- ``--record OUT.rrd`` saves the episode as the operator view shows a live run
+  (``egc_operator.view.record_episode``), one telemetry message per cycle; open it with
+  ``rerun OUT.rrd``.
 - ``--stall-time S`` ends an episode as ``stalled`` once the robot has stood still for S
   simulated seconds (``egc_sim.episodes``); off by default, so that an episode ends only at the
   goal, at a contact or at ``--max-time``.
@@ -54,11 +57,13 @@ from pathlib import Path
 from typing import Any
 
 from egc_common.errors import UsageError
+from egc_common.messages import Telemetry
 from egc_common.profiles import PROFILES, get_profile
 from egc_common.scan import Scan
-from egc_robot.pipeline import FILTERS, Limiter, PipelineConfig, step_command
+from egc_robot.pipeline import FILTERS, Limiter, PipelineConfig, PipelineResult, step_command
 from egc_robot.safety import decelerate
-from egc_sim.episodes import ControlOutput, EpisodeResult, run_episode
+from egc_sim.episodes import ControlOutput, EpisodeResult, TraceRow, run_episode
+from egc_sim.grid_world import World
 from egc_sim.operators import Stick, make_operator
 from egc_sim.simulator import Simulator
 from egc_sim.worlds import WorldError, load_world
@@ -103,10 +108,13 @@ class PipelineController:
     def __init__(self, config: PipelineConfig) -> None:
         self.config = config
         self.previous = (0.0, 0.0)
+        self.last_stick: Stick | None = None
+        self.last_result: PipelineResult | None = None  # None while holding
 
     def __call__(self, stick: Stick, scan: Scan, dt_s: float) -> ControlOutput:
+        self.last_stick, self.last_result = stick, None
         if stick.deadman and not stick.estop:
-            r = step_command(
+            r = self.last_result = step_command(
                 self.config, stick.x_o, stick.y_o, stick.mode, scan.points(), self.previous, dt_s
             )
             out = ControlOutput(
@@ -127,9 +135,12 @@ class PipelineController:
 
 
 def run_settings(
-    settings: EpisodeSettings, record_trace: bool = False
+    settings: EpisodeSettings, record_trace: bool = False, record_path: str | None = None
 ) -> tuple[EpisodeResult, dict[str, Any]]:
-    """Run one episode; returns the result and its JSON summary. Bad settings -> UsageError."""
+    """Run one episode; returns the result and its JSON summary. Bad settings -> UsageError.
+
+    ``record_path`` saves the operator view of the episode to a Rerun .rrd file.
+    """
     try:
         world = load_world(settings.map, seed=settings.seed)
     except WorldError as exc:
@@ -153,18 +164,27 @@ def run_settings(
         raise UsageError(str(exc)) from None
     # The simulated lidar declares "no return" as free: within its range it truly is.
     config = PipelineConfig(profile, filter=settings.filter, no_return_is_free=True)
-    t0 = time.perf_counter()
-    result = run_episode(
-        sim,
-        operator,
-        PipelineController(config),
-        goal,
-        tolerance,
-        settings.max_time_s,
-        settings.dt_s,
-        record_trace,
-        settings.stall_time_s,
+    controller = PipelineController(config)
+    recorder = (
+        None if record_path is None else EpisodeRecorder(record_path, world, goal, controller)
     )
+    t0 = time.perf_counter()
+    try:
+        result = run_episode(
+            sim,
+            operator,
+            controller,
+            goal,
+            tolerance,
+            settings.max_time_s,
+            settings.dt_s,
+            record_trace,
+            settings.stall_time_s,
+            recorder,
+        )
+    finally:
+        if recorder is not None:
+            recorder.close()
     wall_s = time.perf_counter() - t0
     summary = {
         **result.summary(),
@@ -275,22 +295,71 @@ def _settings_from_args(args: argparse.Namespace) -> EpisodeSettings:
     )
 
 
-def _check_record(path: str) -> None:
-    """--record needs the operator view's episode recorder, which does not exist yet."""
-    raise UsageError(
-        f"--record {path}: not available yet (the Rerun operator view has no episode recorder)"
-    )
+class EpisodeRecorder:
+    """Saves an episode as the operator view would show it live (``egc_operator.view``).
+
+    Each cycle becomes the ``Telemetry`` message the robot process would publish (commands,
+    w_SI, region, side, limiter, the guide circles, the scan, the true pose), handed to the
+    view's ``on_telemetry``; the world map is logged once.
+    """
+
+    def __init__(
+        self, path: str, world: World, goal: tuple[float, float], controller: PipelineController
+    ) -> None:
+        try:  # Rerun is imported only when a recording is asked for
+            from egc_operator.view import record_episode
+        except ImportError as exc:
+            raise UsageError(
+                f"--record needs the operator view (egc_operator.view): {exc}"
+            ) from None
+        self.controller = controller
+        self.view = record_episode(path, "sim", recording_name=f"episode on {world.name}")
+        self.view.set_world(world.occupancy[::-1], world.resolution_m, world.origin, goal)
+        self.cycle = 0
+
+    def __call__(self, row: TraceRow, scan: Scan) -> None:
+        r = self.controller.last_result
+        stick = self.controller.last_stick
+        filtered = None if r is None else r.filtered
+        self.view.on_telemetry(
+            Telemetry(
+                seq=self.cycle,
+                stamp_ns=round(row.t_s * 1e9),
+                state="DRIVING" if r is not None else "HOLD",
+                mode=stick.mode if stick is not None else "shared",
+                v_ref=row.v_ref_mps,
+                w_ref=row.w_ref_radps,
+                v_cmd=row.v_cmd_mps,
+                w_cmd=row.w_cmd_radps,
+                w_si=1.0 if r is None else r.w_si,
+                region="safe" if r is None else r.region.value,
+                side=row.side,
+                limiter=row.limiter,
+                igc=None if filtered is None else filtered.igc,
+                agc=None if filtered is None else filtered.agc,
+                egc=None if filtered is None else filtered.egc,
+                r_rc=0.0 if filtered is None else filtered.r_rc_m,
+                scan_xy=scan.points().astype("float32"),
+                pose=(row.x_m, row.y_m, row.yaw_rad),
+                profile=self.controller.config.profile.name,
+                cycle=self.cycle,
+            )
+        )
+        self.cycle += 1
+
+    def close(self) -> None:
+        self.view.close()
 
 
 def run(args: argparse.Namespace) -> int:
     base = _settings_from_args(args)
-    if args.record:
-        _check_record(args.record)
     if args.batch or args.random_worlds is not None:
+        if args.record:
+            raise UsageError("--record saves a single episode; it cannot be used with a batch")
         return _run_batch(args, base)
     if not base.map:
         raise UsageError("--map is required (a map.yaml, a .toml world or a built-in name)")
-    _, summary = run_settings(base)
+    _, summary = run_settings(base, record_path=args.record)
     if args.json:
         print(json.dumps(summary, allow_nan=False))
     else:

@@ -22,6 +22,7 @@ command for safety) so that the episode can count interventions without knowing 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -115,8 +116,12 @@ def run_episode(
     dt_s: float = 0.05,
     record_trace: bool = False,
     stall_time_s: float | None = None,
+    observer: Callable[[TraceRow, Scan], None] | None = None,
 ) -> EpisodeResult:
-    """Run the loop of the module docstring and summarise it."""
+    """Run the loop of the module docstring and summarise it.
+
+    ``observer`` (e.g. a recorder for the operator view) sees every cycle's row and scan.
+    """
     if not (math.isfinite(dt_s) and dt_s > 0):
         raise ValueError("control period must be positive")
     still_since: float | None = None
@@ -139,22 +144,25 @@ def run_episode(
         pose = sim.pose
         t = sim.time_s
         stick = operator.command(t, pose)
-        out = controller(stick, sim.scan(stamp_ns=round(t * 1e9)), dt_s)
-        if record_trace:
-            trace.append(
-                TraceRow(
-                    t,
-                    *pose,
-                    stick.x_o,
-                    stick.y_o,
-                    out.v_ref_mps,
-                    out.w_ref_radps,
-                    out.v_mps,
-                    out.w_radps,
-                    out.limiter,
-                    out.side,
-                )
+        scan = sim.scan(stamp_ns=round(t * 1e9))
+        out = controller(stick, scan, dt_s)
+        if record_trace or observer is not None:
+            row = TraceRow(
+                t,
+                *pose,
+                stick.x_o,
+                stick.y_o,
+                out.v_ref_mps,
+                out.w_ref_radps,
+                out.v_mps,
+                out.w_radps,
+                out.limiter,
+                out.side,
             )
+            if record_trace:
+                trace.append(row)
+            if observer is not None:
+                observer(row, scan)
         sim.step(out.v_mps, out.w_radps, dt_s)
         steps += 1
         interventions += int(out.intervened)

@@ -102,7 +102,7 @@ def test_stall_time_ends_a_deadlocked_episode(capsys):
         (["--map", "hallway", "--goal-tolerance", "0"], "--goal-tolerance"),
         (["--map", "hallway", "--start", "0.05,0.6,0"], "into an obstacle"),
         (["--map", "random:1", "--operator", "nope.csv"], "joystick file"),
-        (["--map", "hallway", "--record", "out.rrd"], "not available yet"),
+        (["--random-worlds", "2", "--record", "out.rrd"], "single episode"),
         ([], "--map is required"),
         (["--map", "office02"], "no start pose"),
     ],
@@ -163,3 +163,26 @@ def test_bad_suites(tmp_path, capsys, text, message):
     suite.write_text(text)
     code, _, err = run_cli(capsys, "--batch", str(suite))
     assert code == 2 and message in err
+
+
+def test_record_saves_the_operator_view_one_row_per_cycle(tmp_path, capsys):
+    from tests.view.rrd import read_recording
+
+    path = tmp_path / "episode.rrd"
+    code, out, _ = run_cli(
+        capsys,
+        "--map",
+        "hallway",
+        "--operator",
+        "forward",
+        "--max-time",
+        "3",
+        "--record",
+        str(path),
+        "--json",
+    )
+    assert code == 0 and json.loads(out)["steps"] == 60
+    recording = read_recording(path)
+    assert len(recording["/plots/v/cmd"]) == 60 and len(recording["/robot/scan"]) == 60
+    assert recording["/plots/v/ref"].column("Scalars:scalars")[-1] == [0.14]
+    assert len(recording["/world/robot"]) == 60
