@@ -155,8 +155,9 @@ def open_scan_message(stamp_ns: int, beams: int = 360, range_m: float = 5.0) -> 
 class Observer:
     """The test's own Zenoh peer (see the module docstring)."""
 
-    def __init__(self, port: int) -> None:
-        self.session = open_session(ZenohOptions(connect=(loopback_endpoint(port),)))
+    def __init__(self, port: int, mode: str = "peer") -> None:
+        options = ZenohOptions(mode=mode, connect=(loopback_endpoint(port),))
+        self.session = open_session(options)
         self.rec = Record()
         self._lock = threading.Lock()
         self._stop = threading.Event()

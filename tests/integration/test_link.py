@@ -18,10 +18,13 @@ import time
 
 import msgpack
 import pytest
+import zenoh
+from egc_common.transport import ZenohOptions, build_config
 
 from tests.integration.harness import (
     MS,
     ROBOT,
+    Observer,
     assert_no_jump,
     first_zero_after,
     joystick_file,
@@ -355,3 +358,26 @@ def test_sensor_silent_when_the_driver_process_is_killed(port, procs, observer):
     observer.stick["x"] = 0.0
     observer.wait_state("DRIVING", since_ns=time.monotonic_ns(), timeout_s=5)
     finish(procs, observer)
+
+
+def test_robot_and_operator_as_clients_of_a_router(port, procs, tmp_path):
+    """Client mode: every process connects to a router (here a Zenoh router session in the
+    test process; deploy/router.json5 configures zenohd the same way)."""
+    router_config = build_config(ZenohOptions(listen=(f"tcp/127.0.0.1:{port}",)))
+    router_config.insert_json5("mode", '"router"')
+    router = zenoh.open(router_config)
+    observer = Observer(port, mode="client")
+    try:
+        client = ["--zenoh-mode", "client", "--connect", f"tcp/127.0.0.1:{port}"]
+        procs.start("robot", "robot", "--robot", ROBOT, "--driver", "zenoh", *client)
+        observer.wait_for("robot telemetry", observer.last_telemetry, 15)
+        observer.start_scans()
+        js = joystick_file(tmp_path / "fwd.csv", [(0, 0, 0, 1), (0.5, 1, 0, 1), (60, 1, 0, 1)])
+        op = operator_args(port, "alice", js, "--zenoh-mode", "client")
+        procs.start("op", *op)
+        wait_full_speed(observer)
+        assert observer.last_telemetry().operator == "alice"
+        finish(procs, observer)
+    finally:
+        observer.close()
+        router.close()
