@@ -181,7 +181,8 @@ def main(argv: list[str] | None = None) -> int:
         f"{'egc_sim':<10}{ours['steps']:>8}{ours['steps_per_s']:>12.0f}{ours['us_per_step']:>12.1f}"
     )
     print(
-        f"  moving in {100 * ours['moving_fraction']:.0f}% of the steps, {ours['path_m']:.1f} m driven"
+        f"  moving in {100 * ours['moving_fraction']:.0f}% of the steps, "
+        f"{ours['path_m']:.1f} m driven"
     )
     targets = {"egc_sim >= 2000 steps/s": ours["steps_per_s"] >= 2000.0}
     ratio = None
@@ -194,7 +195,8 @@ def main(argv: list[str] | None = None) -> int:
             f"{theirs['us_per_step']:>12.1f}   (ir-sim {theirs['version']})"
         )
         print(
-            f"  same map check: median |range difference| {theirs['median_range_difference_m']:.3f} m"
+            "  same map check: median |range difference| "
+            f"{theirs['median_range_difference_m']:.3f} m"
         )
         print(f"egc_sim is {ratio:.0f}x faster per step")
         targets[">= 20x IR-SIM"] = ratio >= 20.0

@@ -98,7 +98,8 @@ def trajectory_figure(world: World, result: EpisodeResult, profile_name: str, pa
     ax.set_ylabel("y [m]")
     ax.set_title(
         f"Hallway, constant forward command, EGC on: {result.outcome}, "
-        f"{result.path_m:.1f} m in {result.time_s:.0f} s, min clearance {result.min_clearance_m:.2f} m"
+        f"{result.path_m:.1f} m in {result.time_s:.0f} s, "
+        f"min clearance {result.min_clearance_m:.2f} m"
     )
     ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()

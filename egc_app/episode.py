@@ -28,8 +28,8 @@ deadman or presses e-stop the robot's stop rule applies (``egc_robot.safety.dece
 JSON keys: ``reached``, ``collided``, ``time_s`` (simulated), ``path_m``, ``min_clearance_m``
 (smallest footprint clearance, 0 after a contact, capped at 1 m), ``interventions``, ``steps``
 (control cycles), ``wall_s`` (wall-clock seconds of the episode loop, world loading excluded),
-plus ``outcome`` (reached | collided | stalled | timeout), ``goal_distance_m``, ``final_pose`` and the
-settings. An **intervention** is a control cycle in which the pipeline's limiter was ``egc``
+plus ``outcome`` (reached | collided | stalled | timeout), ``goal_distance_m``, ``final_pose``
+and the settings. An **intervention** is a control cycle in which the pipeline's limiter was ``egc``
 (the filter changed the operator's command) or ``sweep`` (the footprint check scaled it down).
 Cycles limited only by the profile's velocity/acceleration limits, stopped by the deadman or
 passed through by the anti-dead-lock rule do not count; in direct mode the count is 0.
@@ -38,8 +38,9 @@ The batch form runs episodes in parallel worker processes (``--jobs``, default: 
 shows a progress bar on stderr and writes one JSON object per line to ``--out`` (or stdout), in
 input order. A suite file holds one JSON object per line with the single-episode options as
 keys: ``map`` (required), ``start`` ([x, y, yaw]), ``goal`` ([x, y]), ``operator``, ``filter``,
-``profile``, ``max_time``, ``goal_tolerance``, ``seed``, ``dt``, ``stall_time``; missing keys take the command
-line's values. ``--random-worlds N`` runs ``random:SEED`` for N seeds from ``--seed`` on.
+``profile``, ``max_time``, ``goal_tolerance``, ``seed``, ``dt``, ``stall_time``; missing keys
+take the command line's values. ``--random-worlds N`` runs ``random:SEED`` for N seeds from
+``--seed`` on.
 """
 
 from __future__ import annotations
@@ -250,7 +251,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--stall-time", type=float, help="end as 'stalled' after S s standing still (default off)"
     )
     parser.add_argument(
-        "--record", metavar="OUT.rrd", help="record the episode for the Rerun viewer"
+        "--record", metavar="OUT.rrd", help="save the episode's operator view (Rerun .rrd)"
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     batch = parser.add_argument_group("batch")

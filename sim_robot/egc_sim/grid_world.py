@@ -127,24 +127,3 @@ class World:
         if not (0 <= row < self.rows and 0 <= col < self.cols):
             return True
         return bool(self.occupancy[row, col])
-
-    def with_scenario(
-        self,
-        start_pose: Pose | None = None,
-        goal: tuple[float, float] | None = None,
-        goal_tolerance_m: float | None = None,
-        areas: tuple[Area, ...] = (),
-    ) -> World:
-        """A copy carrying a start pose, goal and named areas (the grid is shared)."""
-        return World(
-            self.name,
-            self.occupancy,
-            self.unknown,
-            self.resolution_m,
-            self.origin_x_m,
-            self.origin_y_m,
-            start_pose,
-            goal,
-            goal_tolerance_m,
-            areas,
-        )

@@ -132,10 +132,6 @@ class Raycaster:
         self.y1 = np.concatenate([v[2], h[0]])
         self.normal = np.concatenate([v[3], h[3]])
 
-    @property
-    def segments(self) -> int:
-        return int(self.x0.size)
-
     def cast(
         self,
         x_m: float,

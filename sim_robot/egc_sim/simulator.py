@@ -87,7 +87,7 @@ class Simulator:
 
     @property
     def odometry(self) -> Pose:
-        """Pose integrated from the (optionally noisy) wheel odometry, starting at the start pose."""
+        """Pose integrated from the (optionally noisy) wheel odometry, from the start pose."""
         return self._odometry
 
     @property

@@ -29,7 +29,8 @@ def write_map_yaml(
     write_pgm(folder / "map.pgm", pixels)
     yaml_path = folder / "map.yaml"
     yaml_path.write_text(
-        f"image: map.pgm\nresolution: {resolution}\norigin: [{origin[0]}, {origin[1]}, {origin[2]}]\n"
+        f"image: map.pgm\nresolution: {resolution}\n"
+        f"origin: [{origin[0]}, {origin[1]}, {origin[2]}]\n"
         f"negate: {negate}\noccupied_thresh: {occupied_thresh}\nfree_thresh: {free_thresh}\n{extra}"
     )
     return yaml_path

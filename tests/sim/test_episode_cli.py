@@ -1,4 +1,4 @@
-"""``egc-teleop episode``: pinned JSON keys, errors, batch, and that it runs the robot's pipeline."""
+"""``egc-teleop episode``: pinned JSON keys, errors, batch, recording, the robot's pipeline."""
 
 from __future__ import annotations
 
