@@ -111,6 +111,7 @@ def _irsim_world(folder: Path, pose: tuple[float, float, float]) -> Path:
 
 
 def bench_irsim(steps: int) -> dict[str, float] | None:
+    os.environ.setdefault("MPLBACKEND", "Agg")  # IR-SIM imports matplotlib; no window wanted
     try:
         import irsim
     except ImportError:
@@ -166,8 +167,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--irsim-steps", type=int, default=60)
     ap.add_argument("--out", default="bench/results/bench_sim.json")
     args = ap.parse_args(argv)
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    cores = os.sched_getaffinity(0) if hasattr(os, "sched_setaffinity") else None
+    if cores is not None:
+        os.sched_setaffinity(0, {min(cores)})
+    try:
+        return _run(args)
+    finally:
+        if cores is not None:  # `egc-teleop bench all` runs the next benchmark in this process
+            os.sched_setaffinity(0, cores)
+
+
+def _run(args: argparse.Namespace) -> int:
 
     print(
         f"One simulation step on MRPB office02 ({LIDAR.beams}-beam lidar, EGC, kinematics, "
