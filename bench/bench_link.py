@@ -254,6 +254,7 @@ def main() -> int:
     robot = start(robot_args, workdir / "robot.log")
     h = Harness(endpoint)
     try:
+        wait_until(lambda: h.cycle_seq, 30, "the robot's first telemetry")
         h.drive(args.seconds)
         time.sleep(0.3)
         lat = h.latencies_ms()

@@ -226,7 +226,6 @@ def run(args: argparse.Namespace) -> int:
         session.close()
         summary = stats.summary()
         summary["rejected"] = dict(node.controller.counters.rejected)
-        summary["queue_overflow"] = node.overflow
         log.info("stopped: %s", json.dumps(summary))
         if args.summary:
             Path(args.summary).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")

@@ -1,12 +1,14 @@
 """The robot process's IO shell around ``RobotController`` (DESIGN 1, 7, 8; issue 4).
 
-Zenoh callbacks only time-stamp what arrives (robot monotonic clock) and queue it; one thread
-owns the controller and runs it:
+The controller is owned by whoever holds the node's lock: the Zenoh callback that receives a
+command, or the loop thread at each deadline. So there are
 
 - a fixed-rate control cycle on a monotonic deadline schedule (``rate_hz``, default 20; the
   deadline advances by whole periods, so the rate does not drift with the work done per cycle),
-- plus an immediate cycle whenever a command from the operator in control is accepted, so the
-  base sees a new command within the pipeline's run time rather than up to one period later,
+  which is also the watchdog's tick,
+- plus an immediate cycle, in the receiving callback itself, whenever a command from the
+  operator in control is accepted: the base sees it after one pipeline run, with no thread
+  hand-off (bench/bench_link.py measures publish-to-base latency),
 - telemetry on every cycle (congestion DROP), state on change and at 1 Hz,
 - the clock queryable ``egc/<robot>/clock`` answered straight from the callback,
 - the liveliness token ``egc/<robot>/alive/robot`` and a liveliness subscriber (with history)
@@ -21,12 +23,10 @@ non-raising, and the callbacks guard the little they do.
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Protocol
 
 import zenoh
@@ -41,7 +41,6 @@ from egc_robot.run_stats import RunStats
 
 log = logging.getLogger("egc.robot")
 
-_QUEUE_SIZE = 4096
 _STATE_PERIOD_NS = 1_000_000_000
 _LOG_PERIOD_NS = 1_000_000_000
 
@@ -56,14 +55,6 @@ class Recorder(Protocol):
     def on_scan(self, scan: Scan, now_ns: int) -> None: ...
     def on_state(self, state: StateMessage) -> None: ...
     def close(self) -> None: ...
-
-
-@dataclass(frozen=True, slots=True)
-class _Received:
-    kind: str  # "cmd" or "alive"
-    payload: bytes
-    rx_ns: int
-    alive: bool = True
 
 
 class RejectionLog:
@@ -112,8 +103,8 @@ class RobotNode:
         self._recorder = recorder
         self._stats = stats
         self._clock = clock
-        self._queue: queue.Queue[_Received] = queue.Queue(maxsize=_QUEUE_SIZE)
-        self._overflow = 0
+        self._lock = threading.Lock()
+        self._last_state_ns = 0
         self._rejections = RejectionLog()
         self._telemetry = data_publisher(session, keys.telemetry(robot_id))
         self._state = data_publisher(session, keys.state(robot_id))
@@ -127,14 +118,29 @@ class RobotNode:
             ),
         ]
 
+    @property
+    def controller(self) -> RobotController:
+        return self._controller
+
     # -- Zenoh callbacks (Zenoh's threads) ------------------------------------------------------
 
     def _on_command(self, sample: zenoh.Sample) -> None:
-        self._put(_Received("cmd", payload_bytes(sample), self._clock()))
+        rx_ns = self._clock()
+        payload = payload_bytes(sample)
+        with self._lock:
+            if self._handle_command(payload, rx_ns):
+                now = self._clock()
+                self._poll_driver(now)
+                self._cycle(now)
 
     def _on_liveliness(self, sample: zenoh.Sample) -> None:
+        operator_id = keys.operator_id_from_alive_key(str(sample.key_expr))
+        if operator_id is None:
+            return
         alive = sample.kind == zenoh.SampleKind.PUT
-        self._put(_Received("alive", str(sample.key_expr).encode(), self._clock(), alive))
+        with self._lock:
+            self._controller.on_operator_alive(operator_id, alive)
+        log.info("operator %s %s", operator_id, "alive" if alive else "lost")
 
     def _on_clock_query(self, query: zenoh.Query) -> None:
         try:
@@ -142,85 +148,54 @@ class RobotNode:
         except Exception as exc:  # a querier that went away must not kill the callback
             log.debug("clock reply failed: %s", exc)
 
-    def _put(self, item: _Received) -> None:
-        try:
-            self._queue.put_nowait(item)
-        except queue.Full:
-            self._overflow += 1  # counted; the controller's watchdog covers what is lost
-
-    # -- the loop (one thread owns the controller) ----------------------------------------------
+    # -- the fixed-rate loop ------------------------------------------------------------------
 
     def run(self, stop: threading.Event) -> None:
         period = self._period_ns
         deadline = self._clock() + period
-        last_state_ns = 0
-        while not stop.is_set():
-            command_arrived = self._drain(max(0, deadline - self._clock()) / 1e9)
+        while not stop.wait(max(0, deadline - self._clock()) / 1e9):
             now = self._clock()
-            self._poll_driver(now)
-            tick = now >= deadline
-            if tick or command_arrived:
-                last_state_ns = self._cycle(now, last_state_ns)
-            if tick:
-                deadline += period
-                if deadline <= now:  # overran a whole period: skip, do not burst
-                    deadline = now + period
+            with self._lock:
+                self._poll_driver(now)
+                self._cycle(now)
+            deadline += period
+            if deadline <= now:  # overran a whole period: skip, do not burst
+                deadline = now + period
 
     def shutdown(self) -> None:
         """Stop the base, announce it, and undeclare everything."""
-        now = self._clock()
-        cycle = self._controller.counters.cycles + 1
-        stop_cmd = BaseCommand(stamp_ns=now, seq=cycle, linear_mps=0.0, angular_radps=0.0)
-        self._driver.send(stop_cmd)
-        if self._recorder is not None:
-            self._recorder.on_base_command(stop_cmd)
-        state = StateMessage(
-            stamp_ns=now,
-            state="HOLD",
-            reason="robot shutting down",
-            operator=None,
-            rejected=self._controller.counters.rejected_total,
-        )
-        self._state.put(state.encode())
-        if self._recorder is not None:
-            self._recorder.on_state(state)
         for entity in self._entities:
             entity.undeclare()
+        with self._lock:
+            now = self._clock()
+            cycle = self._controller.counters.cycles + 1
+            stop_cmd = BaseCommand(stamp_ns=now, seq=cycle, linear_mps=0.0, angular_radps=0.0)
+            self._driver.send(stop_cmd)
+            state = StateMessage(
+                stamp_ns=now,
+                state="HOLD",
+                reason="robot shutting down",
+                operator=None,
+                rejected=self._controller.counters.rejected_total,
+            )
+            self._state.put(state.encode())
+            if self._recorder is not None:
+                self._recorder.on_base_command(stop_cmd)
+                self._recorder.on_state(state)
+                self._recorder.close()
         self._token.undeclare()
-        if self._recorder is not None:
-            self._recorder.close()
 
-    def _drain(self, timeout_s: float) -> bool:
-        """Handle everything queued, waiting up to ``timeout_s`` for the first item.
+    # -- under the lock -------------------------------------------------------------------------
 
-        Returns True if a command from the operator in control was accepted.
-        """
-        try:
-            item = self._queue.get(timeout=timeout_s) if timeout_s > 0 else self._queue.get_nowait()
-        except queue.Empty:
-            return False
-        accepted = False
-        while True:
-            accepted |= self._handle(item)
-            try:
-                item = self._queue.get_nowait()
-            except queue.Empty:
-                return accepted
-
-    def _handle(self, item: _Received) -> bool:
+    def _handle_command(self, payload: bytes, rx_ns: int) -> bool:
+        """Vet one command; True if it came from the operator in control and was accepted."""
         controller = self._controller
-        if item.kind == "alive":
-            operator_id = keys.operator_id_from_alive_key(item.payload.decode())
-            if operator_id is not None:
-                controller.on_operator_alive(operator_id, item.alive)
-                log.info("operator %s %s", operator_id, "alive" if item.alive else "lost")
-            return False
-        verdict = controller.on_command(item.payload, item.rx_ns)
+        verdict = controller.on_command(payload, rx_ns)
         if self._recorder is not None:
             reason = None if verdict.rejection is None else str(verdict.rejection)
-            self._recorder.on_command(item.payload, verdict.accepted, reason, item.rx_ns)
+            self._recorder.on_command(payload, verdict.accepted, reason, rx_ns)
         if not verdict.accepted:
-            self._rejections.log(verdict, controller.counters.rejected_total, item.rx_ns)
+            self._rejections.log(verdict, controller.counters.rejected_total, rx_ns)
             return False
         if verdict.took_control:
             log.info("operator %s took control", controller.operator)
@@ -239,7 +214,7 @@ class RobotNode:
             if self._stats is not None:
                 self._stats.on_odometry(update.odometry)
 
-    def _cycle(self, now: int, last_state_ns: int) -> int:
+    def _cycle(self, now: int) -> None:
         out = self._controller.step(now)
         self._driver.send(out.base)
         self._telemetry.put(out.telemetry.encode())
@@ -256,16 +231,6 @@ class RobotNode:
             )
             if self._recorder is not None:
                 self._recorder.on_state(out.state_changed)
-        if out.state_changed is not None or now - last_state_ns >= _STATE_PERIOD_NS:
+        if out.state_changed is not None or now - self._last_state_ns >= _STATE_PERIOD_NS:
             self._state.put(self._controller.state_message(now).encode())
-            return now
-        return last_state_ns
-
-    @property
-    def controller(self) -> RobotController:
-        return self._controller
-
-    @property
-    def overflow(self) -> int:
-        """Messages dropped because the loop fell behind (counted, never silently lost)."""
-        return self._overflow
+            self._last_state_ns = now
