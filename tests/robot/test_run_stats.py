@@ -1,0 +1,41 @@
+"""RunStats: the numbers of the demo's summary."""
+
+from __future__ import annotations
+
+import pytest
+from egc_common.messages import Odometry, Telemetry
+from egc_robot.run_stats import RunStats
+
+
+def tel(limiter: str) -> Telemetry:
+    return Telemetry(1, 1, "DRIVING", "shared", 0.1, 0.0, 0.1, 0.0, 1.0, limiter=limiter)
+
+
+def odom(x: float, y: float, collided: bool = False) -> Odometry:
+    return Odometry(1, x, y, 0.0, 0.0, 0.0, collided)
+
+
+def test_distance_interventions_collisions_and_latency():
+    s = RunStats()
+    for x, y, hit in [(0, 0, False), (3, 4, False), (3, 4, True), (3, 5, True), (3, 6, False)]:
+        s.on_odometry(odom(x, y, hit))
+    for limiter in ["none", "egc", "egc", "sweep", "none", "limits", "egc"]:
+        s.on_cycle(tel(limiter))
+    for ms in (1, 2, 3, 4):
+        s.on_latency(ms * 1_000_000)
+    out = s.summary()
+    assert out["distance_m"] == pytest.approx(7.0)
+    assert out["collisions"] == 1
+    assert out["interventions"] == 2  # egc..sweep is one episode, the last egc another
+    assert out["command_latency"]["p50_ms"] == pytest.approx(2.5)
+    assert out["cycles_by_state"] == {"DRIVING": 7}
+
+
+def test_empty_summary_has_no_percentiles():
+    assert RunStats().summary()["command_latency"] == {
+        "n": 0,
+        "p50_ms": None,
+        "p90_ms": None,
+        "p99_ms": None,
+        "max_ms": None,
+    }
