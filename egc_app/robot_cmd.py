@@ -225,6 +225,7 @@ def run(args: argparse.Namespace) -> int:
         driver.close()
         session.close()
         summary = stats.summary()
+        summary["accepted"] = node.controller.counters.accepted
         summary["rejected"] = dict(node.controller.counters.rejected)
         log.info("stopped: %s", json.dumps(summary))
         if args.summary:

@@ -127,7 +127,6 @@ class _Scan:
 class Counters:
     accepted: int = 0
     rejected: Counter[str] = field(default_factory=Counter)
-    estops: int = 0
     cycles: int = 0
 
     @property
@@ -179,8 +178,6 @@ class RobotController:
             return self._reject(None, decoded)
         cmd = decoded
         if cmd.estop:
-            if not self._estop_pending:
-                self.counters.estops += 1
             self._estop_pending = True
         cfg = self.config
         max_age_ns = int(cfg.max_command_age_s * NS_PER_S)
