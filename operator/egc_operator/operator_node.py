@@ -114,18 +114,18 @@ class OperatorNode:
         with self._lock:
             previous, self._state = self._state, s
         if previous is None or (previous.state, previous.reason) != (s.state, s.reason):
-            text = f"robot {s.state}: {s.reason}"
-            log.info("%s", text)
-            if self._view is not None:
-                self._view.on_text("WARN" if s.state in ("HOLD", "ESTOP") else "INFO", text)
+            log.info("robot %s: %s", s.state, s.reason)
         if self._view is not None:
-            self._view.on_state(s)
+            self._view.on_state(s)  # the view logs state changes itself
 
     def _on_robot_alive(self, sample: zenoh.Sample) -> None:
         alive = sample.kind == zenoh.SampleKind.PUT
         with self._lock:
             self._robot_alive = alive
-        log.info("robot %s", "present" if alive else "gone")
+        text = "robot present" if alive else "robot gone (its liveliness token was withdrawn)"
+        log.info("%s", text)
+        if self._view is not None:
+            self._view.on_text("INFO" if alive else "WARN", text)
 
     # -- clock sync thread --------------------------------------------------------------------
 
@@ -148,7 +148,9 @@ class OperatorNode:
                         with self._lock:
                             sample = self._sync.add(sent, stamp, received)
                         if sample is not None and self._view is not None:
-                            self._view.on_link(sample.rtt_ns / 1e6, sample.offset_ns)
+                            # the view wants the offset from this process's monotonic clock
+                            skew = self._clock() - time.monotonic_ns()
+                            self._view.on_link(sample.rtt_ns / 1e6, sample.offset_ns + skew)
             except Exception as exc:  # a closing session must not kill the thread noisily
                 if stop.is_set():
                     return
