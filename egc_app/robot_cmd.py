@@ -80,8 +80,19 @@ class SimDriver:
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--robot", default=keys.DEFAULT_ROBOT_ID, metavar="ID")
-    parser.add_argument("--driver", choices=("sim", "zenoh"), default="sim")
+    parser.add_argument(
+        "--robot",
+        default=keys.DEFAULT_ROBOT_ID,
+        metavar="ID",
+        help=f"robot id in the key expressions egc/ID/... (default: {keys.DEFAULT_ROBOT_ID})",
+    )
+    parser.add_argument(
+        "--driver",
+        choices=("sim", "zenoh"),
+        default="sim",
+        help="sim: the simulator in this process; zenoh: a base-and-sensor process over "
+        "scan, base/cmd, base/odom, e.g. 'egc-teleop sim' (default: sim)",
+    )
     parser.add_argument(
         "--map", default="hallway", metavar="SPEC", help="world for --driver sim (default: hallway)"
     )
@@ -91,7 +102,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
         metavar="NAME",
         help=f"{', '.join(sorted(PROFILES))} (default: pioneer3dx)",
     )
-    parser.add_argument("--filter", choices=FILTERS, default="egc")
+    parser.add_argument(
+        "--filter", choices=FILTERS, default="egc", help="filter of shared mode (default: egc)"
+    )
     parser.add_argument("--rate-hz", type=float, default=None, help="control rate (default: 20)")
     parser.add_argument("--start", metavar="X,Y,YAW", help="start pose for --driver sim")
     parser.add_argument("--config", metavar="FILE", help="robot TOML configuration")
@@ -99,7 +112,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key"
     )
     parser.add_argument("--record", metavar="FILE.rrd", help="keep a Rerun black box")
-    parser.add_argument("--record-scan-every", type=int, default=1, metavar="N")
+    parser.add_argument(
+        "--record-scan-every", type=int, default=1, metavar="N", help="black box: every Nth scan"
+    )
     parser.add_argument("--summary", metavar="FILE.json", help="write run statistics at exit")
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
     add_zenoh_arguments(parser, default_listen=(DEFAULT_ENDPOINT,))
@@ -177,7 +192,12 @@ def _open_recorder(args: argparse.Namespace) -> Recorder | None:
         return None
     from egc_robot.blackbox import BlackBox
 
-    recorder: Recorder = BlackBox(args.record, args.robot, scan_decimation=args.record_scan_every)
+    try:
+        recorder: Recorder = BlackBox(
+            args.record, args.robot, scan_decimation=args.record_scan_every
+        )
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"cannot record to {args.record}: {exc}") from None
     return recorder
 
 

@@ -60,7 +60,12 @@ def default_operator_id() -> str:
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--robot", default=keys.DEFAULT_ROBOT_ID, metavar="ID")
+    parser.add_argument(
+        "--robot",
+        default=keys.DEFAULT_ROBOT_ID,
+        metavar="ID",
+        help=f"robot to drive (default: {keys.DEFAULT_ROBOT_ID})",
+    )
     parser.add_argument(
         "--operator-id", metavar="ID", help="this operator's id (default: HOST-PID)"
     )
@@ -70,9 +75,16 @@ def configure(parser: argparse.ArgumentParser) -> None:
     source.add_argument("--script", metavar="NAME", help="built-in script ('list' lists them)")
     parser.add_argument("--loop", action="store_true", help="repeat a file or script forever")
     parser.add_argument("--rate-hz", type=float, default=None, help="command rate (default: 50)")
-    parser.add_argument("--gamepad", choices=sorted(PRESETS), default=None)
+    parser.add_argument(
+        "--gamepad", choices=sorted(PRESETS), default=None, help="button preset (default: xbox)"
+    )
     parser.add_argument("--deadzone", type=float, default=None, help="(default: 0.05)")
-    parser.add_argument("--mode", choices=("direct", "shared"), default="shared")
+    parser.add_argument(
+        "--mode",
+        choices=("direct", "shared"),
+        default="shared",
+        help="initial mode of a gamepad; its mode button toggles it (default: shared)",
+    )
     parser.add_argument("--config", metavar="FILE", help="operator TOML configuration")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     parser.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S")
