@@ -182,6 +182,12 @@ def test_operator_clock_an_hour_off_still_drives(port, procs, observer, tmp_path
     ages = sorted(t.cmd_age_ms for t in driving if t.cmd_age_ms is not None)
     assert ages and ages[len(ages) // 2] < 30, ages  # the stamps are right despite the hour
     assert driving[-1].rejected == 0
+    # A steady stick is still published at 50 Hz: the robot applies ~50 new seqs a second
+    # (telemetry carries the seq of the command each cycle used; one cycle per command).
+    since = time.monotonic_ns()
+    time.sleep(1.0)
+    seqs = sorted({t.seq for t in observer.telemetry(since)})
+    assert 45 <= len(seqs) <= 55 and seqs[-1] - seqs[0] == len(seqs) - 1, seqs
     # Without clock sync the same hour makes every command stale: rejected, counted, logged.
     before = observer.last_telemetry().rejected
     for seq in range(1, 11):
