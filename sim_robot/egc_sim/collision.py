@@ -67,8 +67,13 @@ class FootprintChecker:
         corner[1:, 1:] |= blocked
         self._corner = corner
 
-    def clearance(self, x_m: float, y_m: float, yaw_rad: float) -> float:
-        """Signed clearance (m) of the footprint at the pose; <= 0 is contact, capped above."""
+    def clearance(self, x_m: float, y_m: float, yaw_rad: float, below: float = math.inf) -> float:
+        """Signed clearance (m) of the footprint at the pose; <= 0 is contact, capped above.
+
+        Exact whenever it is below ``below``; otherwise some value above ``below`` (only the
+        cells that could be nearer than ``below`` are examined): a caller tracking a running
+        minimum, or testing for contact, needs no more.
+        """
         w = self.world
         res = w.resolution_m
         fr = (y_m - w.origin_y_m) / res + self._pad
@@ -81,10 +86,15 @@ class FootprintChecker:
         # res/sqrt(2) of its own centre, so the distance d from the centre to U satisfies
         # edt - res sqrt(2) <= d <= edt + res / sqrt(2), and clearance >= d - half_diagonal.
         edt = float(self._edt[row, col])
-        if edt - res * math.sqrt(2.0) - self.half_diagonal_m >= self.clearance_cap_m:
+        lower = edt - res * math.sqrt(2.0) - self.half_diagonal_m
+        if lower >= self.clearance_cap_m:
             return self.clearance_cap_m
-        # Every square within min(d, cap) of the rectangle has its centre within this radius.
-        reach = min(edt + res / math.sqrt(2.0), self.clearance_cap_m) + self.half_diagonal_m
+        if lower > below:
+            return lower
+        # Only squares within D of the rectangle can matter: d(rect, U) <= edt + res / sqrt(2),
+        # clearances beyond the cap are not reported and beyond ``below`` are not needed. Such a
+        # square has its centre within D + half_diagonal + res / sqrt(2) of the robot's centre.
+        reach = min(edt + res / math.sqrt(2.0), self.clearance_cap_m, below) + self.half_diagonal_m
         k = math.ceil(reach / res + 0.5 * math.sqrt(2.0)) + 1
         r0, r1 = max(row - k, 0), min(row + k + 1, n_rows)
         c0, c1 = max(col - k, 0), min(col + k + 1, n_cols)

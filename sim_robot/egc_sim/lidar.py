@@ -176,22 +176,29 @@ class Raycaster:
         if inc <= 0.0:  # a single beam at angle 0
             seg = np.flatnonzero((lo <= 0.0) | (hi >= _TWO_PI))
             return seg, np.zeros(seg.size, dtype=np.int64)
-        last = beams - 1
         first = np.ceil(lo / inc).astype(np.int64)
-        stop = np.minimum(np.floor(np.minimum(hi, _TWO_PI - _ANGLE_EPS) / inc), last).astype(
-            np.int64
-        )
+        if abs(beams * inc - _TWO_PI) < 1e-9:  # a full circle: one interval, indices mod beams
+            counts = np.maximum(np.floor(hi / inc).astype(np.int64) - first + 1, 0)
+            seg, k = _expand(first, counts)
+            return seg, k % beams
+        # A partial field of view: [lo, min(hi, 2 pi)) and, past 2 pi, [0, hi - 2 pi].
+        last = beams - 1
+        stop = np.minimum(np.floor(np.minimum(hi, _TWO_PI - _ANGLE_EPS) / inc), last)
         wrap_stop = np.minimum(np.floor((hi - _TWO_PI) / inc), last).astype(np.int64)
         first = np.maximum(first, 0)
-        n1 = np.maximum(stop - first + 1, 0)
-        n2 = np.maximum(wrap_stop + 1, 0)
         starts = np.concatenate([first, np.zeros_like(first)])
-        counts = np.concatenate([n1, n2])
-        owner = np.concatenate([np.arange(lo.size), np.arange(lo.size)])
-        total = int(counts.sum())
-        seg = np.repeat(owner, counts)
-        offset = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
-        return seg, np.repeat(starts, counts) + offset
+        counts = np.concatenate(
+            [np.maximum(stop.astype(np.int64) - first + 1, 0), np.maximum(wrap_stop + 1, 0)]
+        )
+        seg, k = _expand(starts, counts)
+        return seg % lo.size, k
+
+
+def _expand(starts: IntArray, counts: IntArray) -> tuple[IntArray, IntArray]:
+    """(owner, value) of the integer runs starts[j], ..., starts[j] + counts[j] - 1."""
+    owner = np.repeat(np.arange(starts.size), counts)
+    offset = np.arange(owner.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    return owner, starts[owner] + offset
 
 
 class Lidar:

@@ -72,7 +72,6 @@ class Simulator:
         self._twist = (0.0, 0.0)
         self._time_s = 0.0
         self._path_m = 0.0
-        self._clearance_m = clearance
         self._min_clearance_m = clearance
         self._collided = False
         self._in_contact = False
@@ -103,11 +102,6 @@ class Simulator:
     def path_m(self) -> float:
         """Distance travelled by the robot's centre (arc length)."""
         return self._path_m
-
-    @property
-    def clearance_m(self) -> float:
-        """Footprint clearance now (capped, see ``collision``)."""
-        return self._clearance_m
 
     @property
     def min_clearance_m(self) -> float:
@@ -149,7 +143,8 @@ class Simulator:
                 self._twist = (0.0, 0.0)
                 continue
             after = integrate_arc(self._pose, v, w, h)
-            clearance = self._footprint.clearance(*after)
+            # Exact below the running minimum, which is all that contact and the minimum need.
+            clearance = self._footprint.clearance(*after, below=self._min_clearance_m)
             if clearance <= 0.0:
                 self._stop_at_contact(v, w, h)
                 break
@@ -160,7 +155,6 @@ class Simulator:
         self._pose = pose
         self._twist = (v, w)
         self._path_m += abs(v) * h
-        self._clearance_m = clearance
         self._min_clearance_m = min(self._min_clearance_m, clearance)
         noise = self.odometry_noise
         if noise.enabled:
@@ -171,7 +165,7 @@ class Simulator:
     def _stop_at_contact(self, v: float, w: float, h: float) -> None:
         """Move to the last clear pose of this sub-step, then stand still in contact."""
         lo, hi = 0.0, 1.0
-        clear_pose, clear_value = self._pose, self._clearance_m
+        clear_pose, clear_value = self._pose, self._min_clearance_m
         for _ in range(_BISECTIONS):
             mid = 0.5 * (lo + hi)
             pose = integrate_arc(self._pose, v, w, mid * h)
