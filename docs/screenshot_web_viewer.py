@@ -5,8 +5,8 @@
 
 Steps: serve the .rrd through the web viewer bundled with rerun-sdk (``python -m rerun
 --serve-web``), start ``chromium --headless`` with a DevTools port, open the viewer URL over the
-DevTools protocol, give the wasm viewer time to load (25 s by default) and save
-``Page.captureScreenshot`` as a PNG.
+DevTools protocol, give the wasm viewer time to load (25 s by default, then until two captures
+3 s apart agree) and save ``Page.captureScreenshot`` as a PNG.
 
 Without ``--rrd`` the recording is made here from synthetic telemetry through the operator view's
 own API: a Pioneer 3-DX drives forward down a corridor with two boxes in it, the command pipeline
@@ -20,10 +20,13 @@ from __future__ import annotations
 import argparse
 import base64
 import contextlib
+import io
 import itertools
 import json
 import math
+import os
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -37,6 +40,7 @@ from pathlib import Path
 import numpy as np
 import websocket  # websocket-client (test extra): the DevTools protocol runs over a websocket
 from egc_common.messages import Telemetry
+from PIL import Image, ImageChops
 
 DOCS = Path(__file__).resolve().parent
 DEFAULT_PNG = DOCS / "web_viewer.png"
@@ -207,17 +211,21 @@ def _wait_http(url: str, timeout_s: float) -> bytes:
 
 @contextlib.contextmanager
 def _process(cmd: list[str], log: Path) -> Iterator[subprocess.Popen[bytes]]:
-    """Run ``cmd`` with output to ``log``; terminate it (and only it) on exit."""
+    """Run ``cmd`` in its own process group with output to ``log``; end that group on exit.
+
+    The group matters: ``python -m rerun`` runs the viewer binary as a child, which would
+    outlive its parent if only the parent were terminated.
+    """
     with log.open("wb") as out:
-        proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT)
+        proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
         try:
             yield proc
         finally:
-            proc.terminate()
+            os.killpg(proc.pid, signal.SIGTERM)
             try:
                 proc.wait(timeout=10)
             except subprocess.TimeoutExpired:
-                proc.kill()
+                os.killpg(proc.pid, signal.SIGKILL)
                 proc.wait()
 
 
@@ -231,6 +239,17 @@ def serve_recording(rrd: Path, workdir: Path) -> Iterator[str]:
         _wait_http(f"http://127.0.0.1:{web_port}/", 30)
         proxy = f"rerun+http://127.0.0.1:{grpc_port}/proxy"
         yield f"http://127.0.0.1:{web_port}/?url={urllib.parse.quote(proxy, safe='')}"
+
+
+SETTLED_PIXELS = 100  # a blinking cursor or a ticking number, not the recording still loading
+
+
+def changed_pixels(png_a_b64: str, png_b_b64: str) -> int:
+    """How many pixels differ between two base64 PNG screenshots of the same size."""
+    a, b = (
+        Image.open(io.BytesIO(base64.b64decode(x))).convert("RGB") for x in (png_a_b64, png_b_b64)
+    )
+    return int(np.count_nonzero(np.asarray(ImageChops.difference(a, b)).max(axis=2)))
 
 
 class DevTools:
@@ -261,9 +280,15 @@ def screenshot(
     png: Path,
     workdir: Path,
     wait_s: float,
+    settle_max_s: float = 90.0,
     size: tuple[int, int] = (1600, 1000),
-) -> None:
-    """Open ``url`` in headless Chromium, wait ``wait_s`` seconds and save a PNG of the page."""
+) -> bool:
+    """Open ``url`` in headless Chromium and save a PNG of the page; True if the page settled.
+
+    After ``wait_s`` the page is captured every 3 s until two captures agree (the viewer has
+    ingested the whole recording; on a loaded machine this takes longer), for at most
+    ``settle_max_s`` more seconds.
+    """
     port = free_port()
     cmd = [chromium, *CHROMIUM_FLAGS, f"--user-data-dir={workdir / 'profile'}"]
     cmd += [f"--remote-debugging-port={port}", f"--window-size={size[0]},{size[1]}", "about:blank"]
@@ -283,10 +308,20 @@ def screenshot(
             tools.call("Page.enable")
             tools.call("Page.navigate", url=url)
             time.sleep(wait_s)
-            shot = tools.call("Page.captureScreenshot", format="png")
+            shot = str(tools.call("Page.captureScreenshot", format="png")["data"])
+            deadline = time.monotonic() + settle_max_s
+            settled = False
+            while not settled and time.monotonic() < deadline:
+                time.sleep(3.0)
+                previous, shot = (
+                    shot,
+                    str(tools.call("Page.captureScreenshot", format="png")["data"]),
+                )
+                settled = shot == previous
         finally:
             tools.close()
-    png.write_bytes(base64.b64decode(str(shot["data"])))
+    png.write_bytes(base64.b64decode(shot))
+    return settled
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -307,10 +342,11 @@ def main(argv: list[str] | None = None) -> int:
         workdir = Path(tmp)
         rrd = args.rrd or record_corridor_run(workdir / "corridor.rrd", args.seconds)
         with serve_recording(rrd, workdir) as url:
-            screenshot(chromium, url, args.out, workdir, args.wait)
-    print(
-        f"wrote {args.out} ({args.out.stat().st_size} bytes) showing {args.rrd or 'a synthetic corridor run'}"
-    )
+            settled = screenshot(chromium, url, args.out, workdir, args.wait)
+    what = args.rrd or "a synthetic corridor run"
+    print(f"wrote {args.out} ({args.out.stat().st_size} bytes) showing {what}")
+    if not settled:
+        print("warning: the page was still changing at the last capture", file=sys.stderr)
     return 0
 
 

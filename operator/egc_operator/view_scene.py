@@ -17,7 +17,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from egc_common.kinematics import footprint_corners
 from egc_common.messages import Circle, Telemetry
 from egc_common.profiles import PROFILES, RobotProfile
 
@@ -67,9 +66,7 @@ CIRCLE_LABELS = {
     "agc": "aux. GC",
     "egc": "expanded GC",
 }
-CIRCLE_SEGMENTS = 72
 FALLBACK_HORIZON_S = 1.0
-EMPTY_XY: F32 = np.zeros((0, 2), np.float32)
 
 
 def profile_named(name: str) -> RobotProfile | None:
@@ -77,22 +74,18 @@ def profile_named(name: str) -> RobotProfile | None:
     return PROFILES.get(name)
 
 
-def circle_strip(cx: float, cy: float, r: float, segments: int = CIRCLE_SEGMENTS) -> F32:
-    """A closed polyline (segments + 1, 2) approximating the circle; empty for r <= 0."""
-    if not (r > 0.0 and math.isfinite(r)):
-        return EMPTY_XY
-    a = np.linspace(0.0, 2.0 * math.pi, segments + 1)
-    out = np.empty((segments + 1, 2), np.float32)
-    out[:, 0] = cx + r * np.cos(a)
-    out[:, 1] = cy + r * np.sin(a)
-    out[-1] = out[0]  # exactly closed
-    return out
+def drawable_circle(circle: Circle | None) -> Circle | None:
+    """The circle (x, y, r) if it can be drawn (finite, r > 0), else None."""
+    if circle is None:
+        return None
+    if not (all(math.isfinite(v) for v in circle) and circle[2] > 0.0):
+        return None
+    return circle
 
 
-def footprint_strip(profile: RobotProfile) -> F32:
-    """The footprint rectangle in {R} as a closed polyline (5, 2)."""
-    corners = footprint_corners(profile.length_m, profile.width_m)
-    return np.vstack([corners, corners[:1]]).astype(np.float32)
+def footprint_half_size(profile: RobotProfile) -> tuple[float, float]:
+    """Half length and half width of the footprint rectangle, centred on the origin of {R}."""
+    return 0.5 * profile.length_m, 0.5 * profile.width_m
 
 
 def command_vector(v_mps: float, w_radps: float, horizon_s: float) -> tuple[float, float]:
@@ -117,9 +110,9 @@ class RobotFrameScene:
     """The robot-frame view of one control cycle; every array is in {R}, metres."""
 
     scan_xy: F32
-    footprint: F32
+    footprint_half_size: tuple[float, float] | None  # None: unknown profile
     region_colour: Rgb
-    circles: dict[str, F32]  # CIRCLE_NAMES -> closed polyline (empty when absent this cycle)
+    circles: dict[str, Circle | None]  # CIRCLE_NAMES -> (x, y, r), None when absent this cycle
     reference_vector: tuple[float, float]
     sent_vector: tuple[float, float]
     status: str
@@ -135,15 +128,15 @@ def robot_frame_scene(t: Telemetry) -> RobotFrameScene:
     profile = profile_named(t.profile)
     horizon = profile.horizon_s if profile else FALLBACK_HORIZON_S
     circles = {
-        "reachable": circle_strip(0.0, 0.0, t.r_rc),
-        "igc": _strip_or_empty(t.igc),
-        "agc": _strip_or_empty(t.agc),
-        "egc": _strip_or_empty(t.egc),
+        "reachable": drawable_circle((0.0, 0.0, t.r_rc)),
+        "igc": drawable_circle(t.igc),
+        "agc": drawable_circle(t.agc),
+        "egc": drawable_circle(t.egc),
     }
     back = -(0.5 * profile.length_m + 0.15) if profile else -0.4
     return RobotFrameScene(
         scan_xy=np.ascontiguousarray(t.scan_xy, dtype=np.float32).reshape(-1, 2),
-        footprint=footprint_strip(profile) if profile else EMPTY_XY,
+        footprint_half_size=footprint_half_size(profile) if profile else None,
         region_colour=REGION_COLOURS.get(t.region, UNKNOWN_REGION),
         circles=circles,
         reference_vector=command_vector(t.v_ref, t.w_ref, horizon),
@@ -151,10 +144,6 @@ def robot_frame_scene(t: Telemetry) -> RobotFrameScene:
         status=status_text(t),
         status_anchor=(back, 0.0),
     )
-
-
-def _strip_or_empty(circle: Circle | None) -> F32:
-    return EMPTY_XY if circle is None else circle_strip(*circle)
 
 
 def time_series(t: Telemetry) -> dict[str, float]:

@@ -122,11 +122,13 @@ def test_robot_frame_values(recorded) -> None:  # type: ignore[no-untyped-def]
     rec, sent = recorded
     scans = rec[_entity(paths.SCAN)].column("Points2D:positions")
     assert np.allclose(scans[7], sent[7].scan_xy)
-    igc = rec[_entity(paths.circle_path("igc"))].column("LineStrips2D:strips")
-    assert igc[10] == []  # cycle 10 had no circles: the strip is cleared
-    strip = np.array(igc[0][0])
+    igc = rec[_entity(paths.circle_path("igc"))]
+    centres, half_sizes = igc.column("Ellipses2D:centers"), igc.column("Ellipses2D:half_sizes")
+    assert centres[10] == [] and half_sizes[10] == []  # cycle 10 had no circles: cleared
     cx, cy, r = sent[0].igc
-    assert np.allclose(np.hypot(strip[:, 0] - cx, strip[:, 1] - cy), r, rtol=1e-5)
+    assert np.allclose(centres[0], [[cx, cy]]) and np.allclose(half_sizes[0], [[r, r]])
+    footprint = rec[_entity(paths.FOOTPRINT)].column("Boxes2D:half_sizes")
+    assert np.allclose(footprint[0], [[0.455 / 2, 0.381 / 2]])
     arrows = rec[_entity(paths.SENT_ARROW)].column("Arrows2D:vectors")
     assert arrows[5][0] == pytest.approx(
         command_vector(sent[5].v_cmd, sent[5].w_cmd, 4.25), rel=1e-5

@@ -13,9 +13,9 @@ from egc_operator.view_scene import (
     REGION_COLOURS,
     ROBOT_TO_SCREEN,
     WORLD_TO_SCREEN,
-    circle_strip,
     command_vector,
-    footprint_strip,
+    drawable_circle,
+    footprint_half_size,
     map_image,
     pose_moved,
     robot_frame_scene,
@@ -28,26 +28,16 @@ from egc_robot.filters.egc import EgcParams, egc_filter, predicted_position
 from tests.view.conftest import telemetry
 
 
-def test_circle_strip_is_a_closed_circle_of_the_right_radius() -> None:
-    strip = circle_strip(0.5, -0.25, 0.3, segments=48)
-    assert strip.shape == (49, 2)
-    assert np.array_equal(strip[0], strip[-1])
-    radii = np.hypot(strip[:, 0] - 0.5, strip[:, 1] + 0.25)
-    np.testing.assert_allclose(radii, 0.3, rtol=1e-6)
-
-
-@pytest.mark.parametrize("r", [0.0, -1.0, math.nan, math.inf])
-def test_degenerate_circles_draw_nothing(r: float) -> None:
-    assert circle_strip(0.0, 0.0, r).shape == (0, 2)
+def test_only_drawable_circles_are_drawn() -> None:
+    assert drawable_circle((0.5, -0.25, 0.3)) == (0.5, -0.25, 0.3)
+    assert drawable_circle(None) is None
+    for bad in ((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), (0.0, 0.0, math.nan), (math.inf, 0.0, 1.0)):
+        assert drawable_circle(bad) is None
 
 
 @pytest.mark.parametrize("profile", [PIONEER3DX, JACKAL])
-def test_footprint_is_the_profiles_rectangle_centred_on_the_robot(profile) -> None:  # type: ignore[no-untyped-def]
-    strip = footprint_strip(profile)
-    assert strip.shape == (5, 2) and np.array_equal(strip[0], strip[-1])
-    np.testing.assert_allclose(strip[:, 0].max() - strip[:, 0].min(), profile.length_m, rtol=1e-6)
-    np.testing.assert_allclose(strip[:, 1].max() - strip[:, 1].min(), profile.width_m, rtol=1e-6)
-    np.testing.assert_allclose(strip[:4].mean(axis=0), 0.0, atol=1e-7)
+def test_footprint_is_the_profiles_rectangle(profile) -> None:  # type: ignore[no-untyped-def]
+    assert footprint_half_size(profile) == (profile.length_m / 2, profile.width_m / 2)
 
 
 def test_operator_arrow_ends_at_the_initial_guide_circle_centre() -> None:
@@ -64,14 +54,14 @@ def test_robot_frame_scene_from_telemetry() -> None:
     t = telemetry(3)
     scene = robot_frame_scene(t)
     np.testing.assert_array_equal(scene.scan_xy, t.scan_xy)
-    assert scene.footprint.shape == (5, 2)
+    assert scene.footprint_half_size == footprint_half_size(PIONEER3DX)
     assert scene.region_colour == REGION_COLOURS["conditional"]
-    assert set(scene.circles) == set(CIRCLE_NAMES)
-    for name, circle in (("igc", t.igc), ("agc", t.agc), ("egc", t.egc)):
-        assert circle is not None
-        centre_to_rim = np.hypot(*(scene.circles[name][0] - np.array(circle[:2])))
-        assert centre_to_rim == pytest.approx(circle[2], rel=1e-6)
-    assert np.hypot(*scene.circles["reachable"][0]) == pytest.approx(t.r_rc, rel=1e-6)
+    assert scene.circles == {
+        "reachable": (0.0, 0.0, t.r_rc),
+        "igc": t.igc,
+        "agc": t.agc,
+        "egc": t.egc,
+    }
     horizon = PIONEER3DX.horizon_s
     assert scene.reference_vector == pytest.approx(command_vector(t.v_ref, t.w_ref, horizon))
     assert scene.sent_vector == pytest.approx(command_vector(t.v_cmd, t.w_cmd, horizon))
@@ -81,8 +71,8 @@ def test_robot_frame_scene_from_telemetry() -> None:
 def test_absent_circles_and_unknown_profile() -> None:
     t = telemetry(1, igc=None, agc=None, egc=None, r_rc=0.0, profile="", region="weird")
     scene = robot_frame_scene(t)
-    assert all(scene.circles[name].shape == (0, 2) for name in CIRCLE_NAMES)
-    assert scene.footprint.shape == (0, 2)
+    assert all(scene.circles[name] is None for name in CIRCLE_NAMES)
+    assert scene.footprint_half_size is None
     assert scene.sent_vector == pytest.approx(command_vector(t.v_cmd, t.w_cmd, FALLBACK_HORIZON_S))
 
 

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import os
+import signal
 import socket
 import subprocess
 import sys
@@ -137,6 +139,7 @@ def test_connect_streams_to_a_running_viewer(tmp_path: Path) -> None:
         [sys.executable, "-m", "rerun", "--port", str(port), "--save", str(received)],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
+        start_new_session=True,  # `python -m rerun` runs the binary as a child: end both
     )
     try:
         _wait_for(received.exists)
@@ -147,7 +150,7 @@ def test_connect_streams_to_a_running_viewer(tmp_path: Path) -> None:
         _wait_for(lambda: "/" + paths.SCAN in read_recording(received))
         _wait_for(lambda: len(read_recording(received)["/" + paths.SCAN]) == 5)
     finally:
-        server.terminate()
+        os.killpg(server.pid, signal.SIGTERM)
         server.wait(timeout=10)
 
 
