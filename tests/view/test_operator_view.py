@@ -11,6 +11,7 @@ from egc_common.messages import StateMessage
 from egc_operator import view_blueprint as paths
 from egc_operator.view import OperatorView, record_episode
 from egc_operator.view_scene import command_vector, status_text
+from rerun.chunk import RrdReader
 
 from tests.view.conftest import telemetry
 from tests.view.rrd import read_recording
@@ -58,10 +59,35 @@ def _run(path: Path) -> list:  # type: ignore[type-arg]
 
 
 @pytest.fixture(scope="module")
-def recorded(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, list]:  # type: ignore[type-arg]
+def recording_path(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list]:  # type: ignore[type-arg]
     path = tmp_path_factory.mktemp("view") / "run.rrd"
-    sent = _run(path)
+    return path, _run(path)
+
+
+@pytest.fixture(scope="module")
+def recorded(recording_path) -> tuple[dict, list]:  # type: ignore[no-untyped-def, type-arg]
+    path, sent = recording_path
     return read_recording(path), sent
+
+
+def test_the_file_carries_the_default_layout(recording_path) -> None:  # type: ignore[no-untyped-def]
+    """Opening the .rrd shows the operator console, not Rerun's automatic layout."""
+    reader = RrdReader(recording_path[0])
+    (blueprint,) = reader.blueprints()
+    assert blueprint.application_id == "egc-teleop"
+    views = {}
+    for chunk in reader.stream(store=blueprint).to_chunks():
+        batch = chunk.to_record_batch()
+        if "ViewBlueprint:class_identifier" in batch.schema.names:
+            kind = batch.column("ViewBlueprint:class_identifier").to_pylist()[0][0]
+            origin = batch.column("ViewBlueprint:space_origin").to_pylist()[0][0]
+            views.setdefault(kind, set()).add(origin)
+    assert views == {
+        "2D": {"/"},  # robot frame and world frame (each selects its subtree)
+        "StateTimeline": {paths.LANES},
+        "TextLog": {paths.TEXT_LOG},
+        "TimeSeries": {"plots/v", "plots/w", "plots/w_si", "plots/latency"},
+    }
 
 
 def test_every_view_entity_is_in_the_recording(recorded) -> None:  # type: ignore[no-untyped-def]
