@@ -250,6 +250,13 @@ class OperatorView:
                 static=True,
             )
 
+    def flush(self) -> None:
+        """Block until everything logged so far has reached the sink."""
+        with self._lock:
+            rec = self._rec
+        if rec is not None:
+            rec.flush()
+
     def close(self) -> None:
         """Flush and close the sink; a saved .rrd is complete and readable afterwards."""
         with self._lock:
