@@ -19,10 +19,10 @@ from egc_common.messages import (
     BaseCommand,
     Odometry,
     Rejection,
-    ScanMessage,
     decode_odometry,
     decode_scan,
 )
+from egc_common.scan import Scan
 from egc_common.transport import command_publisher, payload_bytes
 
 from egc_robot.drivers import SensorUpdate, scan_from_message
@@ -33,7 +33,7 @@ log = logging.getLogger("egc.robot.driver")
 class ZenohDriver:
     def __init__(self, session: zenoh.Session, robot_id: str) -> None:
         self._lock = threading.Lock()
-        self._scan: ScanMessage | None = None
+        self._scan: Scan | None = None
         self._scan_rx_ns = 0
         self._odometry: Odometry | None = None
         self.rejected: Counter[str] = Counter()
@@ -49,8 +49,9 @@ class ZenohDriver:
         if isinstance(decoded, Rejection):
             self._count(decoded, "scan")
             return
+        scan = scan_from_message(decoded)  # here, off the command path
         with self._lock:
-            self._scan, self._scan_rx_ns = decoded, now_ns
+            self._scan, self._scan_rx_ns = scan, now_ns
 
     def _on_odometry(self, sample: zenoh.Sample) -> None:
         decoded = decode_odometry(payload_bytes(sample))
@@ -71,11 +72,7 @@ class ZenohDriver:
         with self._lock:
             scan, rx_ns, odometry = self._scan, self._scan_rx_ns, self._odometry
             self._scan, self._odometry = None, None
-        return SensorUpdate(
-            scan=None if scan is None else scan_from_message(scan),
-            scan_rx_ns=rx_ns,
-            odometry=odometry,
-        )
+        return SensorUpdate(scan=scan, scan_rx_ns=rx_ns, odometry=odometry)
 
     def send(self, command: BaseCommand) -> None:
         self._publisher.put(command.encode())
