@@ -1,0 +1,70 @@
+"""``egc-teleop sim`` as a remote driver: pinned scan and odometry out, base commands in, and
+the base's own watchdog (it stops without commands, as a real base's firmware does)."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+from egc_common import keys
+from egc_common.messages import BaseCommand, Odometry, ScanMessage, decode_odometry, decode_scan
+from egc_common.transport import ZenohOptions, command_publisher, loopback_endpoint, open_session
+
+from tests.integration.harness import ROBOT
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(60)]
+
+
+def test_bridge_drives_reports_and_stops_on_its_own_watchdog(port, procs):
+    session = open_session(ZenohOptions(listen=(loopback_endpoint(port),)))
+    lock = threading.Lock()
+    scans: list[ScanMessage] = []
+    odom: list[tuple[int, Odometry]] = []
+
+    def on_scan(sample):
+        s = decode_scan(sample.payload.to_bytes())
+        assert isinstance(s, ScanMessage), s
+        with lock:
+            scans.append(s)
+
+    def on_odom(sample):
+        o = decode_odometry(sample.payload.to_bytes())
+        assert isinstance(o, Odometry), o
+        with lock:
+            odom.append((time.monotonic_ns(), o))
+
+    subs = [
+        session.declare_subscriber(keys.scan(ROBOT), on_scan),
+        session.declare_subscriber(keys.base_odom(ROBOT), on_odom),
+    ]
+    publisher = command_publisher(session, keys.base_cmd(ROBOT))
+    try:
+        procs.start("sim", "sim", "--robot", ROBOT, "--connect", loopback_endpoint(port))
+        deadline = time.monotonic() + 15
+        while time.monotonic() < deadline and not (scans and odom):
+            time.sleep(0.05)
+        assert scans and odom, procs.log("sim")
+        start_x = odom[-1][1].x_m
+        for seq in range(1, 51):  # 1 s at 0.1 m/s
+            publisher.put(BaseCommand(time.monotonic_ns(), seq, 0.1, 0.0).encode())
+            time.sleep(0.02)
+        stopped_sending = time.monotonic_ns()
+        with lock:
+            moving = odom[-1][1]
+        assert moving.linear_mps == pytest.approx(0.1, abs=0.01)
+        assert moving.x_m - start_x > 0.05
+        time.sleep(1.0)
+        with lock:
+            after = [(rx, o) for rx, o in odom if rx > stopped_sending]
+        halted = next(rx for rx, o in after if o.linear_mps == 0.0)
+        # --base-timeout-s 0.5, then the simulated base brakes at 0.5 m/s^2 from 0.1 m/s
+        assert (halted - stopped_sending) / 1e6 <= 500 + 200 + 100
+        with lock:
+            scan = scans[-1]
+        assert scan.ranges_m.size == 360 and scan.range_max_m > scan.range_min_m
+        assert procs.stop("sim") == 0, procs.log("sim")
+    finally:
+        for sub in subs:
+            sub.undeclare()
+        session.close()
