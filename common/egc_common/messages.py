@@ -12,7 +12,7 @@ from __future__ import annotations
 import enum
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any, Final, TypeVar
 
 import msgpack
@@ -192,6 +192,11 @@ def _decode(
         return Rejection(RejectReason.NOT_MSGPACK, "nesting too deep")
 
 
+def _shallow_fields(message: Any) -> dict[str, Any]:
+    """A dataclass's fields as a dict, without ``asdict``'s deep copy (a scan array per cycle)."""
+    return {f.name: getattr(message, f.name) for f in fields(message)}
+
+
 def _pack(obj: Mapping[str, Any]) -> bytes:
     data: bytes = msgpack.packb(obj, use_bin_type=True)
     return data
@@ -288,7 +293,7 @@ class Telemetry:
     cycle: int = 0
 
     def encode(self) -> bytes:
-        d = asdict(self)
+        d = _shallow_fields(self)
         d["scan_xy"] = np.ascontiguousarray(self.scan_xy, dtype="<f4").tobytes()
         for key in ("igc", "agc", "egc", "pose"):
             if d[key] is not None:
@@ -363,7 +368,7 @@ class StateMessage:
     rejected: int = 0
 
     def encode(self) -> bytes:
-        return _pack({"v": SCHEMA_VERSION, **asdict(self)})
+        return _pack({"v": SCHEMA_VERSION, **_shallow_fields(self)})
 
 
 def _build_state(m: Mapping[Any, Any]) -> StateMessage:
@@ -444,7 +449,7 @@ class BaseCommand:
     angular_radps: float
 
     def encode(self) -> bytes:
-        return _pack({"v": SCHEMA_VERSION, **asdict(self)})
+        return _pack({"v": SCHEMA_VERSION, **_shallow_fields(self)})
 
 
 def _build_base_cmd(m: Mapping[Any, Any]) -> BaseCommand:
@@ -473,7 +478,7 @@ class Odometry:
     collided: bool = False
 
     def encode(self) -> bytes:
-        return _pack({"v": SCHEMA_VERSION, **asdict(self)})
+        return _pack({"v": SCHEMA_VERSION, **_shallow_fields(self)})
 
 
 def _build_odom(m: Mapping[Any, Any]) -> Odometry:
