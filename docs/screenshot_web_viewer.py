@@ -1,15 +1,17 @@
 """Screenshot of the Rerun web viewer showing a recording, taken in headless Chromium.
 
-    python docs/screenshot_web_viewer.py                 # synthetic corridor run -> docs/web_viewer.png
-    python docs/screenshot_web_viewer.py --rrd demo.rrd  # any recording
+    python docs/screenshot_web_viewer.py --demo 20       # egc-teleop demo -> docs/web_viewer.png
+    python docs/screenshot_web_viewer.py --rrd run.rrd   # any recording
+    python docs/screenshot_web_viewer.py                 # a synthetic corridor run (no Zenoh)
 
 Steps: serve the .rrd through the web viewer bundled with rerun-sdk (``python -m rerun
 --serve-web``), start ``chromium --headless`` with a DevTools port, open the viewer URL over the
 DevTools protocol, give the wasm viewer time to load (25 s by default, then until two captures
 3 s apart agree) and save ``Page.captureScreenshot`` as a PNG.
 
-Without ``--rrd`` the recording is made here from synthetic telemetry through the operator view's
-own API: a Pioneer 3-DX drives forward down a corridor with two boxes in it, the command pipeline
+``--demo S`` records ``egc-teleop demo --duration S --save FILE.rrd`` first (the simulated robot
+and a scripted operator as separate processes over Zenoh). With neither option the recording is
+made here from synthetic telemetry through the operator view's own API (what the test uses): a Pioneer 3-DX drives forward down a corridor with two boxes in it, the command pipeline
 (EGC + footprint sweep) filters the constant forward command, and the resulting telemetry (with
 720-beam scans) is fed to ``egc_operator.view.record_episode``. This script may import the robot
 package because it is a documentation tool, not part of the operator.
@@ -324,9 +326,18 @@ def screenshot(
     return settled
 
 
+def record_demo(path: Path, seconds: float) -> Path:
+    """Run ``egc-teleop demo --duration S --save path`` (headless) and return ``path``."""
+    cmd = [sys.executable, "-m", "egc_app.cli", "demo", "--duration", f"{seconds:g}"]
+    subprocess.run([*cmd, "--save", str(path)], check=True, timeout=seconds + 120)
+    return path
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rrd", type=Path, help="recording to show (default: a synthetic run)")
+    source = parser.add_mutually_exclusive_group()
+    source.add_argument("--rrd", type=Path, help="recording to show (default: a synthetic run)")
+    source.add_argument("--demo", type=float, metavar="S", help="record S seconds of the demo")
     parser.add_argument("--out", type=Path, default=DEFAULT_PNG, help="PNG to write")
     parser.add_argument("--wait", type=float, default=25.0, help="seconds for the viewer to load")
     parser.add_argument("--seconds", type=float, default=14.0, help="length of the synthetic run")
@@ -340,10 +351,15 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     with tempfile.TemporaryDirectory(prefix="egc-shot-") as tmp:
         workdir = Path(tmp)
-        rrd = args.rrd or record_corridor_run(workdir / "corridor.rrd", args.seconds)
+        if args.rrd:
+            rrd = args.rrd
+        elif args.demo:
+            rrd = record_demo(workdir / "demo.rrd", args.demo)
+        else:
+            rrd = record_corridor_run(workdir / "corridor.rrd", args.seconds)
         with serve_recording(rrd, workdir) as url:
             settled = screenshot(chromium, url, args.out, workdir, args.wait)
-    what = args.rrd or "a synthetic corridor run"
+    what = args.rrd or (f"{args.demo:g} s of egc-teleop demo" if args.demo else "a synthetic run")
     print(f"wrote {args.out} ({args.out.stat().st_size} bytes) showing {what}")
     if not settled:
         print("warning: the page was still changing at the last capture", file=sys.stderr)

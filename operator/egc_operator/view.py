@@ -20,6 +20,7 @@ import sys
 import threading
 import time
 import uuid
+from collections import deque
 from pathlib import Path
 from typing import Any
 
@@ -52,6 +53,7 @@ from egc_operator.view_scene import (
 from egc_operator.viewer_target import ViewerTarget, attach, choose_target
 
 TRAJECTORY_STEP_M = 0.02
+MAX_PENDING_TEXT = 100  # text events kept while the robot's clock is unknown (oldest dropped)
 THIN_LINE = rr.Radius.ui_points(1.0)
 THICK_LINE = rr.Radius.ui_points(2.0)
 SCAN_RADIUS_M = 0.02
@@ -168,6 +170,8 @@ class OperatorView:
         self._state_key: tuple[str, str, str | None] | None = None
         self._rejected_seen = 0
         self._offset_ns: int | None = None
+        self._robot_ns: int | None = None  # the latest robot stamp seen
+        self._pending_text: deque[tuple[str, str]] = deque(maxlen=MAX_PENDING_TEXT)
         if recording is not None:
             self._log_static(recording)
 
@@ -189,6 +193,8 @@ class OperatorView:
             if t.pose is not None:
                 self._log_pose(rec, t)
             self._last = t
+            self._robot_ns = t.stamp_ns
+            self._log_pending_text(rec)
 
     def on_state(self, s: StateMessage) -> None:
         """A state message: logged to the text log when state, reason or operator changed."""
@@ -196,6 +202,8 @@ class OperatorView:
             rec = self._rec
             if rec is None:
                 return
+            self._robot_ns = s.stamp_ns
+            self._log_pending_text(rec)
             _set_time(rec, s.stamp_ns, self._cycle)
             key = (s.state, s.reason, s.operator)
             if key != self._state_key:
@@ -206,13 +214,18 @@ class OperatorView:
             self._note_rejections(rec, s.rejected)
 
     def on_text(self, level: str, text: str) -> None:
-        """An operator-side event (a rejected message, a link event) for the text log."""
+        """An operator-side event (a rejected message, a link event) for the text log.
+
+        Before anything tells the robot's clock (telemetry, state or a link sample) the event
+        waits, and is logged at the first robot time known: a stamp of 0 would stretch the
+        ``robot_time`` timeline from zero to the robot's uptime.
+        """
         with self._lock:
             rec = self._rec
             if rec is None:
                 return
-            _set_time(rec, self._robot_now(), self._cycle)
-            rec.log(paths.TEXT_LOG, rr.TextLog(text, level=TEXT_LEVELS.get(level.lower(), "INFO")))
+            self._pending_text.append((TEXT_LEVELS.get(level.lower(), "INFO"), text))
+            self._log_pending_text(rec)
 
     def on_link(self, rtt_ms: float, offset_ns: int) -> None:
         """A clock-sync round trip; ``offset_ns`` = robot clock - this process's monotonic clock."""
@@ -221,8 +234,9 @@ class OperatorView:
             if rec is None:
                 return
             self._offset_ns = int(offset_ns)
-            _set_time(rec, self._robot_now(), self._cycle)
+            _set_time(rec, self._robot_now() or 0, self._cycle)
             rec.log(paths.LINK_RTT, rr.Scalars(float(rtt_ms)))
+            self._log_pending_text(rec)
 
     def set_world(
         self,
@@ -258,9 +272,14 @@ class OperatorView:
             rec.flush()
 
     def close(self) -> None:
-        """Flush and close the sink; a saved .rrd is complete and readable afterwards."""
+        """Flush and close the sink; a saved .rrd is complete and readable afterwards.
+
+        Text events still waiting for a robot time (no robot was ever heard) go at time 0.
+        """
         with self._lock:
             rec, self._rec = self._rec, None
+            if rec is not None:
+                self._log_pending_text(rec, at_ns=self._robot_now() or 0)
         if rec is not None:
             rec.flush()
             rec.disconnect()
@@ -271,11 +290,21 @@ class OperatorView:
     def _cycle(self) -> int:
         return 0 if self._last is None else self._last.cycle
 
-    def _robot_now(self) -> int:
-        """The robot's clock now: from the link offset once known, else the latest telemetry."""
+    def _robot_now(self) -> int | None:
+        """The robot's clock now: from the link offset once known, else the latest robot stamp."""
         if self._offset_ns is not None:
             return max(0, time.monotonic_ns() + self._offset_ns)
-        return 0 if self._last is None else self._last.stamp_ns
+        return self._robot_ns
+
+    def _log_pending_text(self, rec: rr.RecordingStream, at_ns: int | None = None) -> None:
+        """Log the waiting text events once a robot time is known (``at_ns`` forces one)."""
+        robot_ns = self._robot_now() if at_ns is None else at_ns
+        if robot_ns is None or not self._pending_text:
+            return
+        _set_time(rec, robot_ns, self._cycle)
+        while self._pending_text:
+            level, text = self._pending_text.popleft()
+            rec.log(paths.TEXT_LOG, rr.TextLog(text, level=level))
 
     def _log_static(self, rec: rr.RecordingStream) -> None:
         """Transforms and styling, logged once: per cycle only the geometry is sent."""

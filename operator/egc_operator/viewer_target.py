@@ -25,6 +25,9 @@ from egc_common.errors import UsageError
 
 Kind = Literal["spawn", "serve_web", "connect", "save", "none"]
 GRPC_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
+# What the --serve-web gRPC server keeps for viewers that connect late (oldest dropped first):
+# 20 Hz telemetry with 720-point scans is ~45 MB a minute, so about 20 minutes of history.
+SERVE_MEMORY_LIMIT = "1GiB"
 
 
 @dataclass(frozen=True, slots=True)
@@ -114,7 +117,11 @@ def attach(rec: rr.RecordingStream, target: ViewerTarget, blueprint: rrb.Bluepri
         return f"operator view streamed to the viewer at {target.url}"
     if target.kind == "serve_web":
         assert target.web_port is not None
-        grpc_url = rec.serve_grpc(grpc_port=target.grpc_port, default_blueprint=blueprint)
+        grpc_url = rec.serve_grpc(
+            grpc_port=target.grpc_port,
+            default_blueprint=blueprint,
+            server_memory_limit=SERVE_MEMORY_LIMIT,
+        )
         rr.serve_web_viewer(web_port=target.web_port, open_browser=False, connect_to=grpc_url)
         query = urllib.parse.quote(grpc_url, safe="")
         return (

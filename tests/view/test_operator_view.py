@@ -242,3 +242,29 @@ def test_after_close_and_disabled_views_drop_messages(tmp_path: Path) -> None:
     disabled.on_link(1.0, 0)
     disabled.set_world(np.zeros((2, 2), bool), 0.1, (0.0, 0.0))
     disabled.close()
+
+
+def test_text_before_the_robots_clock_is_known_waits_for_it(tmp_path: Path) -> None:
+    """An event logged at robot time 0 would stretch the timeline from 0 to the robot's uptime."""
+    view = record_episode(tmp_path / "early.rrd", "sim")
+    view.on_text("info", "robot present")
+    view.on_text("warn", "telemetry rejected: too_large")
+    first = telemetry(5)
+    view.on_telemetry(first)
+    view.close()
+    log = read_recording(tmp_path / "early.rrd")[_entity(paths.TEXT_LOG)]
+    assert [r[0] for r in log.column("TextLog:text")] == [
+        "robot present",
+        "telemetry rejected: too_large",
+    ]
+    assert log.rows.column("robot_time").cast("int64").to_pylist() == [first.stamp_ns] * 2
+    assert log.column("cycle") == [first.cycle] * 2
+
+
+def test_text_without_any_robot_is_kept_at_time_zero(tmp_path: Path) -> None:
+    view = record_episode(tmp_path / "alone.rrd", "sim")
+    view.on_text("warn", "no robot answers")
+    view.close()
+    log = read_recording(tmp_path / "alone.rrd")[_entity(paths.TEXT_LOG)]
+    assert [r[0] for r in log.column("TextLog:text")] == ["no robot answers"]
+    assert log.rows.column("robot_time").cast("int64").to_pylist() == [0]
