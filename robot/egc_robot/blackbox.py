@@ -48,6 +48,13 @@ LOG = "log"
 # Rerun's 2D views put +y down: show {R} with forward up, left to the left (screen = (-y, -x)).
 ROBOT_TO_SCREEN = ((0.0, -1.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 0.0, 1.0))
 STATE_LEVELS = {"IDLE": "INFO", "DRIVING": "INFO", "HOLD": "WARN", "ESTOP": "ERROR"}
+# The same lane colours as the operator view's state lane.
+STATE_COLOURS = {
+    "IDLE": (190, 190, 190),
+    "DRIVING": (40, 170, 70),
+    "HOLD": (235, 150, 0),
+    "ESTOP": (220, 30, 30),
+}
 
 
 def _blueprint(robot_id: str) -> rrb.Blueprint:
@@ -88,6 +95,11 @@ class BlackBox:
         rec.send_recording_name(f"{robot_id}: black box")
         rec.send_property("robot", rr.AnyValues(robot_id=robot_id, scan_decimation=scan_decimation))
         rec.log(ROBOT, rr.Transform3D(mat3x3=ROBOT_TO_SCREEN), static=True)
+        rec.log(
+            STATE,
+            rr.StateConfiguration(values=list(STATE_COLOURS), colors=list(STATE_COLOURS.values())),
+            static=True,
+        )
         rec.log(
             BASE_CMD,
             rr.SeriesLines(names=["v (m/s)", "w (rad/s)"], colors=[(220, 40, 40), (40, 40, 200)]),
