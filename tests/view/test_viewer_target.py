@@ -116,7 +116,7 @@ def test_no_view(capsys: pytest.CaptureFixture[str]) -> None:
     assert "disabled" in capsys.readouterr().err
 
 
-def _wait_for(check: Callable[[], bool], timeout_s: float = 20.0) -> None:
+def _wait_for(check: Callable[[], bool], timeout_s: float = 60.0) -> None:
     deadline = time.monotonic() + timeout_s
     while not check():
         assert time.monotonic() < deadline, "timed out"
@@ -127,6 +127,14 @@ def _answers(url: str) -> bool:
     try:
         with urllib.request.urlopen(url, timeout=2) as reply:
             return b"<html" in reply.read(4096).lower()
+    except OSError:
+        return False
+
+
+def _listening(port: int) -> bool:
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=1):
+            return True
     except OSError:
         return False
 
@@ -153,7 +161,7 @@ def test_connect_streams_to_a_running_viewer(tmp_path: Path) -> None:
         start_new_session=True,  # `python -m rerun` runs the binary as a child: end both
     )
     try:
-        _wait_for(received.exists)
+        _wait_for(lambda: _listening(port))
         view = open_view(_args("--connect", f"rerun+http://127.0.0.1:{port}/proxy"), "sim")
         for i in range(5):
             view.on_telemetry(telemetry(i))
