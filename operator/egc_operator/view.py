@@ -154,7 +154,8 @@ def _open(
 class OperatorView:
     """Logs telemetry, state, text and link statistics of one robot to one recording.
 
-    ``recording`` None makes a view that drops everything (``--no-view``).
+    ``recording`` None makes a view that drops everything (``--no-view``); ``where`` is the
+    line ``open_view`` prints (where the view goes).
     """
 
     def __init__(
