@@ -70,8 +70,8 @@ def add_zenoh_arguments(
     """Add --zenoh-config, --zenoh-mode, --connect, --listen and --lease-ms to a subcommand.
 
     ``--connect``/``--listen`` are also spelled ``--zenoh-connect``/``--zenoh-listen``; where a
-    subcommand already uses the short spelling for something else (the operator view's
-    ``--connect URL``), only the ``--zenoh-`` spelling is added.
+    subcommand already defines the short spelling (the operator's ``--connect`` takes Zenoh
+    endpoints and its view's URL alike), only the ``--zenoh-`` spelling is added.
     """
     taken = set(parser._option_string_actions)
 

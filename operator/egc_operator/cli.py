@@ -92,8 +92,46 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
     # Test hook: shift this process's clock to check clock sync across machines (issue 4).
     parser.add_argument("--clock-offset-s", type=float, default=0.0, help=argparse.SUPPRESS)
-    view_mod.add_view_arguments(parser)
+    view_mod.add_view_arguments(parser, with_connect=False)
+    parser.add_argument(
+        "--connect",
+        action=_ConnectAction,
+        dest="connect",
+        default=None,
+        metavar="ENDPOINT|URL",
+        help="a Zenoh endpoint to connect to (tcp/HOST:PORT, repeatable) or a running Rerun "
+        "viewer to stream the view to (rerun+http://HOST:9876/proxy)",
+    )
     add_zenoh_arguments(parser, default_connect=(DEFAULT_ENDPOINT,))
+
+
+# A Zenoh locator is PROTOCOL/ADDRESS (tcp/10.0.0.2:7447, tls/host:7447, udp/..., quic/...);
+# a viewer URL has a scheme (rerun+http://...). The two cannot be confused.
+_ZENOH_LOCATOR = re.compile(r"^[a-z][a-z0-9-]*/[^/]")
+
+
+class _ConnectAction(argparse.Action):
+    """``--connect``: Zenoh endpoints (issue 4) and the viewer URL (issue 5) share one option."""
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: Any,
+        option_string: str | None = None,
+    ) -> None:
+        value = str(values)
+        if _ZENOH_LOCATOR.match(value):
+            namespace.zenoh_connect = [*(getattr(namespace, "zenoh_connect", None) or []), value]
+        elif "://" in value:
+            if namespace.connect is not None:
+                parser.error("--connect: only one viewer URL")
+            namespace.connect = value
+        else:
+            parser.error(
+                f"--connect {value!r}: expected a Zenoh endpoint like tcp/HOST:7447 or a viewer "
+                "URL like rerun+http://HOST:9876/proxy"
+            )
 
 
 def _number(table: dict[str, Any], key: str, default: float) -> float:
