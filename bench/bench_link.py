@@ -50,6 +50,7 @@ from egc_common.messages import (
 )
 from egc_common.profiles import PIONEER3DX
 from egc_common.transport import ZenohOptions, free_tcp_port, loopback_endpoint, open_session
+from egc_operator.clock_sync import ClockSync
 
 ROBOT = "bench"
 MS = 1_000_000
@@ -116,18 +117,18 @@ class Harness:
             time.sleep(max(0, deadline - time.monotonic_ns()) / 1e9)
 
     def robot_offset_ns(self) -> int:
-        best: tuple[int, int] | None = None
+        """Offset of the robot's clock from ours: the operator's own min-RTT estimator."""
+        sync = ClockSync(window=10)
         for _ in range(10):
             sent = time.monotonic_ns()
             for reply in self.session.get(keys.clock(ROBOT), timeout=2.0):
                 received = time.monotonic_ns()
                 stamp = decode_clock_reply(reply.ok.payload.to_bytes())
                 if isinstance(stamp, int):
-                    sample = (received - sent, stamp - (sent + received) // 2)
-                    best = sample if best is None or sample < best else best
-        if best is None:
+                    sync.add(sent, stamp, received)
+        if sync.best is None:
             raise SystemExit("bench: the robot's clock queryable did not answer")
-        return best[1]
+        return sync.best.offset_ns
 
     def drive(self, seconds: float) -> None:
         """The harness operator: 50 Hz, centred for 0.5 s, then half forward."""

@@ -49,6 +49,14 @@ def integrate_arc(
     return x + c * dx - s * dy, y + s * dx + c * dy, wrap_angle(th + dth)
 
 
+def ramp_toward(target: float, current: float, up: float, down: float) -> float:
+    """Move from ``current`` toward ``target`` by at most ``up`` when speeding up (same sign,
+    larger magnitude) and at most ``down`` otherwise (slowing down or reversing)."""
+    speeding_up = abs(target) > abs(current) and target * current >= 0.0
+    step = up if speeding_up else down
+    return current + max(-step, min(step, target - current))
+
+
 def wheel_speeds(v_mps: float, w_radps: float, wheel_base_m: float) -> tuple[float, float]:
     """(left, right) wheel rim speeds for a body twist (inverse of eq. 2)."""
     half = 0.5 * wheel_base_m * w_radps

@@ -29,6 +29,19 @@ MAX_ID_CHARS: Final = 64
 MAX_SCAN_BEAMS: Final = 200_000
 
 MODES: Final = ("direct", "shared")
+# Telemetry keys pinned by DESIGN 7 (outside tools read them); the rest are view extras.
+TELEMETRY_PINNED_KEYS: Final = (
+    "v",
+    "seq",
+    "stamp_ns",
+    "state",
+    "v_ref",
+    "w_ref",
+    "v_cmd",
+    "w_cmd",
+    "w_si",
+    "mode",
+)
 STATES: Final = ("IDLE", "DRIVING", "HOLD", "ESTOP")
 
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from egc_common.kinematics import arc_displacement
+from egc_common.kinematics import arc_displacement, ramp_toward
 from egc_common.profiles import RobotProfile
 
 FloatArray = npt.NDArray[np.float64]
@@ -161,13 +161,6 @@ def limit_velocity(v_mps: float, w_radps: float, profile: RobotProfile) -> tuple
     )
 
 
-def _ramp(target: float, previous: float, up: float, down: float) -> float:
-    """Move from previous toward target by at most ``up`` when speeding up, ``down`` slowing."""
-    speeding_up = abs(target) > abs(previous) and target * previous >= 0.0
-    step = up if speeding_up else down
-    return previous + max(-step, min(step, target - previous))
-
-
 def limit_acceleration(
     v_mps: float,
     w_radps: float,
@@ -179,7 +172,10 @@ def limit_acceleration(
     dv_up = profile.accel_max_mps2 * dt_s
     dv_down = profile.decel_max_mps2 * dt_s
     dw = profile.angular_accel_max_radps2 * dt_s
-    return (_ramp(v_mps, previous[0], dv_up, dv_down), _ramp(w_radps, previous[1], dw, dw))
+    return (
+        ramp_toward(v_mps, previous[0], dv_up, dv_down),
+        ramp_toward(w_radps, previous[1], dw, dw),
+    )
 
 
 def decelerate(

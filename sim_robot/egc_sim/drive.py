@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from egc_common.kinematics import ramp_toward
 from egc_common.profiles import RobotProfile
 
 
@@ -41,12 +42,6 @@ class OdometryNoise:
         return self.linear_rel_std > 0.0 or self.angular_rel_std > 0.0
 
 
-def _ramp(target: float, current: float, up: float, down: float) -> float:
-    speeding_up = abs(target) > abs(current) and target * current >= 0.0
-    step = up if speeding_up else down
-    return current + max(-step, min(step, target - current))
-
-
 def achievable_twist(
     v_cmd_mps: float,
     w_cmd_radps: float,
@@ -56,12 +51,12 @@ def achievable_twist(
 ) -> tuple[float, float]:
     """The twist the base reaches after dt from ``current`` toward the command (docstring)."""
     v_max, w_max = profile.v_max_mps, profile.w_max_radps
-    v = _ramp(
+    v = ramp_toward(
         max(-v_max, min(v_max, v_cmd_mps)),
         current[0],
         profile.accel_max_mps2 * dt_s,
         profile.decel_max_mps2 * dt_s,
     )
     dw = profile.angular_accel_max_radps2 * dt_s
-    w = _ramp(max(-w_max, min(w_max, w_cmd_radps)), current[1], dw, dw)
+    w = ramp_toward(max(-w_max, min(w_max, w_cmd_radps)), current[1], dw, dw)
     return max(-v_max, min(v_max, v)), max(-w_max, min(w_max, w))

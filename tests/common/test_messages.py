@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from egc_common.messages import (
     MAX_COMMAND_BYTES,
+    TELEMETRY_PINNED_KEYS,
     BaseCommand,
     Odometry,
     OperatorCommand,
@@ -236,18 +237,9 @@ def test_telemetry_round_trips_with_scan_and_circles():
     ):
         assert getattr(back, key) == getattr(t, key), key
     raw = msgpack.unpackb(t.encode())
-    for key in (
-        "v",
-        "seq",
-        "stamp_ns",
-        "state",
-        "v_ref",
-        "w_ref",
-        "v_cmd",
-        "w_cmd",
-        "w_si",
-        "mode",
-    ):
+    design_7 = {"v", "seq", "stamp_ns", "state", "v_ref", "w_ref", "v_cmd", "w_cmd", "w_si", "mode"}
+    assert set(TELEMETRY_PINNED_KEYS) == design_7
+    for key in TELEMETRY_PINNED_KEYS:
         assert key in raw  # the pinned keys (DESIGN 7)
 
 

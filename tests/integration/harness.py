@@ -41,6 +41,7 @@ from egc_common.messages import (
     decode_telemetry,
 )
 from egc_common.transport import ZenohOptions, loopback_endpoint, open_session
+from egc_operator.clock_sync import ClockSync
 
 ROBOT = "itest"
 MS = 1_000_000
@@ -243,18 +244,17 @@ class Observer:
                 self.session.put(keys.scan(ROBOT), open_scan_message(now).encode())
 
     def robot_clock_offset_ns(self) -> int:
-        """Offset of the robot's clock from ours, by the min-RTT of a few clock queries."""
-        best: tuple[int, int] | None = None
+        """Offset of the robot's clock from ours: the operator's own min-RTT estimator."""
+        sync = ClockSync(window=5)
         for _ in range(5):
             sent = time.monotonic_ns()
             for reply in self.session.get(keys.clock(ROBOT), timeout=1.0):
                 received = time.monotonic_ns()
                 stamp = decode_clock_reply(reply.ok.payload.to_bytes())
                 assert isinstance(stamp, int)
-                sample = (received - sent, stamp - (sent + received) // 2)
-                best = sample if best is None or sample < best else best
-        assert best is not None, "the robot's clock queryable did not answer"
-        return best[1]
+                sync.add(sent, stamp, received)
+        assert sync.best is not None, "the robot's clock queryable did not answer"
+        return sync.best.offset_ns
 
     def command(self, seq: int, stamp_ns: int, **kw: Any) -> bytes:
         """A pinned OperatorCommand as a plain msgpack map (DESIGN 7)."""

@@ -11,7 +11,7 @@ import math
 import msgpack
 import numpy as np
 import pytest
-from egc_common.messages import decode_telemetry
+from egc_common.messages import TELEMETRY_PINNED_KEYS, decode_telemetry
 from egc_common.profiles import get_profile
 from egc_common.scan import Scan
 from egc_robot.controller import ControllerConfig, RobotController
@@ -80,18 +80,7 @@ def test_centred_deadman_command_drives_and_telemetry_has_pinned_keys():
     assert t.v_ref == pytest.approx(PROFILE.v_max_mps)
     assert t.w_si == 1.0
     decoded = msgpack.unpackb(t.encode())
-    for key in (
-        "v",
-        "seq",
-        "stamp_ns",
-        "state",
-        "v_ref",
-        "w_ref",
-        "v_cmd",
-        "w_cmd",
-        "w_si",
-        "mode",
-    ):
+    for key in TELEMETRY_PINNED_KEYS:
         assert key in decoded
     assert not isinstance(decode_telemetry(t.encode()), Exception)
 
