@@ -8,6 +8,8 @@ import sys
 
 import pytest
 
+from tests.view.rrd import read_recording
+
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(90)]
 
 
@@ -38,3 +40,24 @@ def test_demo_runs_headless_and_prints_a_summary(tmp_path):
     assert "collisions      0" in out
     assert rrd.stat().st_size > 0 and str(rrd) in err  # the view says where it saved
     assert children_of(proc.pid) == []
+
+    # Issue 5: the saved view has the robot-frame view, the time series and the text log.
+    entities = read_recording(rrd)
+    for path in (
+        "/robot/scan",
+        "/robot/footprint",
+        "/robot/circles/igc",
+        "/robot/command/sent",
+        "/plots/v/ref",
+        "/plots/v/cmd",
+        "/plots/w/ref",
+        "/plots/w/cmd",
+        "/plots/w_si",
+        "/log",
+    ):
+        assert path in entities and len(entities[path]) > 0, (path, sorted(entities))
+    cycles = len(entities["/plots/v/cmd"])
+    assert cycles >= 20 * 3  # 20 Hz telemetry for most of the 6 s run
+    assert len(entities["/robot/scan"]) == cycles
+    texts = [row[0] for row in entities["/log"].column("TextLog:text")]
+    assert any("DRIVING" in text for text in texts), texts
