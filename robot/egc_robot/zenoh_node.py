@@ -17,7 +17,8 @@ command, or the loop thread at each deadline. So there are
   reason so a flood cannot flood the log.
 
 Nothing received from the network can raise out of a callback or the loop: the decoders are
-non-raising, and the callbacks guard the little they do.
+non-raising, and the callbacks guard the little they do. Should a cycle fail anyway (a bug),
+the node sends the base a zero command, logs it and carries on (``_fail_safe``).
 """
 
 from __future__ import annotations
@@ -105,6 +106,7 @@ class RobotNode:
         self._clock = clock
         self._lock = threading.Lock()
         self._last_state_ns = 0
+        self._faults = 0
         self._rejections = RejectionLog()
         self._telemetry = data_publisher(session, keys.telemetry(robot_id))
         self._state = data_publisher(session, keys.state(robot_id))
@@ -128,10 +130,13 @@ class RobotNode:
         rx_ns = self._clock()
         payload = payload_bytes(sample)
         with self._lock:
-            if self._handle_command(payload, rx_ns):
-                now = self._clock()
-                self._poll_driver(now)
-                self._cycle(now)
+            try:
+                if self._handle_command(payload, rx_ns):
+                    now = self._clock()
+                    self._poll_driver(now)
+                    self._cycle(now)
+            except Exception as exc:
+                self._fail_safe(exc)
 
     def _on_liveliness(self, sample: zenoh.Sample) -> None:
         operator_id = keys.operator_id_from_alive_key(str(sample.key_expr))
@@ -156,8 +161,11 @@ class RobotNode:
         while not stop.wait(max(0, deadline - self._clock()) / 1e9):
             now = self._clock()
             with self._lock:
-                self._poll_driver(now)
-                self._cycle(now)
+                try:
+                    self._poll_driver(now)
+                    self._cycle(now)
+                except Exception as exc:
+                    self._fail_safe(exc)
             deadline += period
             if deadline <= now:  # overran a whole period: skip, do not burst
                 deadline = now + period
@@ -186,6 +194,21 @@ class RobotNode:
         self._token.undeclare()
 
     # -- under the lock -------------------------------------------------------------------------
+
+    def _fail_safe(self, exc: Exception) -> None:
+        """A bug must not leave the base on its last command: stop it, log, keep serving.
+
+        The next cycle starts again from the controller's state; if the fault persists, every
+        cycle ends here and the base keeps receiving zero.
+        """
+        self._faults += 1
+        if self._faults == 1 or self._faults % 100 == 0:
+            log.error("control cycle failed (%d so far); base stopped", self._faults, exc_info=exc)
+        try:
+            now = self._clock()
+            self._driver.send(BaseCommand(stamp_ns=now, seq=0, linear_mps=0.0, angular_radps=0.0))
+        except Exception as send_exc:
+            log.error("could not stop the base: %s", send_exc)
 
     def _handle_command(self, payload: bytes, rx_ns: int) -> bool:
         """Vet one command; True if it came from the operator in control and was accepted."""
