@@ -37,6 +37,7 @@ from egc_common.transport import (
     add_zenoh_arguments,
     open_session,
     options_from_args,
+    serve_static,
 )
 from egc_robot.controller import ControllerConfig, RobotController
 from egc_robot.drivers import Driver, SensorUpdate
@@ -64,8 +65,9 @@ SECTIONS: dict[str, tuple[str, ...]] = {
 class SimDriver:
     """sim_robot in this process, stepped in real time on every poll."""
 
-    def __init__(self, rt: Any) -> None:
+    def __init__(self, rt: Any, map_server: Any = None) -> None:
         self._rt = rt
+        self._map_server = map_server  # the queryable egc/<robot>/map, for the operator view
 
     def poll(self, now_ns: int) -> SensorUpdate:
         self._rt.advance(now_ns)
@@ -76,7 +78,8 @@ class SimDriver:
         self._rt.set_command(command.linear_mps, command.angular_radps)
 
     def close(self) -> None:
-        pass
+        if self._map_server is not None:
+            self._map_server.undeclare()
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -170,6 +173,7 @@ def _open_driver(args: argparse.Namespace, cfg: dict[str, Any], session: Any) ->
 
         return ZenohDriver(session, args.robot)
     from egc_sim.bridge import RealTimeSim, open_simulator, parse_pose
+    from egc_sim.grid_world import map_message
 
     try:
         sim_cfg = config_mod.section(cfg, "sim", SECTIONS["sim"])
@@ -184,7 +188,11 @@ def _open_driver(args: argparse.Namespace, cfg: dict[str, Any], session: Any) ->
         None if beams is None else int(beams),
     )
     scan_hz = _number(sim_cfg, "scan_hz", 20.0)
-    return SimDriver(RealTimeSim(sim, time.monotonic_ns(), 1.0 / scan_hz))
+    world_map = map_message(sim.world, time.monotonic_ns()).encode()
+    return SimDriver(
+        RealTimeSim(sim, time.monotonic_ns(), 1.0 / scan_hz),
+        serve_static(session, keys.world_map(args.robot), world_map),
+    )
 
 
 def _open_recorder(args: argparse.Namespace) -> Recorder | None:

@@ -31,6 +31,11 @@ def clock(robot: str) -> str:
     return f"egc/{validate_id(robot)}/clock"
 
 
+def world_map(robot: str) -> str:
+    """Queryable: the robot's static occupancy map for the operator view (not pinned)."""
+    return f"egc/{validate_id(robot)}/map"
+
+
 def scan(robot: str) -> str:
     return f"egc/{validate_id(robot)}/scan"
 

@@ -27,6 +27,8 @@ MAX_SMALL_BYTES: Final = 4096
 MAX_INT: Final = 2**63 - 1
 MAX_ID_CHARS: Final = 64
 MAX_SCAN_BEAMS: Final = 200_000
+MAX_MAP_CELLS: Final = 64_000_000
+MAX_MAP_BYTES: Final = MAX_MAP_CELLS // 8 + 4096
 
 MODES: Final = ("direct", "shared")
 # Telemetry keys pinned by DESIGN 7 (outside tools read them); the rest are view extras.
@@ -508,3 +510,66 @@ def _build_odom(m: Mapping[Any, Any]) -> Odometry:
 
 def decode_odometry(payload: object) -> Odometry | Rejection:
     return _decode(payload, MAX_SMALL_BYTES, _build_odom)
+
+
+# ---------------------------------------------------------------------------------------------
+# Static map (robot or its driver -> operators, a queryable on egc/<robot>/map)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class MapMessage:
+    """The robot's occupancy map for the operator's world-frame view.
+
+    ``blocked`` is a bool grid, row 0 = the **top** row (highest y) as in a map_server image;
+    ``origin`` is the world position (m) of the lower-left corner of the lower-left cell. On the
+    wire the grid is bit-packed (numpy ``packbits``, row-major).
+    """
+
+    stamp_ns: int
+    resolution_m: float
+    origin_x_m: float
+    origin_y_m: float
+    blocked: npt.NDArray[np.bool_]
+    goal: tuple[float, float] | None = None
+
+    def encode(self) -> bytes:
+        grid = np.asarray(self.blocked, dtype=bool)
+        return _pack(
+            {
+                "v": SCHEMA_VERSION,
+                "stamp_ns": self.stamp_ns,
+                "resolution_m": self.resolution_m,
+                "origin_x_m": self.origin_x_m,
+                "origin_y_m": self.origin_y_m,
+                "height": int(grid.shape[0]),
+                "width": int(grid.shape[1]),
+                "blocked": np.packbits(grid, axis=None).tobytes(),
+                "goal": None if self.goal is None else [float(v) for v in self.goal],
+            }
+        )
+
+
+def _build_map(m: Mapping[Any, Any]) -> MapMessage:
+    height = _int(m, "height", 1, MAX_MAP_CELLS)
+    width = _int(m, "width", 1, MAX_MAP_CELLS)
+    if height * width > MAX_MAP_CELLS:
+        raise _InvalidError(RejectReason.TOO_LARGE, f"map of {height} x {width} cells is too large")
+    packed = _get(m, "blocked")
+    if not isinstance(packed, (bytes, bytearray)):
+        raise _InvalidError(RejectReason.WRONG_TYPE, "'blocked' must be bytes")
+    if len(packed) != (height * width + 7) // 8:
+        raise _InvalidError(RejectReason.OUT_OF_RANGE, "'blocked' does not match height x width")
+    bits = np.unpackbits(np.frombuffer(bytes(packed), dtype=np.uint8), count=height * width)
+    goal = _opt_tuple(m, "goal", 2)
+    return MapMessage(
+        stamp_ns=_int(m, "stamp_ns"),
+        resolution_m=_float(m, "resolution_m", 1e-4, 100.0),
+        origin_x_m=_float(m, "origin_x_m", -1e7, 1e7),
+        origin_y_m=_float(m, "origin_y_m", -1e7, 1e7),
+        blocked=bits.astype(bool).reshape(height, width),
+        goal=None if goal is None else (goal[0], goal[1]),
+    )
+
+
+def decode_map(payload: object) -> MapMessage | Rejection:
+    return _decode(payload, MAX_MAP_BYTES, _build_map)

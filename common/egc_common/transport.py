@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import socket
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -197,6 +198,18 @@ def data_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
     return session.declare_publisher(
         key, priority=zenoh.Priority.DATA, congestion_control=zenoh.CongestionControl.DROP
     )
+
+
+def serve_static(session: zenoh.Session, key: str, payload: bytes) -> zenoh.Queryable[None]:
+    """A queryable that answers every query on ``key`` with the same payload (e.g. the map)."""
+
+    def reply(query: zenoh.Query) -> None:
+        try:
+            query.reply(key, payload)
+        except Exception as exc:  # a querier that went away must not kill the callback
+            logging.getLogger("egc.transport").debug("reply on %s failed: %s", key, exc)
+
+    return session.declare_queryable(key, reply)
 
 
 def payload_bytes(sample: zenoh.Sample) -> bytes:

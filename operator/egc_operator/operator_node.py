@@ -21,6 +21,7 @@ import time
 from collections.abc import Callable
 from typing import Any, Protocol
 
+import numpy.typing as npt
 import zenoh
 from egc_common import keys
 from egc_common.joystick_file import RELEASED
@@ -30,6 +31,7 @@ from egc_common.messages import (
     StateMessage,
     Telemetry,
     decode_clock_reply,
+    decode_map,
     decode_state,
     decode_telemetry,
 )
@@ -45,6 +47,8 @@ NS_PER_S = 1_000_000_000
 _STATUS_PERIOD_NS = 200_000_000
 _RELEASE_AFTER_END_NS = 300_000_000
 _CLOCK_TIMEOUT_S = 0.5
+_MAP_TIMEOUT_S = 1.0
+_MAP_ATTEMPTS = 10  # a robot that serves no map is asked this often, then left alone
 
 
 class View(Protocol):
@@ -55,6 +59,13 @@ class View(Protocol):
     def on_text(self, level: str, text: str) -> None: ...
     def on_link(self, rtt_ms: float, offset_ns: int) -> None: ...
     def close(self) -> None: ...
+    def set_world(
+        self,
+        occupancy: npt.ArrayLike,
+        resolution_m: float,
+        origin_xy_m: tuple[float, float],
+        goal_xy_m: tuple[float, float] | None = None,
+    ) -> None: ...
 
 
 class OperatorNode:
@@ -82,6 +93,7 @@ class OperatorNode:
         self._telemetry: Telemetry | None = None
         self._state: StateMessage | None = None
         self._robot_alive = False
+        self._map_attempts_left = 0 if view is None else _MAP_ATTEMPTS
         self.published = 0
         self._publisher = command_publisher(session, keys.cmd(robot_id))
         liveliness = session.liveliness()
@@ -155,9 +167,35 @@ class OperatorNode:
                 if stop.is_set():
                     return
                 log.debug("clock query failed: %s", exc)
+            if self._map_attempts_left > 0 and not stop.is_set():
+                self._map_attempts_left -= 1
+                self._fetch_map()
             with self._lock:
                 synced = self._sync.synchronised
             stop.wait(1.0 if synced else 0.1)
+
+    def _fetch_map(self) -> None:
+        """The robot's static map (``egc/<robot>/map``) for the view's world frame, once."""
+        try:
+            replies = list(self._session.get(keys.world_map(self._robot), timeout=_MAP_TIMEOUT_S))
+        except Exception as exc:  # a closing session
+            log.debug("map query failed: %s", exc)
+            return
+        for reply in replies:
+            ok = reply.ok
+            world = None if ok is None else decode_map(payload_bytes(ok))
+            if isinstance(world, Rejection):
+                log.warning("rejected map from the robot: %s", world)
+            elif world is not None and self._view is not None:
+                self._view.set_world(
+                    world.blocked,
+                    world.resolution_m,
+                    (world.origin_x_m, world.origin_y_m),
+                    world.goal,
+                )
+                self._map_attempts_left = 0
+                log.info("map %d x %d cells from the robot", *world.blocked.shape)
+                return
 
     # -- the publishing loop --------------------------------------------------------------------
 

@@ -37,8 +37,10 @@ from egc_common.transport import (
     open_session,
     options_from_args,
     payload_bytes,
+    serve_static,
 )
 
+from egc_sim.grid_world import map_message
 from egc_sim.lidar import LidarConfig
 from egc_sim.simulator import Simulator
 from egc_sim.worlds import load_world
@@ -201,6 +203,9 @@ def run(args: argparse.Namespace) -> int:
             last_cmd[0], last_cmd[1] = (decoded.linear_mps, decoded.angular_radps), now
 
     subscriber: Any = session.declare_subscriber(keys.base_cmd(robot_id), on_base_cmd)
+    map_server: Any = serve_static(
+        session, keys.world_map(robot_id), map_message(sim.world, time.monotonic_ns()).encode()
+    )
     scan_pub = data_publisher(session, keys.scan(robot_id))
     odom_pub = data_publisher(session, keys.base_odom(robot_id))
     now = time.monotonic_ns()
@@ -226,5 +231,6 @@ def run(args: argparse.Namespace) -> int:
                 deadline = now + period
     finally:
         subscriber.undeclare()
+        map_server.undeclare()
         session.close()
     return 0

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from egc_common.messages import MapMessage
 
 BoolGrid = npt.NDArray[np.bool_]
 Pose = tuple[float, float, float]
@@ -127,3 +128,15 @@ class World:
         if not (0 <= row < self.rows and 0 <= col < self.cols):
             return True
         return bool(self.occupancy[row, col])
+
+
+def map_message(world: World, stamp_ns: int = 0) -> MapMessage:
+    """The world as the operator view's map (``egc/<robot>/map``): row 0 = top on the wire."""
+    return MapMessage(
+        stamp_ns=stamp_ns,
+        resolution_m=world.resolution_m,
+        origin_x_m=world.origin_x_m,
+        origin_y_m=world.origin_y_m,
+        blocked=np.flipud(world.occupancy),
+        goal=world.goal,
+    )

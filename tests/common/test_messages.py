@@ -11,6 +11,7 @@ from egc_common.messages import (
     MAX_COMMAND_BYTES,
     TELEMETRY_PINNED_KEYS,
     BaseCommand,
+    MapMessage,
     Odometry,
     OperatorCommand,
     Rejection,
@@ -21,6 +22,7 @@ from egc_common.messages import (
     decode_base_command,
     decode_clock_reply,
     decode_command,
+    decode_map,
     decode_odometry,
     decode_scan,
     decode_state,
@@ -285,3 +287,32 @@ def test_other_messages_round_trip():
     back = decode_scan(sc.encode())
     assert isinstance(back, ScanMessage)
     np.testing.assert_array_equal(back.ranges_m, ranges)  # no-return readings survive the wire
+
+
+def test_map_round_trips_bit_packed_and_rejects_mismatches():
+    grid = np.random.default_rng(1).random((37, 53)) > 0.7
+    m = MapMessage(
+        stamp_ns=1,
+        resolution_m=0.05,
+        origin_x_m=-15.0,
+        origin_y_m=2.0,
+        blocked=grid,
+        goal=(1.0, 2.0),
+    )
+    raw = m.encode()
+    back = decode_map(raw)
+    assert isinstance(back, MapMessage)
+    np.testing.assert_array_equal(back.blocked, grid)
+    assert (back.resolution_m, back.origin_x_m, back.origin_y_m, back.goal) == (
+        0.05,
+        -15.0,
+        2.0,
+        (1.0, 2.0),
+    )
+    assert len(raw) < grid.size // 8 + 200  # bit-packed on the wire
+    doc = msgpack.unpackb(raw)
+    doc["width"] = 54
+    assert decode_map(msgpack.packb(doc)).reason is RejectReason.OUT_OF_RANGE
+    doc["width"], doc["height"] = 10**5, 10**5
+    assert decode_map(msgpack.packb(doc)).reason is RejectReason.TOO_LARGE
+    assert isinstance(decode_map(raw[:-2]), Rejection)

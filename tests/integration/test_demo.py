@@ -59,5 +59,6 @@ def test_demo_runs_headless_and_prints_a_summary(tmp_path):
     cycles = len(entities["/plots/v/cmd"])
     assert cycles >= 20 * 3  # 20 Hz telemetry for most of the 6 s run
     assert len(entities["/robot/scan"]) == cycles
+    assert "/world/map" in entities  # the robot's map, fetched from egc/<robot>/map
     texts = [row[0] for row in entities["/log"].column("TextLog:text")]
     assert any("DRIVING" in text for text in texts), texts

@@ -6,10 +6,20 @@ from __future__ import annotations
 import threading
 import time
 
+import numpy as np
 import pytest
 from egc_common import keys
-from egc_common.messages import BaseCommand, Odometry, ScanMessage, decode_odometry, decode_scan
+from egc_common.messages import (
+    BaseCommand,
+    MapMessage,
+    Odometry,
+    ScanMessage,
+    decode_map,
+    decode_odometry,
+    decode_scan,
+)
 from egc_common.transport import ZenohOptions, command_publisher, loopback_endpoint, open_session
+from egc_sim.worlds import load_world
 
 from tests.integration.harness import ROBOT
 
@@ -63,6 +73,13 @@ def test_bridge_drives_reports_and_stops_on_its_own_watchdog(port, procs):
         with lock:
             scan = scans[-1]
         assert scan.ranges_m.size == 360 and scan.range_max_m > scan.range_min_m
+        # the static map for the operator view, answered on egc/<robot>/map
+        replies = list(session.get(keys.world_map(ROBOT), timeout=5.0))
+        world = decode_map(replies[0].ok.payload.to_bytes())
+        assert isinstance(world, MapMessage), world
+        hallway = load_world("hallway")
+        np.testing.assert_array_equal(world.blocked, np.flipud(hallway.occupancy))
+        assert world.goal == hallway.goal and world.resolution_m == hallway.resolution_m
         assert procs.stop("sim") == 0, procs.log("sim")
     finally:
         for sub in subs:
