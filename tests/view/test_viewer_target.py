@@ -150,18 +150,35 @@ def _scan_rows(path: Path) -> int:
     return -1 if entity is None else len(entity)
 
 
+def _start_saving_server(received: Path, attempts: int = 3) -> tuple[subprocess.Popen[bytes], int]:
+    """A headless ``rerun`` server on a free port, saving to ``received``.
+
+    A free port can be taken by another test process between ``free_tcp_port`` and the server's
+    bind (tests run in parallel); the server then exits, and whatever else listens there must
+    not be mistaken for it. So: wait until the port listens *and* our server is still alive,
+    else try a fresh port.
+    """
+    for _ in range(attempts):
+        port = free_tcp_port()
+        server = subprocess.Popen(
+            [sys.executable, "-m", "rerun", "--port", str(port), "--save", str(received)],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,  # `python -m rerun` runs the binary as a child: end both
+        )
+        _wait_for(lambda: _listening(port) or server.poll() is not None)  # noqa: B023
+        time.sleep(0.3)  # a server that lost the bind race exits right after
+        if server.poll() is None and _listening(port):
+            return server, port
+        server.wait(timeout=10)
+    raise AssertionError(f"no rerun server came up in {attempts} attempts")
+
+
 def test_connect_streams_to_a_running_viewer(tmp_path: Path) -> None:
     """A headless `rerun` server that saves what it receives stands in for the viewer."""
-    port = free_tcp_port()
     received = tmp_path / "received.rrd"
-    server = subprocess.Popen(
-        [sys.executable, "-m", "rerun", "--port", str(port), "--save", str(received)],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,  # `python -m rerun` runs the binary as a child: end both
-    )
+    server, port = _start_saving_server(received)
     try:
-        _wait_for(lambda: _listening(port))
         view = open_view(_args("--connect", f"rerun+http://127.0.0.1:{port}/proxy"), "sim")
         for i in range(5):
             view.on_telemetry(telemetry(i))
