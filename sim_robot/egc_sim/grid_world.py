@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
@@ -25,6 +26,16 @@ Pose = tuple[float, float, float]
 
 class WorldError(ValueError):
     """A world cannot be loaded or built; the message says which file or value and why."""
+
+
+def read_world_text(path: Path, what: str) -> str:
+    """A world description file as text; a WorldError naming ``what`` and the file if not."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise WorldError(f"{what} not found: {path}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise WorldError(f"cannot read {what} {path}: {exc}") from None
 
 
 @dataclass(frozen=True, slots=True)

@@ -30,7 +30,7 @@ import numpy.typing as npt
 import yaml
 from PIL import Image, UnidentifiedImageError
 
-from egc_sim.grid_world import BoolGrid, World, WorldError
+from egc_sim.grid_world import BoolGrid, World, WorldError, read_world_text
 
 MODES = ("trinary", "scale")
 REQUIRED_KEYS = ("image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
@@ -94,12 +94,9 @@ def _number(meta: dict[str, Any], key: str, where: Path) -> float:
 def load_map_yaml(path: str | Path) -> World:
     """Load a map_server map; raises WorldError naming the file and the problem."""
     p = Path(path)
+    text = read_world_text(p, "map file")
     try:
-        meta = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise WorldError(f"map file not found: {p}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise WorldError(f"cannot read map file {p}: {exc}") from None
+        meta = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         raise WorldError(f"{p} is not valid YAML: {exc}") from None
     if not isinstance(meta, dict):

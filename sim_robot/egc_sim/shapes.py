@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from egc_sim.grid_world import Area, BoolGrid, Pose, World, WorldError
+from egc_sim.grid_world import Area, BoolGrid, Pose, World, WorldError, read_world_text
 from egc_sim.npy_grid import load_npy_grid
 
 DEFAULT_RESOLUTION_M = 0.05
@@ -243,12 +243,9 @@ def parse_scenario(
 def load_toml_world(path: str | Path) -> World:
     """A geometric world from TOML (module docstring), optionally over a ``.npy`` grid."""
     p = Path(path)
+    text = read_world_text(p, "world file")
     try:
-        doc = tomllib.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise WorldError(f"world file not found: {p}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise WorldError(f"cannot read world file {p}: {exc}") from None
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise WorldError(f"{p} is not valid TOML: {exc}") from None
     where = str(p)
