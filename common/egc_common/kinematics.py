@@ -68,15 +68,17 @@ def body_twist(left_mps: float, right_mps: float, wheel_base_m: float) -> tuple[
     return 0.5 * (left_mps + right_mps), (right_mps - left_mps) / wheel_base_m
 
 
-def footprint_corners(length_m: float, width_m: float) -> FloatArray:
-    """The rectangular footprint's corners in {R} (centred on the origin), CCW, shape (4, 2)."""
-    hl, hw = 0.5 * length_m, 0.5 * width_m
-    return np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]], dtype=np.float64)
+def signed_distance_to_rectangle(
+    x_m: npt.ArrayLike, y_m: npt.ArrayLike, half_length_m: float, half_width_m: float
+) -> FloatArray:
+    """Signed distance (m) from points (x, y) to the rectangle centred on the origin, axes along
+    x and y: positive outside, minus the penetration depth inside.
 
-
-def distance_to_footprint(points: FloatArray, length_m: float, width_m: float) -> FloatArray:
-    """Distance (m) from each point in {R} to the centred rectangle; 0 for points inside."""
-    p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    dx = np.maximum(np.abs(p[:, 0]) - 0.5 * length_m, 0.0)
-    dy = np.maximum(np.abs(p[:, 1]) - 0.5 * width_m, 0.0)
-    return np.hypot(dx, dy)
+    The footprint check of the robot's safety rules and the simulator's collision check both
+    measure with this, in the footprint's own frame.
+    """
+    qx = np.abs(np.asarray(x_m, dtype=np.float64)) - half_length_m
+    qy = np.abs(np.asarray(y_m, dtype=np.float64)) - half_width_m
+    outside = np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0))
+    result: FloatArray = outside + np.minimum(np.maximum(qx, qy), 0.0)
+    return result

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from egc_common.kinematics import arc_displacement, ramp_toward
+from egc_common.kinematics import arc_displacement, ramp_toward, signed_distance_to_rectangle
 from egc_common.profiles import RobotProfile
 
 FloatArray = npt.NDArray[np.float64]
@@ -35,24 +35,18 @@ class SweepParams:
     iterations: int = 10
 
 
-def signed_clearance(points: FloatArray, half_length_m: float, half_width_m: float) -> FloatArray:
-    """Signed distance from each point (frame of the footprint) to the centred rectangle.
-
-    Positive outside, negative inside (minus the penetration depth).
-    """
-    qx = np.abs(points[..., 0]) - half_length_m
-    qy = np.abs(points[..., 1]) - half_width_m
-    outside = np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0))
-    inside = np.minimum(np.maximum(qx, qy), 0.0)
-    result: FloatArray = outside + inside
-    return result
+def _min_clearance(x_m: FloatArray, y_m: FloatArray, profile: RobotProfile) -> float:
+    """Smallest signed clearance of points given in the footprint's frame."""
+    return float(
+        signed_distance_to_rectangle(x_m, y_m, 0.5 * profile.length_m, 0.5 * profile.width_m).min()
+    )
 
 
 def footprint_clearance(points: FloatArray, profile: RobotProfile) -> float:
     """Smallest signed clearance (m) of the footprint at the origin; inf with no points."""
     if len(points) == 0:
         return math.inf
-    return float(signed_clearance(points, 0.5 * profile.length_m, 0.5 * profile.width_m).min())
+    return _min_clearance(points[:, 0], points[:, 1], profile)
 
 
 def stopping_time_s(
@@ -95,8 +89,7 @@ def sweep_min_clearance(
     c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
     dx = points[None, :, 0] - poses[:, 0, None]
     dy = points[None, :, 1] - poses[:, 1, None]
-    local = np.stack((c * dx + s * dy, -s * dx + c * dy), axis=-1)
-    return float(signed_clearance(local, 0.5 * profile.length_m, 0.5 * profile.width_m).min())
+    return _min_clearance(c * dx + s * dy, -s * dx + c * dy, profile)
 
 
 def sweep_scale(
@@ -148,8 +141,7 @@ def increases_clearance(
     dx, dy, dth = arc_displacement(v_mps, w_radps, horizon_s)
     c, s = math.cos(dth), math.sin(dth)
     px, py = points[:, 0] - dx, points[:, 1] - dy
-    local = np.stack((c * px + s * py, -s * px + c * py), axis=-1)
-    after = float(signed_clearance(local, 0.5 * profile.length_m, 0.5 * profile.width_m).min())
+    after = _min_clearance(c * px + s * py, -s * px + c * py, profile)
     return after > footprint_clearance(points, profile) + 1e-6
 
 

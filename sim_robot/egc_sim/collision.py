@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 import numpy.typing as npt
+from egc_common.kinematics import signed_distance_to_rectangle
 from scipy import ndimage
 
 from egc_sim.grid_world import World
@@ -110,11 +111,8 @@ class FootprintChecker:
         vr, vc = np.nonzero(self._corner[r0 : r1 + 1, c0 : c1 + 1])
         px = ox + (vc + c0) * res - x_m
         py = oy + (vr + r0) * res - y_m
-        qx = np.abs(cos_t * px + sin_t * py) - hl
-        qy = np.abs(-sin_t * px + cos_t * py) - hw
-        outside = np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0))
-        inside = np.minimum(np.maximum(qx, qy), 0.0)
-        best = float((outside + inside).min())
+        local_x, local_y = cos_t * px + sin_t * py, -sin_t * px + cos_t * py
+        best = float(signed_distance_to_rectangle(local_x, local_y, hl, hw).min())
 
         # The rectangle's corners against the blocked squares (world frame).
         sx = ox + (cells_c + c0 + 0.5) * res

@@ -6,13 +6,13 @@ import math
 
 import numpy as np
 import pytest
+from egc_common.kinematics import signed_distance_to_rectangle
 from egc_common.profiles import JACKAL, PIONEER3DX
 from egc_robot.filters.egc import EgcCase
 from egc_robot.pipeline import Limiter, PipelineConfig, filter_velocity, step_command
 from egc_robot.safety import (
     SweepParams,
     footprint_clearance,
-    signed_clearance,
     stopping_time_s,
     sweep_min_clearance,
     sweep_scale,
@@ -29,7 +29,7 @@ def wall_x(x, half=1.5, n=121):
 
 def test_signed_clearance_outside_inside():
     pts = np.array([[1.0, 0.0], [0.0, 0.0], [0.6, 0.4], [0.45, 0.0]])
-    c = signed_clearance(pts, 0.5, 0.25)
+    c = signed_distance_to_rectangle(pts[:, 0], pts[:, 1], 0.5, 0.25)
     assert c == pytest.approx([0.5, -0.25, math.hypot(0.1, 0.15), -0.05])
 
 
