@@ -4,8 +4,8 @@ Processes: the robot is its own process (``egc-teleop robot --driver zenoh``). T
 plays both ends around it, so that both ends read one clock (CLOCK_MONOTONIC is shared by all
 processes of a machine): a test-harness operator publishing pinned OperatorCommands at 50 Hz
 (stamped with the robot clock obtained from its clock queryable) and the remote driver,
-publishing 720-point scans at 20 Hz (a corridor with a box ahead, so the EGC filter does real
-work) and receiving ``base/cmd``.
+publishing 720-point scans at 20 Hz (a corridor with a box 0.75 m ahead: the EGC filter expands
+the guide circle and modifies the command on every cycle; the run reports the share) and receiving ``base/cmd``.
 
 1. Latency from the operator's publish to the base receiving the filtered command: the robot
    runs a control cycle on each accepted command (and at its 20 Hz rate); its telemetry tells
@@ -34,6 +34,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -56,17 +57,19 @@ ROBOT = "bench"
 MS = 1_000_000
 BEAMS = 720
 COMMAND_TIMEOUT_MS = 250.0
+BOX_M = 0.75  # the latency run: close enough that EGC modifies every command
+OPEN_BOX_M = 1.5  # the dropout trials: far enough for full speed
 STOP_MS = PIONEER3DX.v_max_mps / PIONEER3DX.decel_max_mps2 * 1000
 
 
-def corridor_scan(stamp_ns: int) -> bytes:
-    """A 2.4 m wide corridor with a box 1.5 m ahead, slightly right, 720 beams."""
+def corridor_scan(stamp_ns: int, box_m: float) -> bytes:
+    """A 2.4 m wide corridor with a box ``box_m`` ahead, slightly right, 720 beams."""
     a = np.linspace(-math.pi, math.pi, BEAMS, endpoint=False)
     s, c = np.sin(a), np.cos(a)
     with np.errstate(divide="ignore"):
         r = np.where(s != 0, 1.2 / np.abs(s), np.inf)
     box = np.abs(a + 0.08) < 0.15
-    r[box] = np.minimum(r[box], 1.5 / np.maximum(c[box], 1e-3))
+    r[box] = np.minimum(r[box], box_m / np.maximum(c[box], 1e-3))
     r = np.minimum(r, 12.0).astype(np.float32)
     return ScanMessage(stamp_ns, -math.pi, 2 * math.pi / BEAMS, 0.05, 10.0, r).encode()
 
@@ -78,9 +81,12 @@ class Harness:
         self.session = open_session(ZenohOptions(connect=(endpoint,)))
         self.lock = threading.Lock()
         self.base: list[tuple[int, int, float, float]] = []  # rx_ns, cycle, v, w
+        self.base_stamp: dict[int, int] = {}  # cycle -> the robot's clock when the cycle ran
         self.cycle_seq: dict[int, int] = {}  # robot cycle -> command seq it used
+        self.limiters: Counter[str] = Counter()  # what limited the command, while DRIVING
         self.published: dict[int, int] = {}  # command seq -> publish time
         self.stop = threading.Event()
+        self.box_m = BOX_M
         s = self.session
         self.subs = [
             s.declare_subscriber(keys.base_cmd(ROBOT), self._on_base),
@@ -101,18 +107,21 @@ class Harness:
         if not isinstance(b, Rejection):
             with self.lock:
                 self.base.append((now, b.seq, b.linear_mps, b.angular_radps))
+                self.base_stamp[b.seq] = b.stamp_ns
 
     def _on_telemetry(self, sample: zenoh.Sample) -> None:
         t = decode_telemetry(sample.payload.to_bytes())
         if not isinstance(t, Rejection):
             with self.lock:
                 self.cycle_seq[t.cycle] = t.seq
+                if t.state == "DRIVING":
+                    self.limiters[t.limiter] += 1
 
     def _scans(self) -> None:
         period = 50 * MS
         deadline = time.monotonic_ns()
         while not self.stop.is_set():
-            self.session.put(keys.scan(ROBOT), corridor_scan(time.monotonic_ns()))
+            self.session.put(keys.scan(ROBOT), corridor_scan(time.monotonic_ns(), self.box_m))
             deadline += period
             time.sleep(max(0, deadline - time.monotonic_ns()) / 1e9)
 
@@ -131,15 +140,15 @@ class Harness:
         return sync.best.offset_ns
 
     def drive(self, seconds: float) -> None:
-        """The harness operator: 50 Hz, centred for 0.5 s, then half forward."""
+        """The harness operator: 50 Hz, centred for 0.5 s, then half forward, a little left."""
         offset = self.robot_offset_ns()
         period = 20 * MS
         start = deadline = time.monotonic_ns()
         seq = 0
         while (now := time.monotonic_ns()) - start < seconds * 1e9:
             seq += 1
-            x = 0.0 if now - start < 500 * MS else 0.5
-            msg = {"v": 1, "seq": seq, "stamp_ns": now + offset, "x": x, "y": 0.0}
+            x, y = (0.0, 0.0) if now - start < 500 * MS else (0.5, 0.2)
+            msg = {"v": 1, "seq": seq, "stamp_ns": now + offset, "x": x, "y": y}
             msg |= {"mode": "shared", "deadman": True, "estop": False, "reset": False}
             msg |= {"op": "bench"}
             payload = msgpack.packb(msg)
@@ -156,18 +165,26 @@ class Harness:
             self.cmd_pub.put(msgpack.packb(msg))
             time.sleep(0.02)
 
-    def latencies_ms(self) -> list[float]:
+    def latencies_ms(self) -> tuple[list[float], list[float]]:
+        """Publish -> base receipt per command, and the part of it before the robot's cycle ran.
+
+        Both ends and the robot read CLOCK_MONOTONIC of this machine, so the base command's
+        stamp (the robot's clock when its cycle started) splits each latency into "publish ->
+        cycle start" (Zenoh hop, decode, checks) and "cycle start -> base receipt" (pipeline,
+        encode, Zenoh hop).
+        """
         with self.lock:
             base_rx = {cycle: rx for rx, cycle, _, _ in self.base}
             first_cycle: dict[int, int] = {}
             for cycle in sorted(self.cycle_seq):
                 first_cycle.setdefault(self.cycle_seq[cycle], cycle)
-            out = []
+            total, before_cycle = [], []
             for seq, t_pub in self.published.items():
                 cycle = first_cycle.get(seq)
                 if cycle is not None and cycle in base_rx:
-                    out.append((base_rx[cycle] - t_pub) / MS)
-        return out
+                    total.append((base_rx[cycle] - t_pub) / MS)
+                    before_cycle.append((self.base_stamp[cycle] - t_pub) / MS)
+        return total, before_cycle
 
     def base_since(self, since_ns: int) -> list[tuple[int, int, float, float]]:
         with self.lock:
@@ -258,8 +275,10 @@ def main() -> int:
         wait_until(lambda: h.cycle_seq, 30, "the robot's first telemetry")
         h.drive(args.seconds)
         time.sleep(0.3)
-        lat = h.latencies_ms()
+        lat, before_cycle = h.latencies_ms()
         sent = len(h.published)
+        limiters = dict(h.limiters)
+        h.box_m = OPEN_BOX_M
         kills = [
             operator_trial(h, endpoint, workdir, signal.SIGKILL, i) for i in range(args.trials)
         ]
@@ -282,6 +301,8 @@ def main() -> int:
             "p90": pct(lat, 90),
             "p99": pct(lat, 99),
             "max": max(lat),
+            "publish_to_cycle_start_p50": pct(before_cycle, 50),
+            "limiter_while_driving": limiters,
         },
         "sigkill_to_zero_ms": kill_zero,
         "sigstop_to_hold_ms": stop_brake,
@@ -306,6 +327,15 @@ def main() -> int:
     print(
         f"  p50 {lat_r['p50']:.3f} ms  p90 {lat_r['p90']:.3f} ms  p99 {lat_r['p99']:.3f} ms"
         f"  max {lat_r['max']:.3f} ms"
+    )
+    print(
+        f"  of which publish -> robot cycle start p50 {lat_r['publish_to_cycle_start_p50']:.3f} ms,"
+        f" cycle start -> base p50 {lat_r['p50'] - lat_r['publish_to_cycle_start_p50']:.3f} ms"
+    )
+    driving = sum(limiters.values())
+    print(
+        f"  the EGC filter modified {limiters.get('egc', 0)}/{driving} driving cycles"
+        f" (limiters: {limiters})"
     )
     print(f"operator SIGKILL -> zero command (stop from full speed takes {STOP_MS:.0f} ms):")
     print("  " + "  ".join(f"{v:.0f}" for v in kill_zero) + " ms")

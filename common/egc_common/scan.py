@@ -9,12 +9,16 @@ the driver's declaration (``no_return_is_free``); the filter treats unknown as a
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 
 FloatArray = npt.NDArray[np.float64]
+
+# Coordinates beyond this magnitude (m) are treated as invalid readings: no real sensor produces
+# them, and squaring them would overflow.
+MAX_ABS_COORD_M = 1e6
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -29,6 +33,7 @@ class Scan:
     no_return_is_free: bool = False
     mount_x_m: float = 0.0
     mount_y_m: float = 0.0
+    _obstacles: ObstaclePoints | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         angles = np.asarray(self.angles_rad, dtype=np.float64)
@@ -65,15 +70,48 @@ class Scan:
             return np.isfinite(r) & (r >= self.range_min_m) & (r <= self.range_max_m)
 
     def points(self) -> FloatArray:
-        """Valid readings as an (N, 2) array of (x, y) in {R}, metres."""
-        return ranges_to_points(
-            self.ranges_m,
-            self.angles_rad,
-            self.range_min_m,
-            self.range_max_m,
-            self.mount_x_m,
-            self.mount_y_m,
-        )
+        """Valid readings as a read-only (N, 2) array of (x, y) in {R}, metres."""
+        return self.obstacles().xy
+
+    def obstacles(self) -> ObstaclePoints:
+        """Valid readings as prepared points in {R}, computed once per scan and cached.
+
+        A driver can call this in its receiving thread, so the command path finds it done.
+        """
+        cached = self._obstacles
+        if cached is None:
+            xy = ranges_to_points(
+                self.ranges_m,
+                self.angles_rad,
+                self.range_min_m,
+                self.range_max_m,
+                self.mount_x_m,
+                self.mount_y_m,
+            )
+            cached = obstacle_points(xy)
+            for array in (cached.xy, cached.x, cached.y, cached.r2):
+                array.flags.writeable = False
+            object.__setattr__(self, "_obstacles", cached)
+        return cached
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class ObstaclePoints:
+    """Scan points in {R}, checked once (``obstacle_points``): finite, every coordinate within
+    ``MAX_ABS_COORD_M``, an (N, 2) C-contiguous array plus contiguous x and y columns.
+
+    A scan arrives at sensor rate but is filtered against every command until the next one;
+    checking and laying out the points once, when the scan arrives, keeps that work off the
+    command path.
+    """
+
+    xy: FloatArray
+    x: FloatArray
+    y: FloatArray
+    r2: FloatArray  # squared distance of each point from the origin of {R}
+
+    def __len__(self) -> int:
+        return len(self.xy)
 
 
 def ranges_to_points(
@@ -97,11 +135,22 @@ def ranges_to_points(
     return out
 
 
-def finite_points(points: npt.ArrayLike) -> FloatArray:
-    """An (N, 2) float array of the finite rows of ``points`` (empty input gives shape (0, 2))."""
+def obstacle_points(points: npt.ArrayLike | ObstaclePoints) -> ObstaclePoints:
+    """Check points once: drop rows that are not finite or beyond ``MAX_ABS_COORD_M``.
+
+    Raises ValueError unless ``points`` is empty or an (N, 2) array; already prepared points are
+    returned as they are.
+    """
+    if isinstance(points, ObstaclePoints):
+        return points
     p = np.asarray(points, dtype=np.float64)
     if p.size == 0:
-        return np.empty((0, 2), dtype=np.float64)
-    if p.ndim != 2 or p.shape[1] != 2:
+        p = np.empty((0, 2), dtype=np.float64)
+    elif p.ndim != 2 or p.shape[1] != 2:
         raise ValueError("points must be an (N, 2) array of x, y in metres")
-    return p[np.all(np.isfinite(p), axis=1)]
+    elif not np.abs(p).max() <= MAX_ABS_COORD_M:  # NaN compares False
+        with np.errstate(invalid="ignore"):
+            p = p[np.all(np.abs(p) <= MAX_ABS_COORD_M, axis=1)]
+    p = np.ascontiguousarray(p)
+    x, y = p[:, 0].copy(), p[:, 1].copy()
+    return ObstaclePoints(p, x, y, x * x + y * y)

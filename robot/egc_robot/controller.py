@@ -32,7 +32,9 @@ from __future__ import annotations
 
 import math
 from collections import Counter, OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cached_property, partial
 
 import numpy as np
 import numpy.typing as npt
@@ -46,7 +48,7 @@ from egc_common.messages import (
     Telemetry,
     decode_command,
 )
-from egc_common.scan import Scan
+from egc_common.scan import ObstaclePoints, Scan
 
 from egc_robot.pipeline import Limiter, PipelineConfig, PipelineResult, step_command
 from egc_robot.safety import decelerate
@@ -103,12 +105,36 @@ class CommandVerdict:
         return self.rejection is None
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True)
 class CycleOutput:
+    """One cycle's base command, with its telemetry built on first use.
+
+    The telemetry is a snapshot of the cycle (every value is fixed when ``step`` returns) but is
+    only assembled when asked for, so that the robot can send the base command first.
+    """
+
     base: BaseCommand
-    telemetry: Telemetry
     state_changed: StateMessage | None
     result: PipelineResult | None
+    build_telemetry: Callable[[], Telemetry] = field(repr=False, compare=False)
+
+    @cached_property
+    def telemetry(self) -> Telemetry:
+        return self.build_telemetry()
+
+
+@dataclass(frozen=True, slots=True)
+class _TelemetrySnapshot:
+    """The controller's mutable state that a cycle's telemetry reports, fixed at ``step``."""
+
+    state: str
+    operator: str | None
+    command_rx_ns: int
+    scan_rx_ns: int | None
+    scan_xy: npt.NDArray[np.float32]
+    pose: tuple[float, float, float] | None
+    rejected: int
+    cycle: int
 
 
 @dataclass(slots=True)
@@ -119,7 +145,7 @@ class _OperatorTrack:
 
 @dataclass(slots=True)
 class _Scan:
-    points: npt.NDArray[np.float64]
+    points: ObstaclePoints  # checked when the scan arrives, not on every command
     rx_ns: int
 
 
@@ -225,10 +251,10 @@ class RobotController:
 
     def on_scan(self, scan: Scan, now_ns: int) -> None:
         """The newest scan; its arrival time decides freshness (scan_timeout)."""
-        points = scan.points()
+        points = scan.obstacles()
         self._scan = _Scan(points, now_ns)
         step = self.config.telemetry_scan_decimation
-        self._telemetry_xy = np.ascontiguousarray(points[::step], dtype=np.float32)
+        self._telemetry_xy = np.ascontiguousarray(points.xy[::step], dtype=np.float32)
 
     def on_odometry(self, odometry: Odometry) -> None:
         self._pose = (odometry.x_m, odometry.y_m, odometry.theta_rad)
@@ -303,8 +329,18 @@ class RobotController:
         self._previous = (v, w)
 
         base = BaseCommand(stamp_ns=now_ns, seq=self.counters.cycles, linear_mps=v, angular_radps=w)
-        telemetry = self._telemetry(now_ns, cmd, fresh, v, w, limiter, result)
-        return CycleOutput(base, telemetry, self.state_message(now_ns) if changed else None, result)
+        snapshot = _TelemetrySnapshot(
+            state=state.value,
+            operator=self._controller_op,
+            command_rx_ns=self._command_rx_ns,
+            scan_rx_ns=None if scan is None else scan.rx_ns,
+            scan_xy=self._telemetry_xy,
+            pose=self._pose,
+            rejected=self.counters.rejected_total,
+            cycle=self.counters.cycles,
+        )
+        build = partial(self._telemetry, now_ns, cmd, fresh, v, w, limiter, result, snapshot)
+        return CycleOutput(base, self.state_message(now_ns) if changed else None, result, build)
 
     def state_message(self, now_ns: int) -> StateMessage:
         return StateMessage(
@@ -332,18 +368,18 @@ class RobotController:
         w: float,
         limiter: Limiter,
         result: PipelineResult | None,
+        snap: _TelemetrySnapshot,
     ) -> Telemetry:
         filtered = result.filtered if result is not None else None
         if cmd is None:
             cmd_age_ms = None
         else:
-            since = cmd.stamp_ns if cmd.stamp_ns else self._command_rx_ns
+            since = cmd.stamp_ns if cmd.stamp_ns else snap.command_rx_ns
             cmd_age_ms = (now_ns - since) / 1e6
-        scan = self._scan
         return Telemetry(
             seq=cmd.seq if cmd is not None else 0,
             stamp_ns=now_ns,
-            state=self.state.value,
+            state=snap.state,
             mode=cmd.mode if cmd is not None else "shared",
             v_ref=result.v_ref_mps if result is not None else 0.0,
             w_ref=result.w_ref_radps if result is not None else 0.0,
@@ -357,14 +393,14 @@ class RobotController:
             agc=filtered.agc if filtered is not None else None,
             egc=filtered.egc if filtered is not None else None,
             r_rc=filtered.r_rc_m if filtered is not None else 0.0,
-            scan_xy=self._telemetry_xy,
-            pose=self._pose,
+            scan_xy=snap.scan_xy,
+            pose=snap.pose,
             cmd_age_ms=cmd_age_ms,
-            scan_age_ms=None if scan is None else (now_ns - scan.rx_ns) / 1e6,
-            operator=self._controller_op,
+            scan_age_ms=None if snap.scan_rx_ns is None else (now_ns - snap.scan_rx_ns) / 1e6,
+            operator=snap.operator,
             profile=self.config.pipeline.profile.name,
-            rejected=self.counters.rejected_total,
-            cycle=self.counters.cycles,
+            rejected=snap.rejected,
+            cycle=snap.cycle,
         )
 
     def _reject(self, cmd: OperatorCommand | None, rejection: Rejection) -> CommandVerdict:

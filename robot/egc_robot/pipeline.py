@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy.typing as npt
 from egc_common.joystick import JoystickMapping, deflection_to_velocity
 from egc_common.profiles import RobotProfile
-from egc_common.scan import finite_points
+from egc_common.scan import ObstaclePoints, obstacle_points
 
 from egc_robot.filters.egc import EgcCase, EgcParams, EgcResult, Region, Side, egc_filter
 from egc_robot.safety import (
@@ -58,6 +58,7 @@ class PipelineConfig:
     horizon_s: float | None = None
     no_return_is_free: bool = False
     sweep: SweepParams = field(default_factory=SweepParams)
+    egc_params: EgcParams = field(init=False, repr=False, compare=False)  # derived, once
 
     def __post_init__(self) -> None:
         if self.filter not in FILTERS:
@@ -66,14 +67,11 @@ class PipelineConfig:
             math.isfinite(self.horizon_s) and self.horizon_s > 0
         ):
             raise ValueError("horizon must be a positive number of seconds")
-
-    @property
-    def egc_params(self) -> EgcParams:
         p = self.profile
         params = EgcParams.from_profile(p.r_min_m, p.r_max_m, p.v_max_mps, self.horizon_s)
         if self.no_return_is_free:
             params = EgcParams(params.r_min_m, params.r_max_m, params.horizon_s, True)
-        return params
+        object.__setattr__(self, "egc_params", params)
 
 
 @dataclass(frozen=True, slots=True)
@@ -105,7 +103,7 @@ def filter_velocity(
     v_ref_mps: float,
     w_ref_radps: float,
     mode: str,
-    points: npt.ArrayLike,
+    points: npt.ArrayLike | ObstaclePoints,
     previous_cmd: tuple[float, float] | None,
     dt_s: float,
 ) -> PipelineResult:
@@ -115,13 +113,14 @@ def filter_velocity(
     stateless tools such as ``egc-teleop filter``).
     """
     profile = config.profile
-    pts = finite_points(points)
+    obstacles = obstacle_points(points)
+    pts = obstacles.xy
     shared = mode == "shared" and config.filter == "egc"
     filtered: EgcResult | None = None
     v, w = v_ref_mps, w_ref_radps
     escape = False
     if shared:
-        filtered = egc_filter(v_ref_mps, w_ref_radps, pts, config.egc_params)
+        filtered = egc_filter(v_ref_mps, w_ref_radps, obstacles, config.egc_params)
         v, w = filtered.v_mps, filtered.w_radps
         if (
             filtered.case in _STOPPED_NEAR_OBSTACLE
@@ -136,7 +135,7 @@ def filter_velocity(
         v, w = limit_acceleration(v, w, previous_cmd, dt_s, profile)
     limited = abs(v - after_filter[0]) > _SAME or abs(w - after_filter[1]) > _SAME
 
-    scale = sweep_scale(v, w, pts, profile, config.sweep) if shared else 1.0
+    scale = sweep_scale(v, w, obstacles, profile, config.sweep) if shared else 1.0
     if scale < 1.0:
         v, w = scale * v, scale * w
         limiter = Limiter.SWEEP
@@ -158,7 +157,7 @@ def step_command(
     x_o: float,
     y_o: float,
     mode: str,
-    points: npt.ArrayLike,
+    points: npt.ArrayLike | ObstaclePoints,
     previous_cmd: tuple[float, float],
     dt_s: float,
 ) -> PipelineResult:

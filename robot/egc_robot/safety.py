@@ -18,6 +18,7 @@ import numpy as np
 import numpy.typing as npt
 from egc_common.kinematics import arc_displacement, ramp_toward, signed_distance_to_rectangle
 from egc_common.profiles import RobotProfile
+from egc_common.scan import ObstaclePoints, obstacle_points
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -62,16 +63,21 @@ def stopping_time_s(
     return params.period_s + 0.5 * t_brake
 
 
-def _sweep_poses(v_mps: float, w_radps: float, t_s: float, params: SweepParams) -> FloatArray:
-    """(K, 3) poses (x, y, theta) along the arc at times in (0, t_s], in the start frame."""
+def _sweep_poses(
+    v_mps: float, w_radps: float, t_s: float, params: SweepParams
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Poses (x, y, theta) along the arc at times in (0, t_s], in the start frame.
+
+    ``arc_displacement`` for all sample times at once: chord v t sinc(w t / 2) along w t / 2.
+    """
     length = abs(v_mps) * t_s
     turn = abs(w_radps) * t_s
     k = max(1, math.ceil(max(length / params.step_m, turn / params.step_rad)))
     ts = np.linspace(t_s / k, t_s, k)
-    out = np.empty((k, 3))
-    for i, t in enumerate(ts):
-        out[i] = arc_displacement(v_mps, w_radps, float(t))
-    return out
+    theta = w_radps * ts
+    half = 0.5 * theta
+    chord = v_mps * ts * np.sinc(half / math.pi)
+    return chord * np.cos(half), chord * np.sin(half), theta
 
 
 def sweep_min_clearance(
@@ -85,31 +91,33 @@ def sweep_min_clearance(
     """Smallest signed footprint clearance over the poses swept in (0, t_s]."""
     if len(points) == 0 or (v_mps == 0.0 and w_radps == 0.0):
         return math.inf
-    poses = _sweep_poses(v_mps, w_radps, t_s, params)
-    c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
-    dx = points[None, :, 0] - poses[:, 0, None]
-    dy = points[None, :, 1] - poses[:, 1, None]
+    x, y, theta = _sweep_poses(v_mps, w_radps, t_s, params)
+    c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
+    dx = points[None, :, 0] - x[:, None]
+    dy = points[None, :, 1] - y[:, None]
     return _min_clearance(c * dx + s * dy, -s * dx + c * dy, profile)
 
 
 def sweep_scale(
     v_mps: float,
     w_radps: float,
-    points: FloatArray,
+    points: FloatArray | ObstaclePoints,
     profile: RobotProfile,
     params: SweepParams,
 ) -> float:
     """Largest s in [0, 1] such that the command (s v, s w) sweeps the footprint clear."""
     if len(points) == 0 or (v_mps == 0.0 and w_radps == 0.0):
         return 1.0
-    now = footprint_clearance(points, profile)
-    required = min(params.margin_m, now) - _EPS
+    obstacles = obstacle_points(points)
     # Only points the footprint can reach within the full command's stopping sweep matter.
     t_full = stopping_time_s(v_mps, w_radps, profile, params)
     reach = profile.half_diagonal_m + abs(v_mps) * t_full + params.margin_m
-    near = points[np.einsum("ij,ij->i", points, points) <= reach * reach]
+    near = obstacles.xy[obstacles.r2 <= reach * reach]
     if len(near) == 0:
         return 1.0
+    # A point beyond ``reach`` is more than the margin clear now, so it cannot lower
+    # min(margin, clearance now): the near points alone give the same requirement.
+    required = min(params.margin_m, footprint_clearance(near, profile)) - _EPS
 
     def clear(scale: float) -> bool:
         v, w = scale * v_mps, scale * w_radps

@@ -49,7 +49,8 @@ class ZenohDriver:
         if isinstance(decoded, Rejection):
             self._count(decoded, "scan")
             return
-        scan = scan_from_message(decoded)  # here, off the command path
+        scan = scan_from_message(decoded)
+        scan.obstacles()  # prepared here, in the receiving thread, off the command path
         with self._lock:
             self._scan, self._scan_rx_ns = scan, now_ns
 

@@ -14,7 +14,7 @@ from egc_common.joystick import (
     normalise_axis,
 )
 from egc_common.profiles import JACKAL, PIONEER3DX, get_profile
-from egc_common.scan import Scan, ranges_to_points
+from egc_common.scan import Scan, obstacle_points, ranges_to_points
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -89,3 +89,25 @@ def test_scan_uniform_layout_and_mount_offset():
 
 def test_jackal_radii_scale_with_speed():
     assert JACKAL.d_safe_m == pytest.approx(JACKAL.v_max_mps * 1.0)
+
+
+def test_obstacle_points_drop_invalid_rows_and_keep_layout():
+    pts = [[1.0, 2.0], [np.nan, 0.0], [np.inf, 1.0], [3.0, -2e6], [-0.5, 0.25]]
+    obs = obstacle_points(pts)
+    assert obs.xy.tolist() == [[1.0, 2.0], [-0.5, 0.25]]
+    assert obs.x.tolist() == [1.0, -0.5] and obs.y.tolist() == [2.0, 0.25]
+    assert obs.r2.tolist() == pytest.approx([5.0, 0.3125])
+    assert obs.xy.flags.c_contiguous and obs.x.flags.c_contiguous and len(obs) == 2
+    assert obstacle_points(obs) is obs
+    assert obstacle_points([]).xy.shape == (0, 2)
+    with pytest.raises(ValueError, match=r"\(N, 2\)"):
+        obstacle_points([1.0, 2.0, 3.0])
+
+
+def test_scan_points_are_prepared_once_and_read_only():
+    scan = Scan.uniform([1.0, np.nan, 2.0], 0.0, math.pi / 2, 0.05, 10.0)
+    first = scan.obstacles()
+    assert scan.obstacles() is first and scan.points() is first.xy
+    np.testing.assert_allclose(first.xy, [[1.0, 0.0], [-2.0, 0.0]], atol=1e-12)
+    with pytest.raises(ValueError):
+        first.xy[0, 0] = 5.0

@@ -262,3 +262,16 @@ def test_same_operator_lost_and_back_in_one_batch_must_centre_again():
     rig.c.on_operator_alive("alice", True)
     rig.send(x=1.0)
     assert rig.cycle().telemetry.state == "HOLD"
+
+
+def test_telemetry_is_the_cycle_snapshot_even_when_built_later():
+    rig = driving_rig()
+    out = rig.cycle()
+    # Later inputs must not leak into the telemetry of a cycle that already ran.
+    rig.c.on_scan(Scan.uniform(np.full(10, 0.3), -math.pi, 0.1, 0.05, 10.0), rig.now + MS)
+    rig.c.on_command(b"\x00garbage", rig.now + MS)
+    rig.c.on_operator_alive("alice", False)
+    t = out.telemetry
+    assert t.state == "DRIVING" and t.operator == "alice" and t.rejected == 0
+    assert t.cycle == out.base.seq and len(t.scan_xy) == 180  # 360 beams, decimation 2
+    assert out.telemetry is t  # built once

@@ -43,13 +43,14 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from egc_common.scan import MAX_ABS_COORD_M, ObstaclePoints, obstacle_points
 
 FloatArray = npt.NDArray[np.float64]
 Point = tuple[float, float]
 
-# Inputs beyond this magnitude (m, m/s, rad/s) are treated as invalid: no real robot or sensor
-# produces them, and squaring them would overflow.
-MAX_ABS_INPUT = 1e6
+# Commands beyond this magnitude (m/s, rad/s) are treated as invalid: no real robot produces
+# them, and squaring them would overflow. Scan points get the same bound (``obstacle_points``).
+MAX_ABS_INPUT = MAX_ABS_COORD_M
 
 
 class Region(enum.Enum):
@@ -212,21 +213,16 @@ def _stop(case: EgcCase, r_rc: float, p_igc: Point, r_igc: float, region: Region
     return EgcResult(0.0, 0.0, 0.0, region, None, True, case, r_rc, p_igc, r_igc)
 
 
-def egc_filter(v_mps: float, w_radps: float, points: npt.ArrayLike, params: EgcParams) -> EgcResult:
+def egc_filter(
+    v_mps: float, w_radps: float, points: npt.ArrayLike | ObstaclePoints, params: EgcParams
+) -> EgcResult:
     """Filter one command against scan points (N, 2) in {R}; see the module docstring."""
     kT, r_min, r_max = params.horizon_s, params.r_min_m, params.r_max_m
     if not (abs(v_mps) <= MAX_ABS_INPUT and abs(w_radps) <= MAX_ABS_INPUT):  # also NaN
         return _stop(EgcCase.INVALID_INPUT, 0.0, (0.0, 0.0), 0.0, Region.UNSAFE)
 
-    pts = np.asarray(points, dtype=np.float64)
-    if pts.size == 0:
-        pts = np.empty((0, 2))
-    elif pts.ndim != 2 or pts.shape[1] != 2:
-        raise ValueError("points must be an (N, 2) array")
-    px, py = pts[:, 0], pts[:, 1]
-    valid = (np.abs(px) <= MAX_ABS_INPUT) & (np.abs(py) <= MAX_ABS_INPUT)  # NaN compares False
-    if not valid.all():
-        px, py = px[valid], py[valid]
+    obstacles = obstacle_points(points)
+    px, py = obstacles.x, obstacles.y
 
     p_igc = predicted_position(v_mps, w_radps, kT)  # eq. 6
     r_rc = math.hypot(*p_igc)  # eq. 7
