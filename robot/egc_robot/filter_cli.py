@@ -5,8 +5,8 @@ Each output line carries the paper's equations alone (DESIGN 5.1-5.8) in ``v``/`
 intermediates, and, under ``final``, what the robot would send to the base after the rules of
 DESIGN 5.9-5.10 and the profile's velocity limits (acceleration limits need a previous command
 and are not applied: each line stands alone). In the undefined cases of DESIGN 5.9, ``v``/``w``
-carry that case's documented rule, named by ``case``. A malformed line gives
-``{"error": "..."}`` and processing continues.
+carry that case's documented rule, named by ``case``. A malformed line (a blank one included)
+gives ``{"error": "..."}`` and processing continues: there is one output line per input line.
 """
 
 from __future__ import annotations
@@ -134,9 +134,9 @@ def process(stream_in: TextIO, stream_out: TextIO, config: PipelineConfig) -> in
     errors = 0
     for raw_line in stream_in:
         line = raw_line.strip()
-        if not line:
-            continue
         try:
+            if not line:
+                raise LineError("empty line")  # still answered: one output line per input line
             v, w, points = parse_line(line)
             mode = "shared" if config.filter == "egc" else "direct"
             out = filter_velocity(config, v, w, mode, points, None, 0.0)
@@ -152,6 +152,9 @@ def process(stream_in: TextIO, stream_out: TextIO, config: PipelineConfig) -> in
         except (LineError, ValueError) as exc:
             errors += 1
             text = json.dumps({"error": str(exc)})
+        except Exception as exc:  # a bug must cost one line, not the rest of the stream
+            errors += 1
+            text = json.dumps({"error": f"internal error: {type(exc).__name__}: {exc}"})
         stream_out.write(text + "\n")
         stream_out.flush()
     return errors
