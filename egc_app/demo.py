@@ -82,8 +82,8 @@ def format_summary(summary: dict[str, Any]) -> str:
     lines = [
         "demo summary",
         f"  distance        {summary['distance_m']:.2f} m",
-        f"  interventions   {summary['interventions']} (times EGC or the footprint "
-        "sweep started limiting the command)",
+        f"  interventions   {summary['interventions']} cycles in which EGC or the footprint "
+        f"sweep changed the command ({summary.get('intervention_onsets', 0)} stretches)",
         f"  collisions      {summary['collisions']}",
         f"  command latency p50 {ms('p50_ms')}, p90 {ms('p90_ms')}, p99 {ms('p99_ms')}, "
         f"max {ms('max_ms')} (operator publish -> robot, {lat.get('n', 0)} commands)",

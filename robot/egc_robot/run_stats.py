@@ -1,8 +1,9 @@
 """Run statistics the robot reports when it stops (the demo's summary), pure and clock-free.
 
 - distance: path length integrated from odometry poses;
-- interventions: cycles in which the filter (EGC or the footprint sweep) started limiting the
-  operator's command, counted once per episode of limiting (rising edges);
+- interventions: control cycles in which the filter (EGC or the footprint sweep) changed the
+  operator's command, as ``egc-teleop episode`` counts them; ``intervention_onsets`` counts the
+  stretches of such cycles (rising edges);
 - collisions: rising edges of the driver's ``collided`` flag;
 - command latency: arrival on the robot minus the operator's stamp (the operator's estimate of
   the robot clock, DESIGN 7), for every accepted synchronised command.
@@ -25,6 +26,7 @@ class RunStats:
     def __init__(self) -> None:
         self.distance_m = 0.0
         self.interventions = 0
+        self.intervention_onsets = 0
         self.collisions = 0
         self.cycles = 0
         self.states: Counter[str] = Counter()
@@ -37,8 +39,10 @@ class RunStats:
         self.cycles += 1
         self.states[telemetry.state] += 1
         limiting = telemetry.limiter in _INTERVENING
-        if limiting and not self._limiting:
+        if limiting:
             self.interventions += 1
+            if not self._limiting:
+                self.intervention_onsets += 1
         self._limiting = limiting
 
     def on_odometry(self, odometry: Odometry) -> None:
@@ -63,6 +67,7 @@ class RunStats:
         return {
             "distance_m": round(self.distance_m, 3),
             "interventions": self.interventions,
+            "intervention_onsets": self.intervention_onsets,
             "collisions": self.collisions,
             "cycles": self.cycles,
             "cycles_by_state": dict(self.states),

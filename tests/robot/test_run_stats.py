@@ -26,7 +26,8 @@ def test_distance_interventions_collisions_and_latency():
     out = s.summary()
     assert out["distance_m"] == pytest.approx(7.0)
     assert out["collisions"] == 1
-    assert out["interventions"] == 2  # egc..sweep is one episode, the last egc another
+    assert out["interventions"] == 4  # cycles, as the episode counts them
+    assert out["intervention_onsets"] == 2  # egc..sweep is one stretch, the last egc another
     assert out["command_latency"]["p50_ms"] == pytest.approx(2.5)
     assert out["cycles_by_state"] == {"DRIVING": 7}
 
