@@ -72,6 +72,10 @@ def _stop(proc: subprocess.Popen[bytes]) -> int:
     return proc.returncode
 
 
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}es" if noun.endswith("ch") else f"{n} {noun}s"
+
+
 def format_summary(summary: dict[str, Any]) -> str:
     lat = summary.get("command_latency", {})
 
@@ -83,7 +87,7 @@ def format_summary(summary: dict[str, Any]) -> str:
         "demo summary",
         f"  distance        {summary['distance_m']:.2f} m",
         f"  interventions   {summary['interventions']} cycles in which EGC or the footprint "
-        f"sweep changed the command ({summary.get('intervention_onsets', 0)} stretches)",
+        f"sweep changed the command (in {_count(summary.get('intervention_onsets', 0), 'stretch')})",
         f"  collisions      {summary['collisions']}",
         f"  command latency p50 {ms('p50_ms')}, p90 {ms('p90_ms')}, p99 {ms('p99_ms')}, "
         f"max {ms('max_ms')} (operator publish -> robot, {lat.get('n', 0)} commands)",
