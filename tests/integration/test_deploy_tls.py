@@ -1,0 +1,399 @@
+"""The shipped TLS + access-control deployment, end to end (deploy/README.md, "TLS and access
+control").
+
+A CA and certificates are made with the ``openssl`` CLI the way the README does it; the router,
+the robot and the operator run as separate OS processes on configurations derived from the real
+``deploy/router-tls-acl.json5``, ``deploy/robot-tls.json5`` and ``deploy/operator-tls.json5`` by
+substituting only certificate paths, the port and the host name, so the ACL rules and the TLS
+settings under test are the shipped ones. There is no ``zenohd`` here: the router is a Python
+process holding a Zenoh session in router mode.
+
+- An operator process drives a robot process through the router, with ``require_clock_sync``
+  as the README recommends for such networks, so the operator's clock queries must pass the ACL
+  too; its liveliness token does (the robot sees it come and go).
+- A certificate signed by the project CA but with a common name outside the ACL connects, yet
+  sees no telemetry, gets no clock, and its commands never reach the robot; the very same
+  commands from an allowed certificate drive it (the positive control).
+- Without a client certificate, with one from another CA, or over plain TCP, no session opens.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import msgpack
+import pytest
+import zenoh
+from egc_common import keys
+from egc_common.messages import (
+    Rejection,
+    StateMessage,
+    Telemetry,
+    decode_clock_reply,
+    decode_state,
+    decode_telemetry,
+)
+
+from tests.integration.harness import MS, ROOT, joystick_file
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(60)]
+
+DEPLOY = ROOT / "deploy"
+OPENSSL = shutil.which("openssl") or "/usr/bin/openssl"
+ALLOWED = ("router", "operator-1", "robot-1")  # common names the shipped ACL knows (or needs)
+INTRUDER = "intruder"  # signed by the project CA, but not in the ACL
+
+ROUTER_SCRIPT = """\
+import sys, time, zenoh
+zenoh.init_log_from_env_or("warn")
+session = zenoh.open(zenoh.Config.from_file(sys.argv[1]))
+print("router ready", flush=True)
+while True:
+    time.sleep(3600)
+"""
+
+
+# -- certificates and configurations ------------------------------------------------------------
+
+
+def openssl(cwd: Path, *args: str) -> None:
+    subprocess.run([OPENSSL, *args], cwd=cwd, check=True, capture_output=True, timeout=30)
+
+
+def make_pki(cwd: Path, ca_cn: str, cns: tuple[str, ...]) -> Path:
+    """deploy/README.md's commands (rsa:2048 for speed): ``ca.pem`` signs ``<cn>.pem``."""
+    cwd.mkdir(parents=True, exist_ok=True)
+    openssl(
+        cwd,
+        *("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "3650"),
+        *("-subj", f"/CN={ca_cn}", "-keyout", "ca-key.pem", "-out", "ca.pem"),
+    )
+    for cn in cns:
+        openssl(
+            cwd,
+            *("req", "-newkey", "rsa:2048", "-nodes", "-subj", f"/CN={cn}"),
+            *("-keyout", f"{cn}-key.pem", "-out", f"{cn}.csr"),
+            *("-addext", "subjectAltName=DNS:localhost"),
+        )
+        openssl(
+            cwd,
+            *("x509", "-req", "-in", f"{cn}.csr", "-CA", "ca.pem", "-CAkey", "ca-key.pem"),
+            *("-CAcreateserial", "-days", "825", "-copy_extensions", "copy"),
+            *("-out", f"{cn}.pem"),
+        )
+    return cwd
+
+
+@pytest.fixture(scope="module")
+def pki(tmp_path_factory) -> Path:
+    """The project CA with every certificate; ``rogue/`` is another CA's ``operator-1``."""
+    root = tmp_path_factory.mktemp("pki")
+    make_pki(root, "egc-ca", (*ALLOWED, INTRUDER))
+    make_pki(root / "rogue", "rogue-ca", ("operator-1",))
+    return root
+
+
+def derive(deploy_file: str, dest: Path, subs: dict[str, str]) -> Path:
+    """A copy of a shipped deploy file with only ``subs`` (paths, port, host) replaced; every
+    one of them must occur, so a changed deploy file fails here instead of going untested."""
+    text = (DEPLOY / deploy_file).read_text()
+    for old, new in subs.items():
+        assert old in text, f"{deploy_file} no longer contains {old!r}"
+        text = text.replace(old, new)
+    dest.write_text(text)
+    return dest
+
+
+def router_config(pki: Path, port: int, dest: Path) -> Path:
+    return derive(
+        "router-tls-acl.json5",
+        dest,
+        {"/etc/egc/tls/": f"{pki}/", "tls/0.0.0.0:7447": f"tls/127.0.0.1:{port}"},
+    )
+
+
+def client_config(
+    deploy_file: str, pki: Path, port: int, dest: Path, extra: dict[str, str] | None = None
+) -> Path:
+    subs = dict(extra or {})
+    subs |= {"/etc/egc/tls/": f"{pki}/", "tls/router.local:7447": f"tls/localhost:{port}"}
+    return derive(deploy_file, dest, subs)
+
+
+def operator_config(pki: Path, port: int, dest: Path, cn: str = "operator-1") -> Path:
+    """deploy/operator-tls.json5 with the certificate of ``cn``."""
+    extra = {} if cn == "operator-1" else {"/etc/egc/tls/operator-1": f"{pki}/{cn}"}
+    return client_config("operator-tls.json5", pki, port, dest, extra)
+
+
+# -- the router process -------------------------------------------------------------------------
+
+
+@pytest.fixture
+def router(pki, port, tmp_path):
+    """The shipped router configuration in its own OS process, until the test ends."""
+    config = router_config(pki, port, tmp_path / "router.json5")
+    script = tmp_path / "router.py"
+    script.write_text(ROUTER_SCRIPT)
+    log = tmp_path / "router.log"
+    with log.open("wb") as out:
+        proc = subprocess.Popen(
+            [sys.executable, str(script), str(config)],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            cwd=tmp_path,
+        )
+    try:
+        wait_until(
+            "the router",
+            lambda: "router ready" in log.read_text(errors="replace") or proc.poll() is not None,
+            20,
+        )
+        assert proc.poll() is None, f"the router exited:\n{log.read_text(errors='replace')}"
+        yield proc
+    finally:
+        proc.kill()
+        proc.wait(5)
+
+
+# -- sessions in the test process ---------------------------------------------------------------
+
+
+def wait_until(what: str, predicate: Callable[[], Any], timeout_s: float) -> Any:
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        time.sleep(0.01)
+
+
+def open_client(config_path: Path) -> zenoh.Session:
+    return zenoh.open(zenoh.Config.from_file(str(config_path)))
+
+
+class Watcher:
+    """A TLS client of the router recording one robot's telemetry and state."""
+
+    def __init__(self, session: zenoh.Session, robot: str) -> None:
+        self.session = session
+        self.robot = robot
+        self._lock = threading.Lock()
+        self._telemetry: list[tuple[int, Telemetry]] = []
+        self._state: list[tuple[int, StateMessage]] = []
+        self._subs = [
+            session.declare_subscriber(keys.telemetry(robot), self._on_telemetry),
+            session.declare_subscriber(keys.state(robot), self._on_state),
+        ]
+
+    def _on_telemetry(self, sample: zenoh.Sample) -> None:
+        t = decode_telemetry(sample.payload.to_bytes())
+        assert not isinstance(t, Rejection), t
+        with self._lock:
+            self._telemetry.append((time.monotonic_ns(), t))
+
+    def _on_state(self, sample: zenoh.Sample) -> None:
+        s = decode_state(sample.payload.to_bytes())
+        assert not isinstance(s, Rejection), s
+        with self._lock:
+            self._state.append((time.monotonic_ns(), s))
+
+    def telemetry(self, since_ns: int = 0) -> list[Telemetry]:
+        with self._lock:
+            return [t for rx, t in self._telemetry if rx >= since_ns]
+
+    def states(self, since_ns: int = 0) -> list[StateMessage]:
+        with self._lock:
+            return [s for rx, s in self._state if rx >= since_ns]
+
+    def moving(self, since_ns: int = 0) -> Telemetry | None:
+        return next(
+            (t for t in self.telemetry(since_ns) if t.state == "DRIVING" and t.v_cmd > 0), None
+        )
+
+    def close(self) -> None:
+        for sub in self._subs:
+            sub.undeclare()
+
+
+def clock_replies(session: zenoh.Session, robot: str) -> list[int]:
+    stamps = []
+    for reply in session.get(keys.clock(robot), timeout=1.0):
+        if reply.ok is not None:
+            stamp = decode_clock_reply(reply.ok.payload.to_bytes())
+            assert isinstance(stamp, int), stamp
+            stamps.append(stamp)
+    return stamps
+
+
+def command(seq: int, x: float) -> bytes:
+    """A pinned OperatorCommand map (DESIGN 7), unsynchronised (stamp 0)."""
+    msg = {"v": 1, "seq": seq, "stamp_ns": 0, "x": x, "y": 0.0, "mode": "shared"}
+    msg |= {"deadman": True, "estop": False, "reset": False, "op": "outside"}
+    data: bytes = msgpack.packb(msg)
+    return data
+
+
+def drive(session: zenoh.Session, robot: str, duration_s: float, until: Callable[[], Any]) -> int:
+    """50 Hz commands: centred with the deadman held for 0.5 s, then half forward, for
+    ``duration_s`` or until ``until()``; returns how many were published."""
+    start = time.monotonic()
+    seq = 0
+    while time.monotonic() - start < duration_s and not until():
+        seq += 1
+        session.put(
+            keys.cmd(robot),
+            command(seq, 0.0 if seq <= 25 else 0.5),
+            priority=zenoh.Priority.INTERACTIVE_HIGH,
+            express=True,
+            congestion_control=zenoh.CongestionControl.BLOCK,
+        )
+        time.sleep(0.02)
+    return seq
+
+
+def start_robot(procs, robot: str, config: Path, *extra: str) -> None:
+    procs.start("robot", "robot", "--robot", robot, "--zenoh-config", str(config), *extra)
+
+
+def stop_robot(procs) -> None:
+    assert procs.alive("robot"), procs.log("robot")
+    assert procs.stop("robot") == 0, procs.log("robot")
+
+
+# -- the tests ------------------------------------------------------------------------------------
+
+
+def test_an_operator_drives_a_robot_through_the_tls_router(procs, pki, port, router, tmp_path):
+    robot = "tls-drive"
+    robot_cfg = client_config("robot-tls.json5", pki, port, tmp_path / "robot-tls.json5")
+    op_cfg = operator_config(pki, port, tmp_path / "operator-tls.json5")
+    # README: on a network you do not control, commands must carry a robot-clock stamp.
+    start_robot(procs, robot, robot_cfg, "--set", "safety.require_clock_sync=true")
+    # The test watches with the operator's certificate, which the ACL lets see telemetry.
+    watcher = Watcher(open_client(op_cfg), robot)
+    try:
+        wait_until("robot telemetry through the router", watcher.telemetry, 20)
+        assert clock_replies(watcher.session, robot), "the robot's clock did not answer"
+        js = joystick_file(tmp_path / "fwd.csv", [(0, 0, 0, 1), (1.5, 0.5, 0, 1), (60, 0.5, 0, 1)])
+        op_args = ["--robot", robot, "--operator-id", "op-tls", "--joystick-file", str(js)]
+        op_args += ["--no-view", "--no-status", "--zenoh-config", str(op_cfg)]
+        procs.start("op", "operator", *op_args)
+        driving = wait_until("DRIVING with v_cmd > 0", watcher.moving, 20)
+        assert driving.operator == "op-tls", driving
+        assert driving.v_cmd > 0.0 and driving.v_ref > 0.0, driving
+        assert "operator op-tls alive" in procs.log("robot")  # its liveliness token got through
+        # Killed, the operator's link closes: the router withdraws its token from the robot.
+        killed = time.monotonic_ns()
+        procs.children["op"].kill()
+        wait_until(
+            "operator lost",
+            lambda: any(s.reason == "operator op-tls lost" for s in watcher.states(killed)),
+            5,
+        )
+        wait_until(
+            "the robot stopped",
+            lambda: any(t.v_cmd == 0.0 for t in watcher.telemetry(killed + 300 * MS)),
+            5,
+        )
+        stop_robot(procs)
+    finally:
+        watcher.close()
+        watcher.session.close()
+
+
+def test_a_certificate_outside_the_acl_cannot_drive(procs, pki, port, router, tmp_path):
+    robot = "tls-acl"
+    robot_cfg = client_config("robot-tls.json5", pki, port, tmp_path / "robot-tls.json5")
+    start_robot(procs, robot, robot_cfg)
+    sessions: list[zenoh.Session] = []
+    watchers: list[Watcher] = []
+    try:
+        watcher = Watcher(open_client(operator_config(pki, port, tmp_path / "op.json5")), robot)
+        sessions.append(watcher.session)
+        watchers.append(watcher)
+        wait_until("robot telemetry through the router", watcher.telemetry, 20)
+        # The intruder's certificate is signed by the project CA: TLS lets it in ...
+        intruder = open_client(operator_config(pki, port, tmp_path / "intruder.json5", INTRUDER))
+        sessions.append(intruder)
+        spy = Watcher(intruder, robot)
+        watchers.append(spy)
+        start = time.monotonic_ns()
+        sent = drive(intruder, robot, 2.0, lambda: False)
+        end = time.monotonic_ns()
+        # ... but the ACL does not: no clock,
+        assert not clock_replies(intruder, robot), "the intruder got the robot's clock"
+        # (the robot keeps publishing: anything of the intruder's in flight has arrived by then)
+        wait_until(
+            "telemetry well after the last command", lambda: watcher.telemetry(end + 300 * MS), 5
+        )
+        during = watcher.telemetry(start)
+        assert sent >= 75 and len(during) >= 30, (sent, len(during))
+        assert not spy.telemetry(), "the intruder sees telemetry"  # no telemetry,
+        assert not spy.states(), "the intruder sees the robot's state"
+        # ... and its commands never reach the robot: not applied, not even counted.
+        assert all(t.state == "IDLE" and t.v_cmd == 0.0 for t in during), during[-1]
+        assert all(t.rejected == 0 and t.operator is None for t in during), during[-1]
+        assert "rejected command" not in procs.log("robot")
+        # Positive control: the very same commands from an allowed certificate drive.
+        allowed = open_client(operator_config(pki, port, tmp_path / "allowed.json5"))
+        sessions.append(allowed)
+        control = time.monotonic_ns()
+        drive(allowed, robot, 10.0, lambda: watcher.moving(control))
+        driving = wait_until("DRIVING with v_cmd > 0", lambda: watcher.moving(control), 1)
+        assert driving.operator == "outside" and driving.rejected == 0, driving
+        stop_robot(procs)
+    finally:
+        for w in watchers:
+            w.close()
+        for s in sessions:
+            s.close()
+
+
+def test_no_session_without_a_certificate_of_the_project_ca(pki, port, router, tmp_path):
+    ok = operator_config(pki, port, tmp_path / "ok.json5")
+    plain_tcp = derive(
+        "operator-tls.json5",
+        tmp_path / "tcp.json5",
+        {"/etc/egc/tls/": f"{pki}/", "tls/router.local:7447": f"tcp/127.0.0.1:{port}"},
+    )
+    rogue = client_config(
+        "operator-tls.json5",
+        pki,
+        port,
+        tmp_path / "rogue.json5",
+        {"/etc/egc/tls/operator-1": f"{pki}/rogue/operator-1"},  # same CN, another CA
+    )
+    # The shipped operator file with its "tls" section cut down to trusting the project CA.
+    no_cert = zenoh.Config.from_file(str(ok))
+    no_cert.insert_json5(
+        "transport/link/tls",
+        json.dumps({"root_ca_certificate": f"{pki}/ca.pem", "enable_mtls": False}),
+    )
+    assert json.loads(no_cert.get_json("transport/link/tls/connect_certificate")) is None
+    refused: dict[str, zenoh.Config] = {
+        "plain TCP": zenoh.Config.from_file(str(plain_tcp)),
+        "TLS without a client certificate": no_cert,
+        "operator-1 signed by another CA": zenoh.Config.from_file(str(rogue)),
+    }
+    for what, config in refused.items():
+        try:
+            session = zenoh.open(config)
+        except zenoh.ZError as exc:
+            assert "Unable to connect" in str(exc), (what, exc)
+        else:
+            session.close()
+            pytest.fail(f"{what}: a session opened")
+    # Positive control: the same file with the project's certificate connects.
+    zenoh.open(zenoh.Config.from_file(str(ok))).close()
