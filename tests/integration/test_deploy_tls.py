@@ -14,6 +14,9 @@ process holding a Zenoh session in router mode.
 - A certificate signed by the project CA but with a common name outside the ACL connects, yet
   sees no telemetry, gets no clock, and its commands never reach the robot; the very same
   commands from an allowed certificate drive it (the positive control).
+- Each role sends only its own messages: commands published with a robot certificate do not
+  reach the robot, telemetry and state forged with an operator certificate reach no one; the
+  map query of the world-frame view passes.
 - Without a client certificate, with one from another CA, or over plain TCP, no session opens.
 """
 
@@ -359,6 +362,55 @@ def test_a_certificate_outside_the_acl_cannot_drive(procs, pki, port, router, tm
             w.close()
         for s in sessions:
             s.close()
+
+
+def test_each_role_sends_only_its_own_messages(procs, pki, port, router, tmp_path):
+    """Robot certificates cannot command, operator certificates cannot forge telemetry."""
+    robot = "tls-roles"
+    robot_cfg = client_config("robot-tls.json5", pki, port, tmp_path / "robot-tls.json5")
+    start_robot(procs, robot, robot_cfg)
+    sessions: list[zenoh.Session] = []
+    watcher: Watcher | None = None
+    try:
+        watcher = Watcher(open_client(operator_config(pki, port, tmp_path / "op.json5")), robot)
+        sessions.append(watcher.session)
+        wait_until("robot telemetry through the router", watcher.telemetry, 20)
+        # The map queryable answers operators through the router (the world-frame view).
+        maps = [r for r in watcher.session.get(keys.world_map(robot), timeout=2.0) if r.ok]
+        assert maps, "the robot's map did not come through the router"
+        # A second client holding a robot certificate publishes valid commands ...
+        fake_robot = open_client(
+            client_config("robot-tls.json5", pki, port, tmp_path / "robot2.json5")
+        )
+        sessions.append(fake_robot)
+        start = time.monotonic_ns()
+        sent = drive(fake_robot, robot, 2.0, lambda: False)
+        end = time.monotonic_ns()
+        # ... and another operator certificate's session forges telemetry and state (from its
+        # own session: Zenoh would deliver a session's puts to its own subscribers directly).
+        forger = open_client(operator_config(pki, port, tmp_path / "forger.json5"))
+        sessions.append(forger)
+        forged = Telemetry(1, 1, "ESTOP", "shared", 0.0, 0.0, 0.0, 0.0, 0.0, operator="forger")
+        forged_state = StateMessage(1, "ESTOP", "forged", "forger")
+        for _ in range(20):
+            forger.put(keys.telemetry(robot), forged.encode())
+            forger.put(keys.state(robot), forged_state.encode())
+            time.sleep(0.02)
+        settled = time.monotonic_ns()
+        wait_until("telemetry after the forgeries", lambda: watcher.telemetry(settled), 5)
+        during = watcher.telemetry(start)
+        assert sent >= 75 and len(during) >= 30, (sent, len(during))
+        assert all(t.state == "IDLE" and t.v_cmd == 0.0 for t in during), during[-1]
+        assert all(t.rejected == 0 and t.operator is None for t in during), during[-1]
+        assert all(t.operator != "forger" for t in watcher.telemetry()), "forged telemetry"
+        assert all(s.operator != "forger" for s in watcher.states()), "forged state"
+        assert watcher.telemetry(end), "the robot went silent"
+        stop_robot(procs)
+    finally:
+        if watcher is not None:
+            watcher.close()
+        for session in sessions:
+            session.close()
 
 
 def test_no_session_without_a_certificate_of_the_project_ca(pki, port, router, tmp_path):
