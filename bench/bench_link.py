@@ -4,8 +4,9 @@ Processes: the robot is its own process (``egc-teleop robot --driver zenoh``). T
 plays both ends around it, so that both ends read one clock (CLOCK_MONOTONIC is shared by all
 processes of a machine): a test-harness operator publishing pinned OperatorCommands at 50 Hz
 (stamped with the robot clock obtained from its clock queryable) and the remote driver,
-publishing 720-point scans at 20 Hz (a corridor with a box 0.75 m ahead: the EGC filter expands
-the guide circle and modifies the command on every cycle; the run reports the share) and receiving ``base/cmd``.
+publishing 720-point scans at 20 Hz and receiving ``base/cmd``. The scans show a corridor with a
+box 0.75 m ahead, so that the EGC filter expands the guide circle and modifies the command in
+nearly every driving cycle (the run prints the share).
 
 1. Latency from the operator's publish to the base receiving the filtered command: the robot
    runs a control cycle on each accepted command (and at its 20 Hz rate); its telemetry tells
