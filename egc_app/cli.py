@@ -26,6 +26,15 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("egc_app.demo", "simulated robot + scripted operator + operator view on loopback"),
     "episode": ("egc_app.episode", "run one headless episode (or a batch) and print JSON"),
     "bench": ("egc_app.bench", "run the benchmarks in bench/"),
+    "link": (
+        "egc_experiments.link_cli",
+        "user-space link emulator: a TCP/UDP relay adding delay, jitter, loss and outages",
+    ),
+    "experiment": (
+        "egc_experiments.experiment_cli",
+        "run a grid of network-delay experiments; runs.jsonl, report.md and plots out",
+    ),
+    "router": ("egc_app.router_cmd", "an embedded Zenoh router, for sites without zenohd"),
 }
 
 

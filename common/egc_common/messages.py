@@ -29,6 +29,7 @@ MAX_ID_CHARS: Final = 64
 MAX_SCAN_BEAMS: Final = 200_000
 MAX_MAP_CELLS: Final = 64_000_000
 MAX_MAP_BYTES: Final = MAX_MAP_CELLS // 8 + 4096
+MAX_VIEW_AGE_MS: Final = 3_600_000
 
 MODES: Final = ("direct", "shared")
 # Telemetry keys pinned by DESIGN 7 (outside tools read them); the rest are view extras.
@@ -235,6 +236,7 @@ class OperatorCommand:
     estop: bool
     reset: bool
     op: str
+    view_age_ms: int | None = None  # DESIGN 7, 9: age of the newest telemetry the view showed
 
     def __post_init__(self) -> None:
         rejection = decode_command(_pack(self._wire()))
@@ -242,7 +244,10 @@ class OperatorCommand:
             raise ValueError(f"invalid OperatorCommand: {rejection}")
 
     def _wire(self) -> dict[str, Any]:
-        return {"v": SCHEMA_VERSION, **{k: getattr(self, k) for k in self.__slots__}}
+        wire = {"v": SCHEMA_VERSION, **{k: getattr(self, k) for k in self.__slots__}}
+        if self.view_age_ms is None:
+            del wire["view_age_ms"]  # optional key: absent when unknown (DESIGN 7)
+        return wire
 
     def encode(self) -> bytes:
         return _pack(self._wire())
@@ -259,6 +264,9 @@ def _build_command(m: Mapping[Any, Any]) -> OperatorCommand:
         "estop": _bool(m, "estop"),
         "reset": _bool(m, "reset"),
         "op": _str(m, "op"),
+        "view_age_ms": (
+            None if m.get("view_age_ms") is None else _int(m, "view_age_ms", 0, MAX_VIEW_AGE_MS)
+        ),
     }
     cmd = object.__new__(OperatorCommand)
     for key, value in fields_.items():
@@ -307,6 +315,16 @@ class Telemetry:
     profile: str = ""
     rejected: int = 0
     cycle: int = 0
+    # Link-aware driving (DESIGN 7, 9); None when not known yet.
+    reason: str | None = None  # why the robot is in its state (HOLD: why it holds)
+    filter: str = ""  # which filter of DESIGN 6 runs in shared mode
+    loop_delay_ms: float | None = None  # tau
+    cmd_age_p50_ms: float | None = None
+    cmd_age_p90_ms: float | None = None
+    cmd_gap_max_ms: float | None = None
+    link_loss: float | None = None  # fraction of seq missing over the last second
+    view_age_ms: float | None = None  # the controlling operator's latest report
+    v_lim_latency: float | None = None  # the latency governor's cap, m/s
 
     def encode(self) -> bytes:
         d = _shallow_fields(self)
@@ -330,8 +348,13 @@ def _opt_tuple(m: Mapping[Any, Any], key: str, n: int) -> tuple[float, ...] | No
     return tuple(_float({key: v}, key) for v in value)
 
 
-def _opt_str(m: Mapping[Any, Any], key: str, choices: tuple[str, ...] | None = None) -> str | None:
-    return None if m.get(key) is None else _str(m, key, choices)
+def _opt_str(
+    m: Mapping[Any, Any],
+    key: str,
+    choices: tuple[str, ...] | None = None,
+    max_chars: int = MAX_ID_CHARS,
+) -> str | None:
+    return None if m.get(key) is None else _str(m, key, choices, max_chars)
 
 
 def _build_telemetry(m: Mapping[Any, Any]) -> Telemetry:
@@ -361,6 +384,15 @@ def _build_telemetry(m: Mapping[Any, Any]) -> Telemetry:
         "profile": _str(m, "profile") if m.get("profile") else "",
         "rejected": _int(m, "rejected") if "rejected" in m else 0,
         "cycle": _int(m, "cycle") if "cycle" in m else 0,
+        "reason": _opt_str(m, "reason", max_chars=256),
+        "filter": _str(m, "filter") if m.get("filter") else "",
+        "loop_delay_ms": _opt_float(m, "loop_delay_ms"),
+        "cmd_age_p50_ms": _opt_float(m, "cmd_age_p50_ms"),
+        "cmd_age_p90_ms": _opt_float(m, "cmd_age_p90_ms"),
+        "cmd_gap_max_ms": _opt_float(m, "cmd_gap_max_ms"),
+        "link_loss": None if m.get("link_loss") is None else _float(m, "link_loss", 0.0, 1.0),
+        "view_age_ms": _opt_float(m, "view_age_ms"),
+        "v_lim_latency": _opt_float(m, "v_lim_latency"),
     }
     for key, value in values.items():
         object.__setattr__(t, key, value)

@@ -65,8 +65,14 @@ class ControllerConfig:
     """DESIGN 8 parameters (seconds) around the command pipeline's configuration."""
 
     pipeline: PipelineConfig
-    max_command_age_s: float = 0.3
+    max_command_age_s: float = 0.3  # direct mode (DESIGN 8)
+    max_command_age_filtered_s: float = 1.0  # shared mode: the filter judges every cycle
     command_timeout_s: float = 0.25
+    resume_window_s: float = 2.0  # short-gap resume after a HOLD from the link alone
+    link_aware: bool = True  # off: one max age (max_command_age_s), no resume, no governor
+    reaction_time_s: float = 0.25  # DESIGN 9: part of the loop delay tau
+    blind_time_direct_s: float = 0.5  # DESIGN 9: D = v_max * blind_time
+    blind_time_filtered_s: float = 1.0
     scan_timeout_s: float = 0.2
     release_timeout_s: float = 2.0
     centre_tolerance: float = 0.05
@@ -77,6 +83,11 @@ class ControllerConfig:
     def __post_init__(self) -> None:
         for name in (
             "max_command_age_s",
+            "max_command_age_filtered_s",
+            "resume_window_s",
+            "reaction_time_s",
+            "blind_time_direct_s",
+            "blind_time_filtered_s",
             "command_timeout_s",
             "scan_timeout_s",
             "release_timeout_s",
