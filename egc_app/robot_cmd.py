@@ -9,8 +9,10 @@ Configuration: defaults < ``--config FILE`` (TOML) < ``--set section.key=value``
 flags. Tables and keys (units in the names):
 
     [robot]    rate_hz, telemetry_scan_decimation
-    [safety]   max_command_age_s, command_timeout_s, scan_timeout_s, release_timeout_s,
-               centre_tolerance, require_clock_sync
+    [safety]   max_command_age_s (direct mode), max_command_age_filtered_s, command_timeout_s,
+               scan_timeout_s, release_timeout_s, centre_tolerance, require_clock_sync
+    [link]     link_aware, resume_window_s, reaction_time_s, blind_time_direct_s,
+               blind_time_filtered_s (DESIGN 8 short-gap resume, DESIGN 9 latency governor)
     [pipeline] horizon_s, gamma_v, gamma_w, no_return_is_free
     [sim]      scan_hz, beams, seed
 """
@@ -52,11 +54,19 @@ SECTIONS: dict[str, tuple[str, ...]] = {
     "robot": ("rate_hz", "telemetry_scan_decimation"),
     "safety": (
         "max_command_age_s",
+        "max_command_age_filtered_s",
         "command_timeout_s",
         "scan_timeout_s",
         "release_timeout_s",
         "centre_tolerance",
         "require_clock_sync",
+    ),
+    "link": (
+        "link_aware",
+        "resume_window_s",
+        "reaction_time_s",
+        "blind_time_direct_s",
+        "blind_time_filtered_s",
     ),
     "pipeline": ("horizon_s", "gamma_v", "gamma_w", "no_return_is_free"),
     "sim": ("scan_hz", "beams", "seed"),
@@ -110,6 +120,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--filter", choices=FILTERS, default="egc", help="filter of shared mode (default: egc)"
     )
     parser.add_argument("--rate-hz", type=float, default=None, help="control rate (default: 20)")
+    parser.add_argument(
+        "--no-link-aware",
+        dest="link_aware",
+        action="store_false",
+        default=None,
+        help="turn link-aware driving off (one max command age, no short-gap resume, no latency "
+        "governor), for comparisons; same as --set link.link_aware=false",
+    )
     parser.add_argument("--start", metavar="X,Y,YAW", help="start pose for --driver sim")
     parser.add_argument("--config", metavar="FILE", help="robot TOML configuration")
     parser.add_argument(
@@ -131,10 +149,18 @@ def _number(table: dict[str, Any], key: str, default: float) -> float:
     return float(value)
 
 
+def _flag(table: dict[str, Any], key: str, default: bool) -> bool:
+    value = table.get(key, default)
+    if not isinstance(value, bool):
+        raise UsageError(f"config key {key} must be true or false, got {value!r}")
+    return value
+
+
 def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> ControllerConfig:
     try:
         robot = config_mod.section(cfg, "robot", SECTIONS["robot"])
         safety = config_mod.section(cfg, "safety", SECTIONS["safety"])
+        link = config_mod.section(cfg, "link", SECTIONS["link"])
         pipe = config_mod.section(cfg, "pipeline", SECTIONS["pipeline"])
         profile = get_profile(args.profile)
         horizon = pipe.get("horizon_s")
@@ -154,6 +180,20 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
         return ControllerConfig(
             pipeline=pipeline,
             max_command_age_s=_number(safety, "max_command_age_s", defaults.max_command_age_s),
+            max_command_age_filtered_s=_number(
+                safety, "max_command_age_filtered_s", defaults.max_command_age_filtered_s
+            ),
+            resume_window_s=_number(link, "resume_window_s", defaults.resume_window_s),
+            link_aware=(
+                args.link_aware
+                if args.link_aware is not None
+                else _flag(link, "link_aware", defaults.link_aware)
+            ),
+            reaction_time_s=_number(link, "reaction_time_s", defaults.reaction_time_s),
+            blind_time_direct_s=_number(link, "blind_time_direct_s", defaults.blind_time_direct_s),
+            blind_time_filtered_s=_number(
+                link, "blind_time_filtered_s", defaults.blind_time_filtered_s
+            ),
             command_timeout_s=_number(safety, "command_timeout_s", defaults.command_timeout_s),
             scan_timeout_s=_number(safety, "scan_timeout_s", defaults.scan_timeout_s),
             release_timeout_s=_number(safety, "release_timeout_s", defaults.release_timeout_s),

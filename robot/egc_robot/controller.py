@@ -50,9 +50,19 @@ from egc_common.messages import (
 )
 from egc_common.scan import ObstaclePoints, Scan
 
+from egc_robot.latency_governor import govern, latency_speed_limit
+from egc_robot.link_stats import LinkFigures, LinkStats
 from egc_robot.pipeline import Limiter, PipelineConfig, PipelineResult, step_command
 from egc_robot.safety import decelerate
-from egc_robot.state_machine import Inputs, State, Transition, next_state
+from egc_robot.state_machine import (
+    COMMAND_TIMEOUT,
+    LINK_REASONS,
+    STALE_COMMANDS,
+    Inputs,
+    State,
+    Transition,
+    next_state,
+)
 
 NS_PER_S = 1_000_000_000
 _MAX_TRACKED_OPERATORS = 64
@@ -101,6 +111,20 @@ class ControllerConfig:
         if self.telemetry_scan_decimation < 1:
             raise ValueError("telemetry_scan_decimation must be >= 1")
 
+    def filtered(self, mode: str) -> bool:
+        """Whether a command in ``mode`` goes through a filter (shared mode, a real filter)."""
+        return mode == "shared" and self.pipeline.filter != "none"
+
+    def max_age_s(self, mode: str) -> float:
+        """``max_command_age`` for a command in ``mode`` (DESIGN 8: by mode when link-aware)."""
+        if self.link_aware and self.filtered(mode):
+            return self.max_command_age_filtered_s
+        return self.max_command_age_s
+
+    def blind_time_s(self, mode: str) -> float:
+        """DESIGN 9: how far ahead the operator may be blind, as time at v_max, by mode."""
+        return self.blind_time_filtered_s if self.filtered(mode) else self.blind_time_direct_s
+
 
 @dataclass(frozen=True, slots=True)
 class CommandVerdict:
@@ -139,6 +163,7 @@ class _TelemetrySnapshot:
     """The controller's mutable state that a cycle's telemetry reports, fixed at ``step``."""
 
     state: str
+    reason: str
     operator: str | None
     command_rx_ns: int
     scan_rx_ns: int | None
@@ -146,6 +171,8 @@ class _TelemetrySnapshot:
     pose: tuple[float, float, float] | None
     rejected: int
     cycle: int
+    link: LinkFigures
+    v_lim_mps: float | None
 
 
 @dataclass(slots=True)
@@ -193,6 +220,11 @@ class RobotController:
         self._pose: tuple[float, float, float] | None = None
         self._previous = (0.0, 0.0)
         self._last_step_ns: int | None = None
+        self._last_drive_epoch = -1  # control epoch of the last DRIVING cycle (resume)
+        self._last_drive_ns = start_ns
+        self._link = LinkStats(
+            reaction_time_s=config.reaction_time_s, unknown_part_s=config.command_timeout_s
+        )
 
     # -- inputs -------------------------------------------------------------------------------
 
@@ -217,7 +249,9 @@ class RobotController:
         if cmd.estop:
             self._estop_pending = True
         cfg = self.config
-        max_age_ns = int(cfg.max_command_age_s * NS_PER_S)
+        max_age_ns = int(cfg.max_age_s(cmd.mode) * NS_PER_S)
+        if cmd.op == self._controller_op:
+            self._link.on_arrival(cmd.seq, now_ns)
         latency_ns: int | None = None
         if cmd.stamp_ns == 0:
             if cfg.require_clock_sync:
@@ -249,6 +283,8 @@ class RobotController:
         if self._controller_op is None and cmd.deadman:
             self._controller_op = cmd.op
             self._control_epoch += 1
+            self._link.reset()
+            self._link.on_arrival(cmd.seq, now_ns)
             took_control = True
         if self._controller_op != cmd.op:
             holder = self._controller_op or "nobody (hold the deadman to take control)"
@@ -257,6 +293,7 @@ class RobotController:
             )
         self._command = cmd
         self._command_rx_ns = now_ns
+        self._link.on_accepted(latency_ns, cmd.view_age_ms, now_ns)
         self.counters.accepted += 1
         return CommandVerdict(cmd, None, took_control, latency_ns)
 
@@ -302,6 +339,8 @@ class RobotController:
             self._release(f"operator {self._controller_op} silent")
             cmd = None
         fresh = cmd is not None and self._command_fresh(cmd, now_ns)
+        timed_out = now_ns - self._command_rx_ns > cfg.command_timeout_s * NS_PER_S
+        session_kept = cfg.link_aware and self._last_drive_epoch == self._control_epoch
         scan = self._scan
         scan_fresh = scan is not None and now_ns - scan.rx_ns <= cfg.scan_timeout_s * NS_PER_S
         tol = cfg.centre_tolerance
@@ -316,6 +355,10 @@ class RobotController:
             base_stopped=max(abs(self._previous[0]), abs(self._previous[1])) < _STOPPED_EPS,
             same_control=self._driving_epoch == self._control_epoch,
             no_operator_reason=self._no_operator_reason,
+            stale_reason=COMMAND_TIMEOUT if timed_out else STALE_COMMANDS,
+            session_kept=session_kept,
+            resume_allowed=session_kept
+            and now_ns - self._last_drive_ns <= cfg.resume_window_s * NS_PER_S,
         )
         self._estop_pending = False
         before = self._transition
@@ -327,21 +370,38 @@ class RobotController:
         result: PipelineResult | None = None
         state = self._transition.state
         self._driving_epoch = self._control_epoch if state is State.DRIVING else -1
+        link = self._link.figures(now_ns)
+        v_lim: float | None = None
+        if cfg.link_aware:
+            profile = cfg.pipeline.profile
+            v_lim = latency_speed_limit(
+                link.loop_delay_s,
+                profile.v_max_mps,
+                profile.decel_max_mps2,
+                cfg.blind_time_s(cmd.mode if cmd is not None else "shared"),
+            )
         if state is State.DRIVING and cmd is not None and scan is not None:
+            self._last_drive_epoch = self._control_epoch
+            self._last_drive_ns = self._command_rx_ns  # the gap is timed from this command
             result = step_command(
                 cfg.pipeline, cmd.x, cmd.y, cmd.mode, scan.points, self._previous, dt_s
             )
             v, w, limiter = result.v_cmd_mps, result.w_cmd_radps, result.limiter
+            if v_lim is not None:
+                v, w, capped = govern(v, w, v_lim)
+                if capped:
+                    limiter = Limiter.LATENCY
         elif state is State.ESTOP:
             v, w, limiter = 0.0, 0.0, Limiter.ESTOP
         else:
             v, w = decelerate(self._previous, dt_s, cfg.pipeline.profile)
-            limiter = Limiter.WATCHDOG if self.reason == "command timeout" else Limiter.HOLD
+            limiter = Limiter.WATCHDOG if self.reason in LINK_REASONS else Limiter.HOLD
         self._previous = (v, w)
 
         base = BaseCommand(stamp_ns=now_ns, seq=self.counters.cycles, linear_mps=v, angular_radps=w)
         snapshot = _TelemetrySnapshot(
             state=state.value,
+            reason=self.reason,
             operator=self._controller_op,
             command_rx_ns=self._command_rx_ns,
             scan_rx_ns=None if scan is None else scan.rx_ns,
@@ -349,6 +409,8 @@ class RobotController:
             pose=self._pose,
             rejected=self.counters.rejected_total,
             cycle=self.counters.cycles,
+            link=link,
+            v_lim_mps=v_lim,
         )
         build = partial(self._telemetry, now_ns, cmd, fresh, v, w, limiter, result, snapshot)
         return CycleOutput(base, self.state_message(now_ns) if changed else None, result, build)
@@ -368,7 +430,7 @@ class RobotController:
         cfg = self.config
         if now_ns - self._command_rx_ns > cfg.command_timeout_s * NS_PER_S:
             return False
-        return cmd.stamp_ns == 0 or now_ns - cmd.stamp_ns <= cfg.max_command_age_s * NS_PER_S
+        return cmd.stamp_ns == 0 or now_ns - cmd.stamp_ns <= cfg.max_age_s(cmd.mode) * NS_PER_S
 
     def _telemetry(
         self,
@@ -412,6 +474,15 @@ class RobotController:
             profile=self.config.pipeline.profile.name,
             rejected=snap.rejected,
             cycle=snap.cycle,
+            reason=snap.reason,
+            filter=self.config.pipeline.filter,
+            loop_delay_ms=snap.link.loop_delay_s * 1e3,
+            cmd_age_p50_ms=snap.link.cmd_age_p50_ms,
+            cmd_age_p90_ms=snap.link.cmd_age_p90_ms,
+            cmd_gap_max_ms=snap.link.cmd_gap_max_ms,
+            link_loss=snap.link.link_loss,
+            view_age_ms=snap.link.view_age_ms,
+            v_lim_latency=snap.v_lim_mps,
         )
 
     def _reject(self, cmd: OperatorCommand | None, rejection: Rejection) -> CommandVerdict:
@@ -428,5 +499,6 @@ class RobotController:
     def _release(self, reason: str) -> None:
         self._controller_op = None
         self._control_epoch += 1
+        self._link.reset()
         self._command = None
         self._no_operator_reason = reason

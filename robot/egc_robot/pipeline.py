@@ -45,6 +45,7 @@ class Limiter(enum.Enum):
     EGC = "egc"
     SWEEP = "sweep"
     LIMITS = "limits"
+    LATENCY = "latency"  # the latency governor (DESIGN 9) capped the speed
     WATCHDOG = "watchdog"
     HOLD = "hold"
     ESTOP = "estop"

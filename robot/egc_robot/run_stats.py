@@ -6,7 +6,10 @@
   stretches of such cycles (rising edges);
 - collisions: rising edges of the driver's ``collided`` flag;
 - command latency: arrival on the robot minus the operator's stamp (the operator's estimate of
-  the robot clock, DESIGN 7), for every accepted synchronised command.
+  the robot clock, DESIGN 7), for every accepted synchronised command;
+- time by state and limiter, from the telemetry stamps (cycles are not evenly spaced: an accepted
+  command also runs one): ``hold_s`` and ``hold_events`` (entries into HOLD), ``latency_limited_s``
+  (the latency governor capped the speed, DESIGN 9), ``first_drive_ns``/``last_stamp_ns``.
 """
 
 from __future__ import annotations
@@ -34,10 +37,25 @@ class RunStats:
         self._pose: tuple[float, float] | None = None
         self._collided = False
         self._limiting = False
+        self.seconds_by_state: dict[str, float] = {}
+        self.hold_events = 0
+        self.latency_limited_s = 0.0
+        self._previous: Telemetry | None = None
 
     def on_cycle(self, telemetry: Telemetry) -> None:
         self.cycles += 1
         self.states[telemetry.state] += 1
+        previous = self._previous
+        if previous is not None and telemetry.stamp_ns >= previous.stamp_ns:
+            dt_s = (telemetry.stamp_ns - previous.stamp_ns) / 1e9
+            self.seconds_by_state[previous.state] = (
+                self.seconds_by_state.get(previous.state, 0.0) + dt_s
+            )
+            if previous.limiter == "latency":
+                self.latency_limited_s += dt_s
+        if telemetry.state == "HOLD" and (previous is None or previous.state != "HOLD"):
+            self.hold_events += 1
+        self._previous = telemetry
         limiting = telemetry.limiter in _INTERVENING
         if limiting:
             self.interventions += 1
@@ -71,5 +89,9 @@ class RunStats:
             "collisions": self.collisions,
             "cycles": self.cycles,
             "cycles_by_state": dict(self.states),
+            "seconds_by_state": {k: round(v, 3) for k, v in self.seconds_by_state.items()},
+            "hold_s": round(self.seconds_by_state.get("HOLD", 0.0), 3),
+            "hold_events": self.hold_events,
+            "latency_limited_s": round(self.latency_limited_s, 3),
             "command_latency": latency,
         }

@@ -13,11 +13,19 @@ States:
   HOLD) only when the controlling operator sends a fresh ``reset`` with the deadman held, the
   stick centred and the e-stop released.
 
-Resuming is the same rule everywhere: from IDLE or HOLD the robot enters DRIVING only on a fresh,
-deadman-held command with the stick **centred**, so an operator who returns (after a crash, a
-hang, a stale link or an e-stop) with the stick deflected cannot make the robot jump. The same
-holds when control changes hands between two cycles (``same_control`` false): DRIVING is never
-inherited by the next operator.
+Resuming: from IDLE or HOLD the robot enters DRIVING only on a fresh, deadman-held command with
+the stick **centred**, so an operator who returns (after a crash, a hang, a long gap or an
+e-stop) with the stick deflected cannot make the robot jump. The same holds when control changes
+hands between two cycles (``same_control`` false): DRIVING is never inherited by the next
+operator.
+
+The one exception is **short-gap resume** (DESIGN 8, link-aware driving): a HOLD entered from
+DRIVING because of the link alone (no command for ``command_timeout``, or only stale commands) is
+*resumable*. It ends without re-centring when a fresh, deadman-held command arrives while the
+controller says the resume window is still open (``resume_allowed``: same operator session still
+in control, gap shorter than ``resume_window``). Any other reason met on the way (deadman
+released, sensor stale, operator lost, e-stop, control changing hands) makes the HOLD
+non-resumable for good, and the centred-stick rule applies again.
 
 The function reads no clock: the controller computes the snapshot (freshness, presence) from
 monotonic times it is given.
@@ -27,6 +35,11 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
+
+COMMAND_TIMEOUT = "command timeout"
+STALE_COMMANDS = "stale commands"
+LINK_REASONS = (COMMAND_TIMEOUT, STALE_COMMANDS)
+RESUMED = "resumed after a link gap"
 
 
 class State(enum.Enum):
@@ -50,12 +63,19 @@ class Inputs:
     base_stopped: bool
     same_control: bool = True  # control has not changed hands since the previous cycle
     no_operator_reason: str = "no operator"
+    stale_reason: str = COMMAND_TIMEOUT  # why the command is not fresh (a LINK_REASONS entry)
+    # Short-gap resume (controller's judgement): ``session_kept``: link-aware driving is on and
+    # control has not changed hands since the robot last drove; ``resume_allowed``: that, and the
+    # gap is still shorter than ``resume_window``.
+    session_kept: bool = False
+    resume_allowed: bool = False
 
 
 @dataclass(frozen=True, slots=True)
 class Transition:
     state: State
     reason: str
+    resumable: bool = False  # a HOLD from the link alone, entered from DRIVING (DESIGN 8)
 
 
 def hold_reason(inputs: Inputs) -> str | None:
@@ -63,7 +83,7 @@ def hold_reason(inputs: Inputs) -> str | None:
     if not inputs.operator_present:
         return inputs.no_operator_reason
     if not inputs.command_fresh:
-        return "command timeout"
+        return inputs.stale_reason
     if not inputs.deadman:
         return "deadman released"
     if not inputs.scan_fresh:
@@ -91,15 +111,23 @@ def next_state(current: Transition, inputs: Inputs) -> Transition:
             return _keep(current, State.IDLE, inputs.no_operator_reason)
         return _keep(current, State.HOLD, inputs.no_operator_reason)
     if reason is not None:
+        if (
+            reason in LINK_REASONS
+            and inputs.session_kept
+            and (current.state is State.DRIVING or current.resumable)
+        ):
+            return _keep(current, State.HOLD, reason, resumable=True)
         return _keep(current, State.HOLD, reason)
     if current.state is State.DRIVING and inputs.same_control:
         return current
+    if current.resumable and inputs.resume_allowed:
+        return Transition(State.DRIVING, RESUMED)
     if inputs.centred:
         return Transition(State.DRIVING, "fresh centred command")
     return _keep(current, State.HOLD, "waiting for a centred stick")
 
 
-def _keep(current: Transition, state: State, reason: str) -> Transition:
-    if current.state is state and current.reason == reason:
+def _keep(current: Transition, state: State, reason: str, resumable: bool = False) -> Transition:
+    if current.state is state and current.reason == reason and current.resumable == resumable:
         return current
-    return Transition(state, reason)
+    return Transition(state, reason, resumable)

@@ -95,17 +95,33 @@ def test_deflected_first_command_does_not_drive():
 
 
 @pytest.mark.parametrize(
-    ("kw", "reason"),
+    ("mode", "delay_ms", "link_aware", "accepted"),
     [
-        ({"delay_ms": 400}, "stale"),
-        ({"delay_ms": -400}, "stale"),
+        # DESIGN 8: max_command_age is 300 ms in direct mode, 1.0 s in a filtered mode.
+        ("direct", 290, True, True),
+        ("direct", 310, True, False),
+        ("direct", -310, True, False),
+        ("shared", 310, True, True),
+        ("shared", 990, True, True),
+        ("shared", 1010, True, False),
+        ("shared", -1010, True, False),
+        # Link-aware driving off: one age for both modes, as before.
+        ("shared", 310, False, False),
     ],
 )
-def test_age_rule(kw, reason):
-    rig = Rig()
-    verdict = rig.send(**kw)
-    assert verdict.rejection is not None and verdict.rejection.reason.value == reason
-    assert rig.c.counters.rejected[reason] == 1
+def test_age_rule_by_mode(mode, delay_ms, link_aware, accepted):
+    rig = Rig(link_aware=link_aware)
+    verdict = rig.send(delay_ms=delay_ms, mode=mode)
+    assert verdict.accepted is accepted
+    if not accepted:
+        assert verdict.rejection.reason.value == "stale"
+        assert rig.c.counters.rejected["stale"] == 1
+
+
+def test_shared_mode_with_no_filter_uses_the_direct_age():
+    cfg = ControllerConfig(PipelineConfig(PROFILE, filter="none"))
+    c = RobotController(cfg, T0)
+    assert not c.on_command(raw(1, T0 - 400 * MS), T0).accepted
 
 
 def test_unsynchronised_stamp_is_accepted_unless_sync_required():
@@ -180,8 +196,8 @@ def test_watchdog_holds_and_decelerates_at_the_profile_limit():
     assert out.base.linear_mps == 0.0
 
 
-def test_resume_after_hold_needs_a_centred_stick():
-    rig = driving_rig()
+def test_resume_after_hold_needs_a_centred_stick_without_link_aware_driving():
+    rig = driving_rig(link_aware=False)
     rig.cycle(dt_ms=300)
     rig.send(x=1.0)
     assert rig.cycle().telemetry.state == "HOLD"

@@ -1,0 +1,104 @@
+"""Link statistics on the robot's clock (DESIGN 7, 9), pure: time is passed in.
+
+Fed with every decoded command of the operator in control (accepted or rejected as stale, since
+both arrived) and with the accepted ones' ages, it reports over a sliding window (1 s):
+
+- command age percentiles p50/p90 (arrival minus ``stamp_ns``, synchronised operators only);
+- the largest gap between arrivals, including the gap still open now (so it grows during an
+  outage);
+- loss from ``seq`` gaps: 1 - received / expected, expected = the span of ``seq`` over the window;
+- the loop delay tau = p90 age + the operator's latest ``view_age_ms`` + ``reaction_time``,
+  each unknown part counted as ``command_timeout`` (DESIGN 9).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+NS_PER_MS = 1_000_000
+NS_PER_S = 1_000_000_000
+
+
+@dataclass(frozen=True, slots=True)
+class LinkFigures:
+    """One snapshot of the link as the robot sees it (None: not known yet)."""
+
+    cmd_age_p50_ms: float | None
+    cmd_age_p90_ms: float | None
+    cmd_gap_max_ms: float | None
+    link_loss: float | None
+    view_age_ms: float | None
+    loop_delay_s: float
+
+
+class LinkStats:
+    """Sliding-window statistics of one operator's command stream (see the module docstring)."""
+
+    def __init__(
+        self, window_s: float = 1.0, reaction_time_s: float = 0.25, unknown_part_s: float = 0.25
+    ) -> None:
+        if not (window_s > 0 and reaction_time_s >= 0 and unknown_part_s >= 0):
+            raise ValueError("window_s must be > 0, the other times >= 0")
+        self._window_ns = int(window_s * NS_PER_S)
+        self._reaction_s = reaction_time_s
+        self._unknown_s = unknown_part_s
+        self._arrivals: deque[tuple[int, int]] = deque()  # (rx_ns, seq)
+        self._ages: deque[tuple[int, int]] = deque()  # (rx_ns, age_ns) of accepted commands
+        self._view_age_ms: float | None = None
+        self._last_rx_ns: int | None = None
+        self._seq_before: int | None = None  # the last seq that left the window
+
+    def reset(self) -> None:
+        """A new operator session: forget everything."""
+        self._arrivals.clear()
+        self._ages.clear()
+        self._view_age_ms = None
+        self._last_rx_ns = None
+        self._seq_before = None
+
+    def on_arrival(self, seq: int, rx_ns: int) -> None:
+        """A decoded command of the operator in control arrived (accepted or stale)."""
+        self._arrivals.append((rx_ns, seq))
+        self._last_rx_ns = rx_ns
+
+    def on_accepted(self, age_ns: int | None, view_age_ms: int | None, rx_ns: int) -> None:
+        if age_ns is not None:
+            self._ages.append((rx_ns, age_ns))
+        if view_age_ms is not None:
+            self._view_age_ms = float(view_age_ms)
+
+    def figures(self, now_ns: int) -> LinkFigures:
+        self._expire(now_ns)
+        ages = np.fromiter((a for _, a in self._ages), dtype=np.float64, count=len(self._ages))
+        p50 = p90 = None
+        if ages.size:
+            p50, p90 = (float(v) / NS_PER_MS for v in np.percentile(ages, (50, 90)))
+        gap_ms = None
+        if self._last_rx_ns is not None:
+            times = [rx for rx, _ in self._arrivals] + [now_ns]
+            gaps = np.diff(np.asarray(times, dtype=np.int64)) if len(times) > 1 else [0]
+            gap_ms = max(float(np.max(gaps)), float(now_ns - self._last_rx_ns)) / NS_PER_MS
+        loss = None
+        if self._arrivals:
+            seqs = [s for _, s in self._arrivals]
+            first = min(seqs) if self._seq_before is None else self._seq_before + 1
+            expected = max(seqs) - first + 1
+            received = len(set(seqs))
+            loss = min(max(1.0 - received / expected, 0.0), 1.0) if expected > 0 else 0.0
+        tau = (
+            (p90 / 1e3 if p90 is not None else self._unknown_s)
+            + (self._view_age_ms / 1e3 if self._view_age_ms is not None else self._unknown_s)
+            + self._reaction_s
+        )
+        return LinkFigures(p50, p90, gap_ms, loss, self._view_age_ms, tau)
+
+    def _expire(self, now_ns: int) -> None:
+        horizon = now_ns - self._window_ns
+        while self._arrivals and self._arrivals[0][0] < horizon:
+            _, seq = self._arrivals.popleft()
+            self._seq_before = seq if self._seq_before is None else max(self._seq_before, seq)
+        while self._ages and self._ages[0][0] < horizon:
+            self._ages.popleft()

@@ -1,0 +1,48 @@
+"""Link statistics on the robot's clock (DESIGN 7, 9)."""
+
+from __future__ import annotations
+
+import pytest
+from egc_robot.link_stats import LinkStats
+
+MS = 1_000_000
+
+
+def feed(stats: LinkStats, seqs, period_ms=20, age_ms=100, t0=0):
+    t = t0
+    for seq in seqs:
+        t += period_ms * MS
+        stats.on_arrival(seq, t)
+        stats.on_accepted(age_ms * MS, 150, t)
+    return t
+
+
+def test_ages_and_tau():
+    stats = LinkStats()
+    t = feed(stats, range(1, 51), age_ms=100)
+    f = stats.figures(t)
+    assert f.cmd_age_p50_ms == pytest.approx(100) and f.cmd_age_p90_ms == pytest.approx(100)
+    assert f.loop_delay_s == pytest.approx(0.1 + 0.15 + 0.25)
+    assert f.link_loss == 0.0 and f.cmd_gap_max_ms == pytest.approx(20)
+
+
+def test_loss_from_seq_gaps():
+    stats = LinkStats()
+    t = feed(stats, [s for s in range(1, 101) if s % 10], period_ms=10)  # every 10th lost
+    assert stats.figures(t).link_loss == pytest.approx(0.1, abs=0.02)
+
+
+def test_open_gap_grows_during_an_outage_and_the_window_forgets():
+    stats = LinkStats()
+    t = feed(stats, range(1, 11))
+    assert stats.figures(t + 600 * MS).cmd_gap_max_ms == pytest.approx(600)
+    t = feed(stats, range(11, 80), t0=t + 600 * MS)
+    assert stats.figures(t).cmd_gap_max_ms == pytest.approx(20)  # > 1 s later
+
+
+def test_reset_forgets_the_session():
+    stats = LinkStats()
+    t = feed(stats, range(1, 11))
+    stats.reset()
+    f = stats.figures(t)
+    assert f.cmd_age_p50_ms is None and f.link_loss is None and f.view_age_ms is None
