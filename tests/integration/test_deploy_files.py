@@ -18,9 +18,9 @@ DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 
 
 @pytest.mark.parametrize("name", sorted(p.name for p in DEPLOY.glob("*.json5")))
-def test_zenoh_files_load_with_the_800ms_lease(name):
+def test_zenoh_files_load_with_the_2s_lease(name):
     config = build_config(ZenohOptions(config_file=str(DEPLOY / name)))
-    assert config.get_json("transport/link/tx/lease") == "800"
+    assert config.get_json("transport/link/tx/lease") == "2000"
     assert config.get_json("scouting/multicast/enabled") == "false"
 
 

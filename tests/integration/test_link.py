@@ -150,16 +150,16 @@ def test_operator_sigstop_holds_within_the_command_timeout(port, procs, observer
     assert (hold - stopped) / MS <= 250 + 100
     zero = observer.wait_for("a zero command", lambda: first_zero_after(observer.base(), stopped))
     assert (zero - stopped) / MS <= 250 + 100 + STOP_MS
-    # The hung peer's TCP link stays open; the 800 ms lease drops it (and its liveliness token)
-    # within 1 s (DESIGN 8: operator lost).
+    # The hung peer's TCP link stays open; the 2 s lease drops it (and its liveliness token)
+    # within 2 s (DESIGN 8: operator lost; a shorter outage would keep the session).
     lost = observer.wait_for(
         "operator lost",
         lambda: next(
             (rx for rx, s in observer.rec.state if s.reason == "operator alice lost"), None
         ),
-        3,
+        4,
     )
-    assert (lost - stopped) / MS <= 1000
+    assert (lost - stopped) / MS <= 2000 + 150
     # Resumed with the stick still forward: it reconnects and retakes control, but no jump.
     procs.children["op"].send_signal(signal.SIGCONT)
     observer.wait_for(

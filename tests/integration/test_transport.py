@@ -21,11 +21,11 @@ def get(config, key):
     return json.loads(config.get_json(key))
 
 
-def test_defaults_peer_no_multicast_800ms_lease_explicit_endpoints():
+def test_defaults_peer_no_multicast_2s_lease_explicit_endpoints():
     c = build_config(ZenohOptions(connect=("tcp/127.0.0.1:1234",)))
     assert get(c, "mode") == "peer"
     assert get(c, "scouting/multicast/enabled") is False
-    assert get(c, "transport/link/tx/lease") == 800
+    assert get(c, "transport/link/tx/lease") == 2000
     assert get(c, "transport/link/tx/keep_alive") == 4
     assert get(c, "connect/endpoints") == ["tcp/127.0.0.1:1234"]
     assert get(c, "listen/endpoints") == []  # a connecting peer opens no port of its own
