@@ -185,9 +185,9 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
             ),
             resume_window_s=_number(link, "resume_window_s", defaults.resume_window_s),
             link_aware=(
-                args.link_aware
-                if args.link_aware is not None
-                else _flag(link, "link_aware", defaults.link_aware)
+                _flag(link, "link_aware", defaults.link_aware)
+                if getattr(args, "link_aware", None) is None
+                else bool(args.link_aware)
             ),
             reaction_time_s=_number(link, "reaction_time_s", defaults.reaction_time_s),
             blind_time_direct_s=_number(link, "blind_time_direct_s", defaults.blind_time_direct_s),

@@ -221,6 +221,7 @@ class RobotController:
         self._previous = (0.0, 0.0)
         self._last_step_ns: int | None = None
         self._last_drive_epoch = -1  # control epoch of the last DRIVING cycle (resume)
+        self._stale_rx_ns: int | None = None  # last stale command from the operator in control
         self._last_drive_ns = start_ns
         self._link = LinkStats(
             reaction_time_s=config.reaction_time_s, unknown_part_s=config.command_timeout_s
@@ -244,7 +245,7 @@ class RobotController:
         """Decode and vet one payload from ``egc/<robot>/cmd``; never raises."""
         decoded = decode_command(payload)
         if isinstance(decoded, Rejection):
-            return self._reject(None, decoded)
+            return self._reject(None, decoded, now_ns)
         cmd = decoded
         if cmd.estop:
             self._estop_pending = True
@@ -255,17 +256,20 @@ class RobotController:
         latency_ns: int | None = None
         if cmd.stamp_ns == 0:
             if cfg.require_clock_sync:
-                return self._reject(cmd, Rejection(RejectReason.STALE, "operator not synchronised"))
+                return self._reject(
+                    cmd, Rejection(RejectReason.STALE, "operator not synchronised"), now_ns
+                )
         else:
             latency_ns = now_ns - cmd.stamp_ns
             if latency_ns > max_age_ns:
                 return self._reject(
-                    cmd, Rejection(RejectReason.STALE, f"{latency_ns / 1e6:.0f} ms old")
+                    cmd, Rejection(RejectReason.STALE, f"{latency_ns / 1e6:.0f} ms old"), now_ns
                 )
             if latency_ns < -max_age_ns:
                 return self._reject(
                     cmd,
                     Rejection(RejectReason.STALE, f"stamped {-latency_ns / 1e6:.0f} ms ahead"),
+                    now_ns,
                 )
         track = self._tracks.get(cmd.op)
         release_ns = int(cfg.release_timeout_s * NS_PER_S)
@@ -277,7 +281,9 @@ class RobotController:
                 if cmd.seq == track.last_seq
                 else RejectReason.OUT_OF_ORDER
             )
-            return self._reject(cmd, Rejection(reason, f"seq {cmd.seq} after {track.last_seq}"))
+            return self._reject(
+                cmd, Rejection(reason, f"seq {cmd.seq} after {track.last_seq}"), now_ns
+            )
         self._track(cmd.op, cmd.seq, now_ns)
         took_control = False
         if self._controller_op is None and cmd.deadman:
@@ -289,7 +295,9 @@ class RobotController:
         if self._controller_op != cmd.op:
             holder = self._controller_op or "nobody (hold the deadman to take control)"
             return self._reject(
-                cmd, Rejection(RejectReason.NOT_IN_CONTROL, f"{cmd.op}: control held by {holder}")
+                cmd,
+                Rejection(RejectReason.NOT_IN_CONTROL, f"{cmd.op}: control held by {holder}"),
+                now_ns,
             )
         self._command = cmd
         self._command_rx_ns = now_ns
@@ -339,7 +347,9 @@ class RobotController:
             self._release(f"operator {self._controller_op} silent")
             cmd = None
         fresh = cmd is not None and self._command_fresh(cmd, now_ns)
-        timed_out = now_ns - self._command_rx_ns > cfg.command_timeout_s * NS_PER_S
+        timeout_ns = cfg.command_timeout_s * NS_PER_S
+        timed_out = now_ns - self._command_rx_ns > timeout_ns
+        stale_arriving = self._stale_rx_ns is not None and now_ns - self._stale_rx_ns <= timeout_ns
         session_kept = cfg.link_aware and self._last_drive_epoch == self._control_epoch
         scan = self._scan
         scan_fresh = scan is not None and now_ns - scan.rx_ns <= cfg.scan_timeout_s * NS_PER_S
@@ -355,7 +365,7 @@ class RobotController:
             base_stopped=max(abs(self._previous[0]), abs(self._previous[1])) < _STOPPED_EPS,
             same_control=self._driving_epoch == self._control_epoch,
             no_operator_reason=self._no_operator_reason,
-            stale_reason=COMMAND_TIMEOUT if timed_out else STALE_COMMANDS,
+            stale_reason=STALE_COMMANDS if not timed_out or stale_arriving else COMMAND_TIMEOUT,
             session_kept=session_kept,
             resume_allowed=session_kept
             and now_ns - self._last_drive_ns <= cfg.resume_window_s * NS_PER_S,
@@ -485,8 +495,13 @@ class RobotController:
             v_lim_latency=snap.v_lim_mps,
         )
 
-    def _reject(self, cmd: OperatorCommand | None, rejection: Rejection) -> CommandVerdict:
+    def _reject(
+        self, cmd: OperatorCommand | None, rejection: Rejection, now_ns: int
+    ) -> CommandVerdict:
         self.counters.rejected[rejection.reason.value] += 1
+        stale = rejection.reason is RejectReason.STALE
+        if stale and cmd is not None and cmd.op == self._controller_op:
+            self._stale_rx_ns = now_ns  # commands arrive, but too old (HOLD reason)
         return CommandVerdict(cmd, rejection)
 
     def _track(self, operator_id: str, seq: int, now_ns: int) -> None:

@@ -306,13 +306,21 @@ class Observer:
         self.session.close()
 
 
-def assert_no_jump(telemetry: list[Telemetry]) -> None:
-    """Every entry into DRIVING happened on a centred command (v_ref = w_ref = 0)."""
+def assert_no_jump(telemetry: list[Telemetry], accel_mps2: float = 0.3) -> None:
+    """Every entry into DRIVING happened on a centred command (v_ref = w_ref = 0), except a
+    short-gap resume (DESIGN 8), which must ramp up from what the base had at the acceleration
+    limit (one cycle of at most 0.1 s at ``accel_mps2``)."""
     previous = None
     for t in telemetry:
-        if t.state == "DRIVING" and previous is not None and previous != "DRIVING":
-            assert t.v_ref == 0.0 and t.w_ref == 0.0, f"robot entered DRIVING on a deflection {t}"
-        previous = t.state
+        if t.state == "DRIVING" and previous is not None and previous.state != "DRIVING":
+            if t.reason == "resumed after a link gap":
+                ramp = abs(previous.v_cmd) + accel_mps2 * 0.1 + 1e-9
+                assert abs(t.v_cmd) <= ramp, f"resume jumped: {previous.v_cmd} -> {t.v_cmd}"
+            else:
+                assert t.v_ref == 0.0 and t.w_ref == 0.0, (
+                    f"robot entered DRIVING on a deflection {t}"
+                )
+        previous = t
 
 
 def first_zero_after(base: list[tuple[int, BaseCommand]], since_ns: int) -> int | None:
