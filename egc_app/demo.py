@@ -7,6 +7,11 @@ separate processes talking Zenoh on loopback (DESIGN 1; issue 4, the README's ma
   viewer when there is a display, otherwise (or with ``--save``) a ``.rrd`` recording, and it
   says where on stderr.
 
+- with ``--up SPEC`` / ``--down SPEC`` (DESIGN 10 link specs, e.g. ``delay=200,jitter=50``), an
+  ``egc-teleop link`` process sits between them and the operator connects through it, so the
+  demo shows how the product drives on a cellular, Wi-Fi or satellite link; ``--transport udp``
+  runs the Zenoh link over UDP instead of TCP.
+
 The demo ends when the script ends (or after ``--duration``), or on SIGINT/SIGTERM, which it
 forwards. The children are asked to stop (SIGTERM), killed if they do not, and die with the demo
 if it is killed itself (PR_SET_PDEATHSIG), so nothing is left behind. Then it prints a summary:
@@ -19,15 +24,17 @@ import argparse
 import ctypes
 import json
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
 from egc_common.errors import UsageError
-from egc_common.transport import free_tcp_port, loopback_endpoint
+from egc_common.transport import free_tcp_port
 
 STOP_TIMEOUT_S = 10.0
 _PR_SET_PDEATHSIG = 1
@@ -42,6 +49,20 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--world", default="hallway", help="built-in world or map file")
     parser.add_argument("--profile", default="pioneer3dx")
     parser.add_argument("--script", default="demo", help="built-in operator script")
+    link = parser.add_argument_group("emulated link (egc-teleop link between the two)")
+    link.add_argument("--up", metavar="SPEC", help="operator -> robot, e.g. delay=200,jitter=50")
+    link.add_argument("--down", metavar="SPEC", help="robot -> operator, same form")
+    link.add_argument("--scenario", metavar="FILE", help="a link scenario file (TOML)")
+    link.add_argument("--link-seed", type=int, default=0, metavar="N", help="(default: 0)")
+    link.add_argument(
+        "--transport", choices=("tcp", "udp"), default="tcp", help="Zenoh link (default: tcp)"
+    )
+    parser.add_argument(
+        "--no-link-aware",
+        action="store_true",
+        help="run the robot without link-aware driving, to compare",
+    )
+    parser.add_argument("--json", metavar="FILE", help="also write the summary as JSON")
 
 
 def _die_with_parent() -> None:
@@ -92,9 +113,44 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"  command latency p50 {ms('p50_ms')}, p90 {ms('p90_ms')}, p99 {ms('p99_ms')}, "
         f"max {ms('max_ms')} (operator publish -> robot, {lat.get('n', 0)} commands)",
         f"  robot cycles    {summary['cycles']} {summary.get('cycles_by_state', {})}",
+        f"  time by state   {_seconds(summary.get('seconds_by_state', {}))}; HOLD entered "
+        f"{summary.get('hold_events', 0)} times; speed capped by latency "
+        f"{summary.get('latency_limited_s', 0.0):.1f} s",
         f"  rejected        {summary.get('rejected') or 'none'}",
     ]
     return "\n".join(lines)
+
+
+def _seconds(by_state: dict[str, float]) -> str:
+    total = sum(by_state.values())
+    if not total:
+        return "n/a"
+    return ", ".join(f"{k} {v:.1f} s ({100 * v / total:.0f}%)" for k, v in sorted(by_state.items()))
+
+
+def _link_cmd(args: argparse.Namespace, listen: str, connect: str) -> list[str]:
+    cmd = ["link", "--listen", listen, "--connect", connect, "--seed", str(args.link_seed)]
+    for flag, value in (("--up", args.up), ("--down", args.down), ("--scenario", args.scenario)):
+        if value is not None:
+            cmd += [flag, value]
+    return cmd
+
+
+def _wait_ready(proc: subprocess.Popen[bytes], host: str, port: int, udp: bool) -> None:
+    """Wait until the link relay listens (TCP: connectable; UDP: a bound port is all we see)."""
+    deadline = time.monotonic() + STOP_TIMEOUT_S
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise UsageError(f"the link relay exited with code {proc.returncode}")
+        if udp:
+            time.sleep(0.5)
+            return
+        try:
+            with socket.create_connection((host, port), timeout=0.2):
+                return
+        except OSError:
+            time.sleep(0.05)
+    raise UsageError("the link relay did not start listening")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -102,13 +158,21 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--duration must be positive")
     if args.save is not None and args.no_view:
         raise UsageError("--save and --no-view exclude each other")
-    endpoint = loopback_endpoint(free_tcp_port())
+    linked = args.up is not None or args.down is not None or args.scenario is not None
+    proto = args.transport
+    endpoint = f"{proto}/127.0.0.1:{free_tcp_port()}"
+    operator_endpoint = endpoint
+    link_port = free_tcp_port()
+    if linked:
+        operator_endpoint = f"{proto}/127.0.0.1:{link_port}"
     workdir = Path(tempfile.mkdtemp(prefix="egc-demo-"))
     summary_path = workdir / "robot-summary.json"
     robot_cmd = ["robot", "--driver", "sim", "--map", args.world, "--profile", args.profile]
     robot_cmd += ["--listen", endpoint, "--summary", str(summary_path)]
+    if args.no_link_aware:
+        robot_cmd.append("--no-link-aware")
     operator_cmd = ["operator", "--script", args.script, "--operator-id", "demo-operator"]
-    operator_cmd += ["--zenoh-connect", endpoint]
+    operator_cmd += ["--zenoh-connect", operator_endpoint]
     if args.duration is not None:
         operator_cmd += ["--loop", "--duration", str(args.duration)]
     if args.no_view:
@@ -120,21 +184,34 @@ def run(args: argparse.Namespace) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     robot = _start(robot_cmd)
-    operator = _start(operator_cmd)
+    relay: subprocess.Popen[bytes] | None = None
+    operator: subprocess.Popen[bytes] | None = None
     try:
+        if linked:
+            relay = _start(_link_cmd(args, operator_endpoint, endpoint))
+            _wait_ready(relay, "127.0.0.1", link_port, proto == "udp")
+        operator = _start(operator_cmd)
         while not stop.wait(0.1):
             if operator.poll() is not None or robot.poll() is not None:
                 break
+            if relay is not None and relay.poll() is not None:
+                break
     finally:
-        operator_rc = _stop(operator)
+        operator_rc = None if operator is None else _stop(operator)
         robot_rc = _stop(robot)
+        relay_rc = None if relay is None else _stop(relay)
     if robot_rc != 0 or operator_rc not in (0, -signal.SIGTERM):
         print(f"demo: robot exited {robot_rc}, operator {operator_rc}", file=sys.stderr)
+        return 1
+    if relay_rc not in (None, 0):
+        print(f"demo: the link relay exited {relay_rc}", file=sys.stderr)
         return 1
     try:
         summary = json.loads(summary_path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
         print(f"demo: no robot summary ({exc})", file=sys.stderr)
         return 1
+    if args.json is not None:
+        Path(args.json).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     print(format_summary(summary), flush=True)
     return 0
