@@ -137,11 +137,11 @@ def _link_cmd(args: argparse.Namespace, listen: str, connect: str) -> list[str]:
 
 
 def _wait_ready(proc: subprocess.Popen[bytes], host: str, port: int, udp: bool) -> None:
-    """Wait until the link relay listens (TCP: connectable; UDP: a bound port is all we see)."""
-    deadline = time.monotonic() + STOP_TIMEOUT_S
+    """Wait until ``proc`` listens (TCP: connectable; UDP: nothing to see, a short pause)."""
+    deadline = time.monotonic() + 3 * STOP_TIMEOUT_S
     while time.monotonic() < deadline:
         if proc.poll() is not None:
-            raise UsageError(f"the link relay exited with code {proc.returncode}")
+            raise UsageError(f"{proc.args[3]} exited with code {proc.returncode}")
         if udp:
             time.sleep(0.5)
             return
@@ -150,7 +150,7 @@ def _wait_ready(proc: subprocess.Popen[bytes], host: str, port: int, udp: bool) 
                 return
         except OSError:
             time.sleep(0.05)
-    raise UsageError("the link relay did not start listening")
+    raise UsageError(f"{proc.args[3]} did not start listening on port {port}")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -188,6 +188,8 @@ def run(args: argparse.Namespace) -> int:
     operator: subprocess.Popen[bytes] | None = None
     try:
         if linked:
+            if proto == "tcp":  # the relay checks that the robot side is reachable
+                _wait_ready(robot, "127.0.0.1", int(endpoint.rsplit(":", 1)[1]), False)
             relay = _start(_link_cmd(args, operator_endpoint, endpoint))
             _wait_ready(relay, "127.0.0.1", link_port, proto == "udp")
         operator = _start(operator_cmd)
