@@ -1,15 +1,28 @@
-"""The operator's one-line terminal status: link round trip, robot state, w_SI, rejections.
+"""The operator's one-line terminal status: what the robot does and why, then the link in numbers.
 
-On a terminal the line is redrawn in place a few times a second. When stdout is not a TTY
-(a log file, a pipe, CI) the same text is printed as plain lines, only when the robot's state
-or the control situation changes and otherwise at most every ``plain_period_s``, so logs stay
-readable.
+The line starts with the situation in an operator's words (``situation``): why the robot holds
+and what to do about it, or why it is slowed, e.g. ``HOLD: link gap (no command for 0.4 s) -
+keep the stick, it resumes`` or ``SLOWED: link delay 1.3 s -> speed capped at 0.10 m/s``. Then
+the link figures (``link_figures``: clock-sync round trip, the robot's command age p50/p90, the
+largest gap between commands, the loss), then w_SI, rejections, mode, deadman and control.
+Every telemetry figure may be unknown (None: an older robot, or none measured yet); unknown
+figures are left out.
+
+On a terminal the line is redrawn in place a few times a second, cut to the terminal's width
+so that it never wraps. When stdout is not a TTY (a log file, a pipe, CI) the same text is
+printed as plain lines, only when the robot's state or reason, the latency cap or the control
+situation changes and otherwise at most every ``plain_period_s``, so logs stay readable.
 """
 
 from __future__ import annotations
 
+import shutil
 from dataclasses import dataclass
 from typing import TextIO
+
+# DESIGN 8 defaults, as the operator cannot read the robot's configuration.
+RESUME_WINDOW_S = 2.0
+MAX_COMMAND_AGE_MS = {"direct": 300, "shared": 1000}
 
 
 @dataclass(frozen=True, slots=True)
@@ -23,38 +36,145 @@ class Status:
     mode: str
     deadman: bool
     in_control: bool | None
+    # From the newest telemetry (DESIGN 7, 9); None when unknown.
+    limiter: str | None = None
+    filter: str | None = None
+    v_lim_latency: float | None = None  # m/s
+    loop_delay_ms: float | None = None  # tau
+    cmd_age_ms: float | None = None  # age of the robot's newest command
+    cmd_age_p50_ms: float | None = None
+    cmd_age_p90_ms: float | None = None
+    cmd_gap_max_ms: float | None = None
+    link_loss: float | None = None  # fraction, 0-1
+    view_age_ms: float | None = None  # what this operator reports with its commands
+
+
+def _seconds(ms: float) -> str:
+    return f"{ms / 1000.0:.1f} s"
+
+
+def _hold(s: Status, reason: str) -> str:
+    r = reason.lower()
+    if r == "command timeout":
+        gap = s.cmd_gap_max_ms if s.cmd_gap_max_ms is not None else s.cmd_age_ms
+        what = "link gap" if gap is None else f"link gap (no command for {_seconds(gap)})"
+        if gap is not None and gap > RESUME_WINDOW_S * 1000.0:
+            return f"HOLD: {what} - centre the stick to drive again"
+        return f"HOLD: {what} - keep the stick, it resumes"
+    if r == "stale commands":
+        limit = MAX_COMMAND_AGE_MS.get(s.mode)
+        age = s.cmd_age_p50_ms if s.cmd_age_p50_ms is not None else s.cmd_age_ms
+        details = [] if age is None else [f"{age:.0f} ms old"]
+        if limit is not None:
+            details.append(f"limit {limit} ms in {s.mode} mode")
+        why = f" ({', '.join(details)})" if details else ""
+        return f"HOLD: commands arrive too late{why} - keep the stick, it resumes"
+    if r == "deadman released":
+        return "HOLD: deadman released - hold it and centre the stick to drive"
+    if r == "sensor stale":
+        return "HOLD: robot's sensor is stale (no fresh scan) - wait, then centre the stick"
+    if r == "waiting for a centred stick":
+        return "HOLD: centre the stick to drive"
+    if r == "estop reset":
+        return "HOLD: e-stop reset - centre the stick to drive"
+    if "resum" in r:
+        return "HOLD: resuming after a link gap - keep the stick"
+    if r.startswith("operator ") and r.endswith((" lost", " silent")):
+        return f"HOLD: {reason} - stopping; hold the deadman, stick centred, to take control"
+    return f"HOLD: {reason}"
+
+
+def _driving(s: Status, reason: str) -> str:
+    limiter = s.limiter or "none"
+    if limiter == "latency":
+        delay = "" if s.loop_delay_ms is None else f" {_seconds(s.loop_delay_ms)}"
+        cap = "" if s.v_lim_latency is None else f" at {s.v_lim_latency:.2f} m/s"
+        return f"SLOWED: link delay{delay} -> speed capped{cap}"
+    if limiter == "egc":
+        return f"SLOWED: obstacle (filter {s.filter or 'egc'})"
+    if limiter == "sweep":
+        return "SLOWED: obstacle next to the footprint (sweep check)"
+    if "resum" in reason.lower():
+        return "DRIVING: resumed after a link gap, ramping up"
+    if limiter == "limits":
+        return "DRIVING (at the robot's speed/acceleration limits)"
+    return "DRIVING"
+
+
+def situation(s: Status) -> str:
+    """What the robot does and why, in an operator's words (the status line's first part)."""
+    state = s.robot_state
+    if state is None:
+        return "robot: no telemetry"
+    reason = s.reason or ""
+    if state == "ESTOP":
+        return "ESTOP: latched - release the e-stop, centre the stick, hold the deadman, reset"
+    if state == "DRIVING":
+        return _driving(s, reason)
+    if state == "IDLE":
+        why = reason or "no operator"
+        return f"IDLE: {why} - hold the deadman with the stick centred to take control"
+    if state == "HOLD":
+        return _hold(s, reason) if reason else "HOLD"
+    return f"{state}: {reason}" if reason else state
+
+
+def link_figures(s: Status) -> str:
+    """The link in numbers: round trip, command age p50/p90, gap max, loss (known ones)."""
+    parts = ["link --" if s.rtt_ms is None else f"rtt {s.rtt_ms:5.1f} ms"]
+    if not s.synchronised:
+        parts[0] += " (clock not synced)"
+    if s.cmd_age_p50_ms is not None:
+        p90 = "--" if s.cmd_age_p90_ms is None else f"{s.cmd_age_p90_ms:.0f}"
+        parts.append(f"cmd age p50/p90 {s.cmd_age_p50_ms:.0f}/{p90} ms")
+    if s.cmd_gap_max_ms is not None:
+        parts.append(f"gap max {s.cmd_gap_max_ms:.0f} ms")
+    if s.link_loss is not None:
+        parts.append(f"loss {100.0 * s.link_loss:.1f} %")
+    return ", ".join(parts)
 
 
 def format_status(s: Status) -> str:
-    link = "link --" if s.rtt_ms is None else f"rtt {s.rtt_ms:5.1f} ms"
-    if not s.synchronised:
-        link += " (clock not synced)"
-    if s.robot_state is None:
-        robot = "robot: no telemetry"
-    else:
-        robot = f"robot {s.robot_state}" + (f" ({s.reason})" if s.reason else "")
     w_si = "w_SI  --" if s.w_si is None else f"w_SI {s.w_si:4.2f}"
     rejected = "rejected --" if s.rejected is None else f"rejected {s.rejected}"
     control = {None: "", True: " | in control", False: " | NOT in control"}[s.in_control]
     deadman = "deadman ON" if s.deadman else "deadman off"
-    return f"{link} | {robot} | {w_si} | {rejected} | {s.mode} | {deadman}{control}"
+    return (
+        f"{situation(s)} | {link_figures(s)} | {w_si} | {rejected} | {s.mode} | {deadman}{control}"
+    )
 
 
 class StatusLine:
-    def __init__(self, stream: TextIO, tty: bool | None = None, plain_period_s: float = 5.0):
+    def __init__(
+        self,
+        stream: TextIO,
+        tty: bool | None = None,
+        plain_period_s: float = 5.0,
+        width: int | None = None,
+    ):
         self._stream = stream
         self._tty = stream.isatty() if tty is None else tty
         self._plain_period_s = plain_period_s
+        self._width = width  # None: the terminal's, asked at every redraw
         self._last_key: tuple[object, ...] | None = None
         self._last_plain_s = -1e9
 
     def show(self, status: Status, now_s: float) -> None:
         text = format_status(status)
         if self._tty:
+            width = self._width or shutil.get_terminal_size(fallback=(200, 24)).columns
+            if len(text) > width - 1:  # a wrapped line cannot be redrawn in place
+                text = text[: max(1, width - 2)] + "~"
             self._stream.write("\r\x1b[2K" + text)
             self._stream.flush()
             return
-        key = (status.robot_state, status.reason, status.in_control, status.synchronised)
+        key = (
+            status.robot_state,
+            status.reason,
+            status.limiter == "latency",  # sustained; egc/none may alternate every cycle
+            status.in_control,
+            status.synchronised,
+        )
         if key != self._last_key or now_s - self._last_plain_s >= self._plain_period_s:
             self._stream.write(text + "\n")
             self._stream.flush()

@@ -41,7 +41,7 @@ STATUS = Status(0.42, True, "DRIVING", "fresh centred command", 0.83, 2, "shared
 
 def test_status_text():
     text = format_status(STATUS)
-    for part in ("rtt   0.4 ms", "robot DRIVING", "w_SI 0.83", "rejected 2", "in control"):
+    for part in ("DRIVING |", "rtt   0.4 ms", "w_SI 0.83", "rejected 2", "in control"):
         assert part in text
 
 
@@ -63,4 +63,4 @@ def test_not_a_tty_prints_plain_lines_on_change_or_every_few_seconds():
     line.show(held, 7.0)
     lines = out.getvalue().splitlines()
     assert len(lines) == 3 and "\r" not in out.getvalue()
-    assert "robot HOLD (command timeout)" in lines[1]
+    assert lines[1].startswith("HOLD: link gap - keep the stick, it resumes")

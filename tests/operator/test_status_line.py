@@ -1,0 +1,200 @@
+"""The status line says why the robot holds or is slowed, and shows the link in numbers."""
+
+from __future__ import annotations
+
+import io
+from dataclasses import replace
+
+import pytest
+from egc_operator.status_line import Status, StatusLine, format_status, link_figures, situation
+
+BASE = Status(
+    rtt_ms=12.3,
+    synchronised=True,
+    robot_state="DRIVING",
+    reason="fresh centred command",
+    w_si=0.9,
+    rejected=0,
+    mode="shared",
+    deadman=True,
+    in_control=True,
+)
+
+# (state, reason, limiter, extra Status fields, expected situation)
+CASES = [
+    ("DRIVING", "fresh centred command", "none", {}, "DRIVING"),
+    ("DRIVING", "fresh centred command", None, {}, "DRIVING"),
+    (
+        "DRIVING",
+        "fresh centred command",
+        "latency",
+        {"loop_delay_ms": 1310.0, "v_lim_latency": 0.1},
+        "SLOWED: link delay 1.3 s -> speed capped at 0.10 m/s",
+    ),
+    ("DRIVING", "x", "latency", {}, "SLOWED: link delay -> speed capped"),
+    ("DRIVING", "x", "egc", {"filter": "egc"}, "SLOWED: obstacle (filter egc)"),
+    ("DRIVING", "x", "egc", {"filter": None}, "SLOWED: obstacle (filter egc)"),
+    ("DRIVING", "x", "sweep", {}, "SLOWED: obstacle next to the footprint (sweep check)"),
+    (
+        "DRIVING",
+        "fresh centred command",
+        "limits",
+        {},
+        "DRIVING (at the robot's speed/acceleration limits)",
+    ),
+    (
+        "DRIVING",
+        "resumed after a link gap",
+        "limits",
+        {},
+        "DRIVING: resumed after a link gap, ramping up",
+    ),
+    (
+        "HOLD",
+        "command timeout",
+        "watchdog",
+        {"cmd_gap_max_ms": 410.0},
+        "HOLD: link gap (no command for 0.4 s) - keep the stick, it resumes",
+    ),
+    (
+        "HOLD",
+        "command timeout",
+        "watchdog",
+        {"cmd_gap_max_ms": None, "cmd_age_ms": 380.0},
+        "HOLD: link gap (no command for 0.4 s) - keep the stick, it resumes",
+    ),
+    (
+        "HOLD",
+        "command timeout",
+        "watchdog",
+        {"cmd_gap_max_ms": 2600.0},
+        "HOLD: link gap (no command for 2.6 s) - centre the stick to drive again",
+    ),
+    ("HOLD", "command timeout", "watchdog", {}, "HOLD: link gap - keep the stick, it resumes"),
+    (
+        "HOLD",
+        "stale commands",
+        "watchdog",
+        {"cmd_age_p50_ms": 1240.0},
+        "HOLD: commands arrive too late (1240 ms old, limit 1000 ms in shared mode)"
+        " - keep the stick, it resumes",
+    ),
+    (
+        "HOLD",
+        "deadman released",
+        "hold",
+        {},
+        "HOLD: deadman released - hold it and centre the stick to drive",
+    ),
+    (
+        "HOLD",
+        "sensor stale",
+        "hold",
+        {},
+        "HOLD: robot's sensor is stale (no fresh scan) - wait, then centre the stick",
+    ),
+    ("HOLD", "waiting for a centred stick", "hold", {}, "HOLD: centre the stick to drive"),
+    ("HOLD", "estop reset", "hold", {}, "HOLD: e-stop reset - centre the stick to drive"),
+    (
+        "HOLD",
+        "resuming after a link gap",
+        "limits",
+        {},
+        "HOLD: resuming after a link gap - keep the stick",
+    ),
+    (
+        "HOLD",
+        "operator alice lost",
+        "hold",
+        {},
+        "HOLD: operator alice lost - stopping; hold the deadman, stick centred, to take control",
+    ),
+    ("HOLD", "something new", "hold", {}, "HOLD: something new"),
+    ("HOLD", None, "hold", {}, "HOLD"),
+    (
+        "ESTOP",
+        "estop",
+        "estop",
+        {},
+        "ESTOP: latched - release the e-stop, centre the stick, hold the deadman, reset",
+    ),
+    (
+        "IDLE",
+        "no operator",
+        "none",
+        {},
+        "IDLE: no operator - hold the deadman with the stick centred to take control",
+    ),
+    (
+        "IDLE",
+        "operator bob silent",
+        "none",
+        {},
+        "IDLE: operator bob silent - hold the deadman with the stick centred to take control",
+    ),
+    (None, None, None, {}, "robot: no telemetry"),
+]
+
+
+@pytest.mark.parametrize(("state", "reason", "limiter", "extra", "expected"), CASES)
+def test_situation_in_words(
+    state: str | None,
+    reason: str | None,
+    limiter: str | None,
+    extra: dict[str, object],
+    expected: str,
+) -> None:
+    status = replace(BASE, robot_state=state, reason=reason, limiter=limiter, **extra)  # type: ignore[arg-type]
+    assert situation(status) == expected
+    assert format_status(status).startswith(expected + " | ")
+
+
+def test_stale_commands_in_direct_mode_name_the_direct_limit() -> None:
+    status = replace(BASE, robot_state="HOLD", reason="stale commands", mode="direct")
+    assert "(limit 300 ms in direct mode)" in situation(status)
+
+
+def test_link_figures_in_plain_numbers() -> None:
+    full = replace(
+        BASE,
+        cmd_age_p50_ms=210.4,
+        cmd_age_p90_ms=262.0,
+        cmd_gap_max_ms=40.0,
+        link_loss=0.012,
+    )
+    assert link_figures(full) == (
+        "rtt  12.3 ms, cmd age p50/p90 210/262 ms, gap max 40 ms, loss 1.2 %"
+    )
+    assert link_figures(replace(full, cmd_age_p90_ms=None)).startswith(
+        "rtt  12.3 ms, cmd age p50/p90 210/-- ms"
+    )
+    # an older robot reports none of them: only what the operator measures itself
+    assert link_figures(BASE) == "rtt  12.3 ms"
+    unknown = replace(BASE, rtt_ms=None, synchronised=False)
+    assert link_figures(unknown) == "link -- (clock not synced)"
+
+
+def test_the_whole_line_keeps_its_order() -> None:
+    text = format_status(replace(BASE, link_loss=0.0, in_control=False, deadman=False))
+    assert text == (
+        "DRIVING | rtt  12.3 ms, loss 0.0 % | w_SI 0.90 | rejected 0 | shared | deadman off"
+        " | NOT in control"
+    )
+
+
+def test_a_terminal_line_is_cut_to_the_terminal_width() -> None:
+    out = io.StringIO()
+    StatusLine(out, tty=True, width=40).show(BASE, 0.0)
+    shown = out.getvalue().removeprefix("\r\x1b[2K")
+    assert len(shown) == 39 and shown.endswith("~")
+
+
+def test_plain_lines_follow_the_latency_cap_but_not_a_flickering_filter() -> None:
+    out = io.StringIO()
+    line = StatusLine(out, tty=False, plain_period_s=5.0)
+    line.show(BASE, 0.0)
+    line.show(replace(BASE, limiter="egc"), 0.2)  # the filter acts on and off: no new line
+    line.show(replace(BASE, limiter="none"), 0.4)
+    line.show(replace(BASE, limiter="latency", v_lim_latency=0.1), 0.6)
+    lines = out.getvalue().splitlines()
+    assert len(lines) == 2 and lines[1].startswith("SLOWED: link delay")
