@@ -5,7 +5,8 @@ the local send and receive times this gives one sample (Cristian's method):
 
     offset = robot_stamp - (t_send + t_recv) / 2,    rtt = t_recv - t_send,
 
-whose error is at most rtt / 2. ``ClockSync`` keeps the last ``window`` samples and uses the one
+whose error is at most rtt / 2. Samples slower than ``max_rtt_ns`` (default 3 s, above a
+satellite link's round trip with jitter) are ignored. ``ClockSync`` keeps the last ``window`` samples and uses the one
 with the smallest round trip (the least queueing delay). All arithmetic is on integer
 nanoseconds, so clocks that differ by hours (or machines booted days apart) lose no precision.
 If a new sample's error interval does not overlap the estimate's, the robot's clock has jumped
@@ -30,7 +31,7 @@ class ClockSample:
 
 
 class ClockSync:
-    def __init__(self, window: int = 16, max_rtt_ns: int = 500 * _MS) -> None:
+    def __init__(self, window: int = 16, max_rtt_ns: int = 3000 * _MS) -> None:
         if window < 1:
             raise ValueError("window must be >= 1")
         self._samples: deque[ClockSample] = deque(maxlen=window)
