@@ -1,6 +1,7 @@
 """``egc-teleop episode``: headless episodes in the simulator, printed as JSON (pinned CLI).
 
-    egc-teleop episode --map PATH --start X,Y,YAW --goal X,Y [--operator goal|forward|FILE]
+    egc-teleop episode --map PATH --start X,Y,YAW --goal X,Y
+        [--operator goal|forward|sighted|route|FILE]
         [--filter none|egc] [--profile NAME] [--max-time S] [--goal-tolerance M] [--seed N]
         [--stall-time S] [--record OUT.rrd] --json
     egc-teleop episode --batch SUITE.jsonl | --random-worlds N  [...] [--jobs J] [--out FILE]
@@ -65,6 +66,7 @@ from egc_robot.pipeline import FILTERS, Limiter, PipelineConfig, PipelineResult,
 from egc_robot.safety import decelerate
 from egc_sim.episodes import ControlOutput, EpisodeResult, TraceRow, run_episode
 from egc_sim.grid_world import World
+from egc_sim.observation import SimSensor
 from egc_sim.operators import Stick, make_operator
 from egc_sim.simulator import Simulator
 from egc_sim.worlds import WorldError, load_world
@@ -160,7 +162,16 @@ def run_settings(
     mode = "shared" if settings.filter == "egc" else "direct"
     try:
         sim = Simulator(world, profile, start, seed=settings.seed)
-        operator = make_operator(settings.operator, goal, mode)
+        operator = make_operator(
+            settings.operator,
+            goal,
+            mode,
+            seed=settings.seed,
+            world=world,
+            start=start,
+            half_width_m=0.5 * profile.width_m,
+            sensor=SimSensor(sim),
+        )
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     # The simulated lidar declares "no return" as free: within its range it truly is.
@@ -233,7 +244,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--start", help="start pose X,Y,YAW (m, m, rad); default: the map's")
     parser.add_argument("--goal", help="goal X,Y (m); default: the map's")
     parser.add_argument(
-        "--operator", default="goal", help="goal | forward | a joystick CSV file (default goal)"
+        "--operator",
+        default="goal",
+        help="goal | forward | sighted | route | a joystick CSV file (default goal)",
     )
     parser.add_argument("--filter", default="egc", help="none (direct mode) | egc (default)")
     parser.add_argument(

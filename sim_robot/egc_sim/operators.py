@@ -9,6 +9,9 @@ paper's eq. 4; operators know nothing about the robot's speeds.
 - ``GoalOperator``: a naive operator who steers at the goal and cannot see obstacles: turn rate
   proportional to the heading error, forward deflection ``cos(error)`` (turning in place while
   the goal is behind).
+- ``sighted`` (``sighted.SightedOperator``) and ``route`` (``route.RouteOperator``): the models
+  of the network-delay experiments (DESIGN 10), fed with what the operator view shows
+  (``observation``) rather than the true pose.
 - ``ReplayOperator``: a recorded joystick file, played back on the simulated clock. The file
   format is the one the operator process reads (``egc_common.joystick_file``): CSV with header
   ``t_s,x,y[,deadman][,mode][,estop][,reset]``; ``t_s`` non-decreasing seconds from the start,
@@ -21,15 +24,19 @@ paper's eq. 4; operators know nothing about the robot's speeds.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from egc_common.joystick import clamp_unit
 from egc_common.joystick_file import JoystickFileError, JoystickTrack, load_joystick_file
 from egc_common.kinematics import wrap_angle
 
-from egc_sim.grid_world import Pose
+from egc_sim.grid_world import Pose, World
+
+if TYPE_CHECKING:
+    from egc_sim.observation import Observation, ObservingOperator
 
 MODES = ("direct", "shared")
 
@@ -49,7 +56,7 @@ class Operator(Protocol):
     def command(self, t_s: float, pose: Pose) -> Stick: ...
 
 
-def _check_mode(mode: str) -> str:
+def check_mode(mode: str) -> str:
     if mode not in MODES:
         raise ValueError(f"operator mode must be direct or shared, got {mode!r}")
     return mode
@@ -63,7 +70,7 @@ class ForwardOperator:
     x_o: float = 1.0
 
     def __post_init__(self) -> None:
-        _check_mode(self.mode)
+        check_mode(self.mode)
 
     def command(self, t_s: float, pose: Pose) -> Stick:
         return Stick(clamp_unit(self.x_o), 0.0, True, self.mode)
@@ -81,7 +88,7 @@ class GoalOperator:
     gain: float = 2.0
 
     def __post_init__(self) -> None:
-        _check_mode(self.mode)
+        check_mode(self.mode)
         if not (math.isfinite(self.gain) and self.gain > 0):
             raise ValueError("goal operator gain must be positive")
 
@@ -108,11 +115,28 @@ class ReplayOperator:
         return Stick(s.x, s.y, s.deadman, s.mode, s.estop)
 
 
-def make_operator(spec: str, goal: tuple[float, float] | None, mode: str) -> Operator:
-    """``forward``, ``goal`` (needs the goal) or the path of a joystick file.
+def make_operator(
+    spec: str,
+    goal: tuple[float, float] | None,
+    mode: str,
+    *,
+    seed: int = 0,
+    world: World | None = None,
+    start: Pose | None = None,
+    half_width_m: float = 0.2,
+    sensor: Callable[[float, Pose], Observation] | None = None,
+) -> Operator:
+    """``forward``, ``goal`` (needs the goal), ``sighted[:K=V,...]`` (the goal),
+    ``route[:K=V,...]`` (the goal, the world and the start) or the path of a joystick file.
 
     ``mode`` is what the scripted operators select; a file carries its own per-row mode.
-    Raises ValueError (a ``JoystickFileError`` for files) with a clear message.
+    ``sighted`` and ``route`` observe the operator view (``observation``): with ``sensor`` (a
+    plain episode) they are wrapped to sense it at every command, without it they are returned
+    as they are for the caller to ``observe``. Their options: ``sighted:reaction_s=0.5,
+    noise_std=0.1,...`` (``sighted.SightedParams``), ``route:map=building,reaction_s=...``
+    (``route.RouteParams``; ``map=building`` plans on the map without its furniture).
+    ``seed`` seeds the steering noise; ``half_width_m`` is the robot's (route inflation, sighted
+    corridor). Raises ValueError (a ``JoystickFileError`` for files) with a clear message.
     """
     if spec == "forward":
         return ForwardOperator(mode)
@@ -120,9 +144,77 @@ def make_operator(spec: str, goal: tuple[float, float] | None, mode: str) -> Ope
         if goal is None:
             raise ValueError("the goal operator needs a goal")
         return GoalOperator(goal, mode)
+    name, _, options = spec.partition(":")
+    if name in ("sighted", "route"):
+        observing = _make_observing(name, options, goal, mode, seed, world, start, half_width_m)
+        if sensor is None:
+            return observing
+        from egc_sim.observation import Sensing
+
+        return Sensing(observing, sensor)
     try:
         return ReplayOperator.from_file(spec)
     except JoystickFileError as exc:
         raise JoystickFileError(
-            f"operator {spec!r} is neither forward, goal nor a joystick file: {exc}"
+            f"operator {spec!r} is neither forward, goal nor a joystick file "
+            f"(nor sighted or route): {exc}"
         ) from None
+
+
+def _options(name: str, text: str) -> dict[str, str]:
+    out: dict[str, str] = {}
+    for item in filter(None, (i.strip() for i in text.split(","))):
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip() or key.strip() in out:
+            raise ValueError(f"operator {name}: options are KEY=VALUE separated by commas")
+        out[key.strip()] = value.strip()
+    return out
+
+
+def _make_observing(
+    name: str,
+    options: str,
+    goal: tuple[float, float] | None,
+    mode: str,
+    seed: int,
+    world: World | None,
+    start: Pose | None,
+    half_width_m: float,
+) -> ObservingOperator:
+    from dataclasses import fields, replace
+
+    from egc_sim.route import RouteOperator, RouteParams
+    from egc_sim.sighted import SightedOperator, SightedParams
+
+    if goal is None:
+        raise ValueError(f"the {name} operator needs a goal")
+    opts = _options(name, options)
+    building = False
+    if name == "route":
+        map_choice = opts.pop("map", "full")
+        if map_choice not in ("full", "building"):
+            raise ValueError("operator route: map must be full or building")
+        building = map_choice == "building"
+    params_type: type[SightedParams] | type[RouteParams] = (
+        SightedParams if name == "sighted" else RouteParams
+    )
+    names = {f.name: f.type for f in fields(params_type)}
+    defaults: SightedParams | RouteParams = (
+        SightedParams(corridor_m=half_width_m + 0.1) if name == "sighted" else RouteParams()
+    )
+    changes: dict[str, float | int] = {}
+    for key, value in opts.items():
+        if key not in names:
+            raise ValueError(
+                f"operator {name}: unknown option {key!r} (known: {', '.join(sorted(names))})"
+            )
+        try:
+            changes[key] = int(value) if key == "bins" else float(value)
+        except ValueError:
+            raise ValueError(f"operator {name}: {key}={value!r} is not a number") from None
+    params = replace(defaults, **changes)  # type: ignore[arg-type]
+    if isinstance(params, SightedParams):
+        return SightedOperator(goal, mode, seed, params)
+    if world is None or start is None:
+        raise ValueError("the route operator needs the map and the start")
+    return RouteOperator.on_world(world, start, goal, half_width_m, mode, params, building)
