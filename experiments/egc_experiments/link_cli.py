@@ -1,0 +1,173 @@
+"""``egc-teleop link``: the user-space link emulator (DESIGN 10, pinned command line).
+
+    egc-teleop link --listen ENDPOINT --connect ENDPOINT [--up SPEC] [--down SPEC] [--seed N]
+                    [--scenario FILE] [--stats FILE.json] [--duration S] [--quiet]
+
+Prints a ready line on stderr once listening, and per-direction counts when it stops (SIGINT,
+SIGTERM or ``--duration``; exit 0). Bad input gives one line on stderr and exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import gc
+import json
+import signal
+import sys
+import time
+from pathlib import Path
+
+from egc_common.errors import UsageError
+
+from egc_experiments.link_model import Schedule, SpecError, load_scenario, parse_spec
+from egc_experiments.relay import (
+    Endpoint,
+    EndpointError,
+    Relay,
+    check_reachable,
+    new_event_loop,
+    parse_endpoint,
+)
+
+SPEC_HELP = (
+    "comma-separated: delay=MS, jitter=MS (standard deviation), dist=normal|uniform|pareto, "
+    "loss=PERCENT and burst=N (Gilbert-Elliott mean burst length; udp/ only), rate=KBITPS, "
+    "outage=START_S+DURATION_S (seconds after the relay started; repeatable), reorder=1 "
+    "(udp/ only). Empty: a perfect link"
+)
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--listen",
+        required=True,
+        metavar="ENDPOINT",
+        help="operator side, tcp/HOST:PORT or udp/HOST:PORT (port 0: any free port)",
+    )
+    parser.add_argument(
+        "--connect",
+        required=True,
+        metavar="ENDPOINT",
+        help="robot side, same protocol as --listen, e.g. tcp/127.0.0.1:7447",
+    )
+    parser.add_argument("--up", default="", metavar="SPEC", help=f"operator -> robot: {SPEC_HELP}")
+    parser.add_argument("--down", default="", metavar="SPEC", help="robot -> operator, as --up")
+    parser.add_argument("--seed", type=int, default=0, metavar="N", help="seed (default 0)")
+    parser.add_argument(
+        "--scenario",
+        metavar="FILE",
+        help="TOML file of timed phases ([[phase]] start_s=, up=, down= or both=) or a trace "
+        '(trace = "FILE.csv" with columns t_s,delay_ms,loss); replaces --up/--down',
+    )
+    parser.add_argument("--stats", metavar="FILE.json", help="write the final counts as JSON")
+    parser.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    parser.add_argument("--quiet", action="store_true", help="no per-connection log lines")
+
+
+def _endpoint(option: str, text: str) -> Endpoint:
+    try:
+        return parse_endpoint(text)
+    except EndpointError as exc:
+        raise UsageError(f"{option}: {exc}") from None
+
+
+def _schedules(args: argparse.Namespace) -> tuple[Schedule, Schedule]:
+    if args.scenario is not None:
+        if args.up or args.down:
+            raise UsageError("--scenario gives both directions; leave out --up and --down")
+        try:
+            return load_scenario(args.scenario)
+        except SpecError as exc:
+            raise UsageError(f"--scenario: {exc}") from None
+    schedules = []
+    for option, text in (("--up", args.up), ("--down", args.down)):
+        try:
+            schedules.append(Schedule.constant(parse_spec(text)))
+        except SpecError as exc:
+            raise UsageError(f"{option} {text!r}: {exc}") from None
+    return schedules[0], schedules[1]
+
+
+def _reason(exc: OSError) -> str:
+    return exc.strerror or str(exc) or type(exc).__name__
+
+
+def build_relay(args: argparse.Namespace) -> Relay:
+    """Check every input (raising ``UsageError``) and build the relay, not yet started."""
+    listen = _endpoint("--listen", args.listen)
+    connect = _endpoint("--connect", args.connect)
+    if listen.proto != connect.proto:
+        raise UsageError(
+            f"--listen {listen} and --connect {connect} must use the same protocol (tcp or udp)"
+        )
+    if connect.port == 0:
+        raise UsageError(f"--connect {connect}: port 0 is not a target")
+    if args.duration is not None and not args.duration > 0:
+        raise UsageError(f"--duration must be > 0 seconds, got {args.duration}")
+    if args.stats and not Path(args.stats).resolve().parent.is_dir():
+        raise UsageError(f"--stats {args.stats}: the folder does not exist")
+    up, down = _schedules(args)
+    log = (lambda line: None) if args.quiet else None
+    try:
+        relay = Relay(listen, connect, up, down, seed=args.seed, log=log)
+    except (SpecError, EndpointError) as exc:
+        raise UsageError(str(exc)) from None
+    try:
+        check_reachable(connect)
+    except OSError as exc:
+        hint = " (is the robot side listening?)" if connect.proto == "tcp" else ""
+        raise UsageError(f"cannot reach --connect {connect}: {_reason(exc)}{hint}") from None
+    return relay
+
+
+async def _serve(relay: Relay, args: argparse.Namespace) -> float:
+    try:
+        bound = await relay.start()
+    except OSError as exc:
+        raise UsageError(f"cannot listen on {relay.listen}: {_reason(exc)}") from None
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    gc.collect()
+    gc.freeze()  # keep collections short while relaying
+    print(
+        f"link: listening on {bound} -> {relay.connect} "
+        f"(up: {relay.up.describe()}, down: {relay.down.describe()}, seed {relay.seed})",
+        file=sys.stderr,
+        flush=True,
+    )
+    started = time.monotonic()
+    with contextlib.suppress(TimeoutError):
+        await asyncio.wait_for(stop.wait(), args.duration)
+    elapsed = time.monotonic() - started
+    await relay.close()
+    return elapsed
+
+
+def run(args: argparse.Namespace) -> int:
+    relay = build_relay(args)
+    with asyncio.Runner(loop_factory=new_event_loop) as runner:
+        elapsed = runner.run(_serve(relay, args))
+    stats = relay.stats()
+    lines = [f"link: stopped after {elapsed:.1f} s, {relay.connections} connection(s)"]
+    lines += [f"link: {s.line(name)}" for name, s in stats.items()]
+    print("\n".join(lines), file=sys.stderr, flush=True)
+    if args.stats:
+        report = {
+            "listen": str(relay.listen),
+            "connect": str(relay.connect),
+            "seed": relay.seed,
+            "duration_s": elapsed,
+            "connections": relay.connections,
+            **{name: s.to_dict() for name, s in stats.items()},
+            "send_errors": {name: r.send_errors for name, r in relay.recorders.items()},
+        }
+        try:
+            Path(args.stats).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+        except OSError as exc:
+            print(f"link: cannot write --stats {args.stats}: {_reason(exc)}", file=sys.stderr)
+            return 1
+    return 0
