@@ -8,6 +8,10 @@
 - Holds the liveliness token ``egc/<robot>/alive/operator/<id>``; closing the session (or the
   process dying) withdraws it, which releases control on the robot at once.
 - Subscribes to telemetry and state for the status line and the operator view.
+- Sends ``view_age_ms`` with every command (DESIGN 7, 9): the age, on the robot's clock, of the
+  newest telemetry received (and handed to the view), once the clock is synchronised.
+- Keeps a bounded history of the commands it sent (robot-clock stamps) and hands it to the view
+  after every command, for the predictive display (DESIGN 9, ``egc_operator.prediction``).
 
 ``local_clock`` is the operator's monotonic clock; the hidden ``--clock-offset-s`` flag shifts it
 to test clock sync against a machine whose clock differs by an hour.
@@ -26,6 +30,7 @@ import zenoh
 from egc_common import keys
 from egc_common.joystick_file import RELEASED
 from egc_common.messages import (
+    MAX_VIEW_AGE_MS,
     OperatorCommand,
     Rejection,
     StateMessage,
@@ -39,6 +44,7 @@ from egc_common.transport import command_publisher, payload_bytes
 
 from egc_operator.clock_sync import ClockSync
 from egc_operator.command_source import CommandSource
+from egc_operator.prediction import CommandHistory, SentCommand
 from egc_operator.status_line import Status, StatusLine
 
 log = logging.getLogger("egc.operator")
@@ -54,7 +60,8 @@ _MAP_ATTEMPTS = 10  # a robot that serves no map is asked this often, then left 
 class View(Protocol):
     """The operator view's interface (``egc_operator.view.OperatorView``)."""
 
-    def on_telemetry(self, t: Telemetry) -> None: ...
+    def on_telemetry(self, t: Telemetry, received_ns: int | None = None) -> None: ...
+    def on_commands(self, history: CommandHistory, robot_now_ns: int) -> None: ...
     def on_state(self, s: StateMessage) -> None: ...
     def on_text(self, level: str, text: str) -> None: ...
     def on_link(self, rtt_ms: float, offset_ns: int) -> None: ...
@@ -66,6 +73,20 @@ class View(Protocol):
         origin_xy_m: tuple[float, float],
         goal_xy_m: tuple[float, float] | None = None,
     ) -> None: ...
+
+
+def view_age_ms(
+    robot_now_ns: int, synchronised: bool, telemetry_stamp_ns: int | None
+) -> int | None:
+    """``OperatorCommand.view_age_ms``: the robot-clock age of the newest telemetry shown.
+
+    None (the key is left out) until the clock is synchronised and telemetry has arrived;
+    clamped to [0, MAX_VIEW_AGE_MS] (a clock-sync error can make a fresh one look negative).
+    """
+    if not synchronised or telemetry_stamp_ns is None or robot_now_ns <= 0:
+        return None
+    age_ms = (robot_now_ns - telemetry_stamp_ns) // 1_000_000
+    return max(0, min(MAX_VIEW_AGE_MS, age_ms))
 
 
 class OperatorNode:
@@ -91,6 +112,7 @@ class OperatorNode:
         self._sync = ClockSync()
         self._lock = threading.Lock()
         self._telemetry: Telemetry | None = None
+        self.history = CommandHistory()  # the commands sent, for the predictive display
         self._state: StateMessage | None = None
         self._robot_alive = False
         self._map_attempts_left = 0 if view is None else _MAP_ATTEMPTS
@@ -115,8 +137,10 @@ class OperatorNode:
             return
         with self._lock:
             self._telemetry = t
+            synced = self._sync.synchronised
+            received = self._sync.robot_now(self._clock()) if synced else None
         if self._view is not None:
-            self._view.on_telemetry(t)
+            self._view.on_telemetry(t, received_ns=received)
 
     def _on_state(self, sample: zenoh.Sample) -> None:
         s = decode_state(payload_bytes(sample))
@@ -222,6 +246,10 @@ class OperatorNode:
             seq += 1
             with self._lock:
                 stamp = self._sync.robot_now(now)
+                shown = self._telemetry
+                age = view_age_ms(
+                    stamp, self._sync.synchronised, None if shown is None else shown.stamp_ns
+                )
             command = OperatorCommand(
                 seq=seq,
                 stamp_ns=stamp,
@@ -232,9 +260,18 @@ class OperatorNode:
                 estop=sample.estop,
                 reset=sample.reset,
                 op=self._op,
+                view_age_ms=age,
             )
             self._publisher.put(command.encode())
             self.published += 1
+            if stamp > 0:
+                self.history.add(
+                    SentCommand(
+                        stamp, sample.x, sample.y, sample.mode, sample.deadman, sample.estop
+                    )
+                )
+                if self._view is not None:
+                    self._view.on_commands(self.history, stamp)
             if self._status is not None and now >= next_status:
                 self._status.show(self._status_of(command), now / NS_PER_S)
                 next_status = now + _STATUS_PERIOD_NS
@@ -259,6 +296,16 @@ class OperatorNode:
             mode=command.mode,
             deadman=command.deadman,
             in_control=None if s is None else s.operator == self._op,
+            limiter=None if t is None else t.limiter,
+            filter=None if t is None else t.filter or None,
+            v_lim_latency=None if t is None else t.v_lim_latency,
+            loop_delay_ms=None if t is None else t.loop_delay_ms,
+            cmd_age_ms=None if t is None else t.cmd_age_ms,
+            cmd_age_p50_ms=None if t is None else t.cmd_age_p50_ms,
+            cmd_age_p90_ms=None if t is None else t.cmd_age_p90_ms,
+            cmd_gap_max_ms=None if t is None else t.cmd_gap_max_ms,
+            link_loss=None if t is None else t.link_loss,
+            view_age_ms=command.view_age_ms,
         )
 
     def close(self) -> None:

@@ -7,6 +7,12 @@ runs and episodes produce the same recording. What is drawn is computed by the p
 ``rr.RecordingStream`` (several views can coexist in one process). Entity paths, timelines and
 the default layout are in ``view_blueprint``; viewer targets in ``viewer_target``.
 
+The operator process also hands over every command it sends (``on_commands``, with its bounded
+history): the view then draws the predictive display (DESIGN 9, ``prediction``) in the world
+frame, a dashed magenta ghost footprint where the robot will be when that command takes effect
+and the path to it, labelled as a prediction, and the link figures in plain numbers. It is
+logged at the robot's time of the command, so a saved recording replays what the operator saw.
+
 Every method is thread-safe (Zenoh delivers on its own threads) and never raises on a message:
 a view must not take the operator process down.
 """
@@ -16,6 +22,7 @@ from __future__ import annotations
 import argparse
 import functools
 import os
+import statistics
 import sys
 import threading
 import time
@@ -31,12 +38,21 @@ import rerun as rr
 from egc_common.messages import StateMessage, Telemetry
 
 from egc_operator import view_blueprint as paths
+from egc_operator.prediction import (
+    CommandHistory,
+    Prediction,
+    predict_from_telemetry,
+    uplink_estimate_ms,
+)
 from egc_operator.view_blueprint import operator_blueprint
 from egc_operator.view_scene import (
     CIRCLE_COLOURS,
     CIRCLE_NAMES,
     GOAL_GREEN,
     LANE_COLOURS,
+    LATENCY_BROWN,
+    LINK_SERIES,
+    PREDICTED_MAGENTA,
     REFERENCE_BLUE,
     ROBOT_TO_SCREEN,
     SCAN_INK,
@@ -44,6 +60,8 @@ from egc_operator.view_scene import (
     TRAJECTORY_TEAL,
     WORLD_TO_SCREEN,
     footprint_half_size,
+    ghost_scene,
+    link_text,
     map_image,
     pose_moved,
     profile_named,
@@ -58,6 +76,8 @@ MAX_PENDING_TEXT = 100  # text events kept while the robot's clock is unknown (o
 THIN_LINE = rr.Radius.ui_points(1.0)
 THICK_LINE = rr.Radius.ui_points(2.0)
 SCAN_RADIUS_M = 0.02
+PREDICTION_PERIOD_NS = 50_000_000  # the ghost is redrawn at most this often (robot clock)
+DOWNLINK_SAMPLES = 20  # telemetry arrivals in the downlink median
 TEXT_LEVELS = {
     "trace": "TRACE",
     "debug": "DEBUG",
@@ -79,6 +99,22 @@ SERIES_STYLE = (
     ("latency/cmd_age_ms", "command age on arrival", (200, 120, 0)),
     ("latency/scan_age_ms", "scan age", (120, 120, 120)),
     ("latency/link_rtt_ms", "link round trip", (0, 130, 160)),
+    ("v/lim_latency", "v cap (latency governor)", LATENCY_BROWN),
+    *(
+        (f"latency/{name}", label, colour)
+        for name, label, colour in zip(
+            LINK_SERIES,
+            (
+                "command age p50",
+                "command age p90",
+                "largest command gap",
+                "view age (operator)",
+                "loop delay tau",
+            ),
+            ((230, 160, 60), (160, 80, 0), (200, 0, 120), (60, 60, 200), LATENCY_BROWN),
+            strict=True,
+        )
+    ),
 )
 
 
@@ -186,17 +222,27 @@ class OperatorView:
         self._offset_ns: int | None = None
         self._robot_ns: int | None = None  # the latest robot stamp seen
         self._pending_text: deque[tuple[str, str]] = deque(maxlen=MAX_PENDING_TEXT)
+        self._rtt_ms: float | None = None
+        self._downlink_ms: deque[float] = deque(maxlen=DOWNLINK_SAMPLES)
+        self._predicted_ns: int | None = None  # robot time of the last ghost drawn
+        self._ghost_drawn = False
         if recording is not None:
             self._log_static(recording)
 
     # -- public API ------------------------------------------------------------------------------
 
-    def on_telemetry(self, t: Telemetry) -> None:
-        """One control cycle: robot-frame view, time series, status lanes, world frame (pose)."""
+    def on_telemetry(self, t: Telemetry, received_ns: int | None = None) -> None:
+        """One control cycle: robot-frame view, time series, status lanes, world frame (pose).
+
+        ``received_ns``: the robot's clock when it arrived (the operator's estimate), for the
+        downlink figure; None when unknown (headless episodes, clock not synchronised).
+        """
         with self._lock:
             rec = self._rec
             if rec is None:
                 return
+            if received_ns is not None and received_ns > 0:
+                self._downlink_ms.append((received_ns - t.stamp_ns) / 1e6)
             _set_time(rec, t.stamp_ns, t.cycle)
             self._log_robot_frame(rec, t)
             for name, value in time_series(t).items():
@@ -248,9 +294,46 @@ class OperatorView:
             if rec is None:
                 return
             self._offset_ns = int(offset_ns)
+            self._rtt_ms = float(rtt_ms)
             _set_time(rec, self._robot_now() or 0, self._cycle)
             rec.log(paths.LINK_RTT, rr.Scalars(float(rtt_ms)))
             self._log_pending_text(rec)
+
+    def on_commands(self, history: CommandHistory, robot_now_ns: int) -> None:
+        """The operator sent a command at ``robot_now_ns`` (robot clock): redraw the ghost.
+
+        ``history`` holds the commands sent, newest last; it is read during the call only. The
+        ghost and the link figures are redrawn at most every ``PREDICTION_PERIOD_NS``.
+        """
+        with self._lock:
+            rec = self._rec
+            if rec is None or robot_now_ns <= 0:
+                return
+            last = self._predicted_ns
+            if last is not None and 0 <= robot_now_ns - last < PREDICTION_PERIOD_NS:
+                return
+            self._predicted_ns = robot_now_ns
+            t = self._last
+            prediction = None
+            uplink_ms = None
+            if t is not None:
+                uplink_ms = uplink_estimate_ms(t.cmd_age_p50_ms, self._rtt_ms)
+                first = t.stamp_ns - round((uplink_ms or 0.0) * 1e6)
+                prediction = predict_from_telemetry(
+                    t, history.since(first), robot_now_ns, self._rtt_ms
+                )
+            _set_time(rec, robot_now_ns, self._cycle)
+            self._log_prediction(rec, t, prediction)
+            downlink = statistics.median(self._downlink_ms) if self._downlink_ms else None
+            text = link_text(
+                uplink_ms,
+                t is not None and t.cmd_age_p50_ms is None and uplink_ms is not None,
+                downlink,
+                None if t is None else max(0.0, (robot_now_ns - t.stamp_ns) / 1e6),
+                t,
+                prediction,
+            )
+            rec.log(paths.LINK_TEXT, rr.TextDocument(text))
 
     def set_world(
         self,
@@ -343,6 +426,22 @@ class OperatorView:
             rr.LineStrips2D.from_fields(radii=THIN_LINE, colors=TRAJECTORY_TEAL),
             static=True,
         )
+        for path, radius in (
+            (paths.PREDICTED_FOOTPRINT, THICK_LINE),
+            (paths.PREDICTED_PATH, THIN_LINE),
+        ):
+            rec.log(
+                path,
+                rr.LineStrips2D.from_fields(
+                    radii=radius, colors=PREDICTED_MAGENTA, draw_order=40.0
+                ),
+                static=True,
+            )
+        rec.log(
+            paths.PREDICTED_HEADING,
+            rr.Arrows2D.from_fields(colors=PREDICTED_MAGENTA, radii=THIN_LINE, show_labels=True),
+            static=True,
+        )
         for name, label, colour in SERIES_STYLE:
             rec.log(
                 paths.plot_path(name),
@@ -404,6 +503,30 @@ class OperatorView:
             if self._trajectory_end is not None:
                 rec.log(paths.TRAJECTORY, rr.LineStrips2D([[self._trajectory_end, (x, y)]]))
             self._trajectory_end = (x, y)
+
+    def _log_prediction(
+        self, rec: rr.RecordingStream, t: Telemetry | None, prediction: Prediction | None
+    ) -> None:
+        """The ghost footprint, its heading (labelled) and the dashed path, in world coordinates;
+        cleared (empty) when there is no prediction."""
+        profile = None if t is None else profile_named(t.profile)
+        if prediction is None or profile is None:
+            if self._ghost_drawn:
+                rec.log(paths.PREDICTED_FOOTPRINT, rr.LineStrips2D([]))
+                rec.log(paths.PREDICTED_HEADING, rr.Arrows2D(vectors=[], origins=[], labels=[]))
+                rec.log(paths.PREDICTED_PATH, rr.LineStrips2D([]))
+                self._ghost_drawn = False
+            return
+        ghost = ghost_scene(prediction, profile)
+        rec.log(paths.PREDICTED_FOOTPRINT, rr.LineStrips2D(ghost.footprint))
+        rec.log(
+            paths.PREDICTED_HEADING,
+            rr.Arrows2D(
+                origins=[ghost.heading_origin], vectors=[ghost.heading_vector], labels=[ghost.label]
+            ),
+        )
+        rec.log(paths.PREDICTED_PATH, rr.LineStrips2D(ghost.path))
+        self._ghost_drawn = True
 
     def _note_rejections(self, rec: rr.RecordingStream, total: int) -> None:
         """Text-log how many more commands the robot rejected since the last report."""

@@ -5,11 +5,16 @@ Layout (paper Fig. 8 as a Rerun blueprint)::
     +---------------------------+----------------------+------------------+
     | robot frame {R}           | world frame          | v: ref vs sent   |
     | scan, footprint, circles, | map, trajectory,     | w: ref vs sent   |
-    | command arrows, status    | goal, robot          | w_SI             |
+    | command arrows, status    | goal, robot, ghost   | w_SI             |
     +---------------------------+----------------------+ latency          |
-    | state / mode / limiter /  | text log             |                  |
-    | region lanes              |                      |                  |
+    | state / mode / limiter /  | link figures         |                  |
+    | region lanes              +----------------------+                  |
+    |                           | text log             |                  |
     +---------------------------+----------------------+------------------+
+
+The world frame shows the newest state of everything (latest-at) except the trajectory, which
+shows its whole history up to the time cursor; the ghost (the predictive display, DESIGN 9) is
+its own latest row only.
 
 Two timelines carry every row logged from telemetry: ``robot_time`` (a duration: the robot's
 monotonic clock, ``Telemetry.stamp_ns``) and ``cycle`` (a sequence: the robot's control cycle,
@@ -39,6 +44,12 @@ GOAL = "world/goal"
 TRAJECTORY = "world/trajectory"
 ROBOT_POSE = "world/robot"  # Transform3D per cycle; its children are static, in {R}
 POSE_FOOTPRINT = "world/robot/footprint"
+# Predictive display (DESIGN 9), in world coordinates: never children of ``world/robot``.
+PREDICTED = "world/predicted"
+PREDICTED_FOOTPRINT = "world/predicted/footprint"
+PREDICTED_HEADING = "world/predicted/heading"
+PREDICTED_PATH = "world/predicted/path"
+LINK_TEXT = "link"  # TextDocument: the link figures in plain numbers
 
 PLOTS = "plots"  # + /v/ref, /v/cmd, /w/ref, /w/cmd, /w_si, /latency/...
 LINK_RTT = "plots/latency/link_rtt_ms"
@@ -81,10 +92,11 @@ def operator_blueprint(robot_id: str, view_radius_m: float = 3.0) -> rrb.Bluepri
         visual_bounds=rrb.VisualBounds2D(x_range=[-r, r], y_range=[-1.5 * r, 0.5 * r]),
     )
     world_view = rrb.Spatial2DView(
-        name="world frame",
+        name="world frame (dashed magenta: predicted, not measured)",
         origin="/",
         contents=f"{WORLD}/**",
-        time_ranges=_whole_history(),
+        # Latest-at for the robot and the ghost; the trajectory's segments accumulate.
+        overrides={TRAJECTORY: rrb.VisibleTimeRanges(_whole_history())},
     )
     plots = rrb.Vertical(
         rrb.TimeSeriesView(name="v (m/s): reference vs sent", origin=f"{PLOTS}/v"),
@@ -105,8 +117,9 @@ def operator_blueprint(robot_id: str, view_radius_m: float = 3.0) -> rrb.Bluepri
             ),
             rrb.Vertical(
                 world_view,
+                rrb.TextDocumentView(name="link (plain numbers)", origin=LINK_TEXT),
                 rrb.TextLogView(name="log: state changes, rejections, link", origin=TEXT_LOG),
-                row_shares=[3, 2],
+                row_shares=[6, 1.4, 2.6],
             ),
             plots,
             column_shares=[4, 3, 3],

@@ -7,11 +7,13 @@ layer maps both onto the screen with one static transform each (``ROBOT_TO_SCREE
 Colour code, after the paper: blue is the operator's side (reference command, initial guide
 circle, Fig. 10 and 11), red is what the robot made of it (sent command, expanded guide circle).
 The region of the safety index circle (eq. 5) colours the footprint: green safe, amber
-conditional, red unsafe.
+conditional, red unsafe. The predictive display (DESIGN 9) is magenta, translucent and dashed,
+labelled as a prediction, so that it is never taken for a measurement.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -20,8 +22,12 @@ import numpy.typing as npt
 from egc_common.messages import Circle, Telemetry
 from egc_common.profiles import PROFILES, RobotProfile
 
+from egc_operator.prediction import Prediction
+
 F32 = npt.NDArray[np.float32]
 Rgb = tuple[int, int, int]
+Rgba = tuple[int, int, int, int]
+Point = tuple[float, float]
 
 # Rerun's 2D views put +y down. {R} is shown with forward up and left to the left
 # (screen = (-y, -x)); the world frame with +y up (screen = (x, -y)).
@@ -41,6 +47,9 @@ REGION_COLOURS: dict[str, Rgb] = {
     "unsafe": (220, 30, 30),
 }
 UNKNOWN_REGION: Rgb = (120, 120, 120)
+PREDICTED_MAGENTA: Rgba = (200, 40, 190, 210)  # translucent: a prediction, not a measurement
+PREDICTED_LABEL = "predicted (not measured)"
+LATENCY_BROWN: Rgb = (150, 90, 30)
 
 # Telemetry.limiter values (egc_robot.pipeline.Limiter plus the state machine's) -> short text.
 LIMITER_TEXT: dict[str, str] = {
@@ -51,6 +60,7 @@ LIMITER_TEXT: dict[str, str] = {
     "watchdog": "watchdog",
     "hold": "hold",
     "estop": "e-stop",
+    "latency": "latency",
 }
 
 CIRCLE_NAMES = ("reachable", "igc", "agc", "egc")
@@ -100,9 +110,16 @@ def command_vector(v_mps: float, w_radps: float, horizon_s: float) -> tuple[floa
 
 
 def status_text(t: Telemetry) -> str:
-    """One line for the robot-frame view, e.g. ``DRIVING · shared · limit: EGC · conditional``."""
+    """One line for the robot-frame view, e.g. ``DRIVING · shared · limit: EGC · conditional``.
+
+    A robot that is not driving says why (``HOLD (command timeout) · ...``); the latency limiter
+    says its cap (``limit: latency <= 0.10 m/s``).
+    """
     limiter = LIMITER_TEXT.get(t.limiter, t.limiter)
-    return f"{t.state} · {t.mode} · limit: {limiter} · {t.region} · w_SI {t.w_si:.2f}"
+    if t.limiter == "latency" and t.v_lim_latency is not None:
+        limiter += f" <= {t.v_lim_latency:.2f} m/s"
+    state = t.state if t.state == "DRIVING" or not t.reason else f"{t.state} ({t.reason})"
+    return f"{state} · {t.mode} · limit: {limiter} · {t.region} · w_SI {t.w_si:.2f}"
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -149,7 +166,8 @@ def robot_frame_scene(t: Telemetry) -> RobotFrameScene:
 def time_series(t: Telemetry) -> dict[str, float]:
     """Scalar plots of one cycle, keyed by the series' name under ``plots/`` (paper Fig. 11).
 
-    Ages are only present when the robot measured them this cycle.
+    Ages and link figures are only present when the robot measured them this cycle; the
+    latency governor's cap is drawn with the speeds (``v/lim_latency``).
     """
     series = {
         "v/ref": t.v_ref,
@@ -162,7 +180,17 @@ def time_series(t: Telemetry) -> dict[str, float]:
         series["latency/cmd_age_ms"] = t.cmd_age_ms
     if t.scan_age_ms is not None:
         series["latency/scan_age_ms"] = t.scan_age_ms
+    for name in LINK_SERIES:
+        value = getattr(t, name)
+        if value is not None:
+            series[f"latency/{name}"] = value
+    if t.v_lim_latency is not None:
+        series["v/lim_latency"] = t.v_lim_latency
     return series
+
+
+# Telemetry link figures plotted under plots/latency (DESIGN 7, 9), all in milliseconds.
+LINK_SERIES = ("cmd_age_p50_ms", "cmd_age_p90_ms", "cmd_gap_max_ms", "view_age_ms", "loop_delay_ms")
 
 
 STATUS_LANES = ("state", "mode", "limiter", "region")
@@ -185,6 +213,7 @@ LANE_COLOURS: dict[str, tuple[tuple[str, Rgb], ...]] = {
         ("watchdog", _AMBER),
         ("hold", _AMBER),
         ("estop", (140, 0, 0)),
+        ("latency", LATENCY_BROWN),
     ),
     "region": tuple(REGION_COLOURS.items()),
 }
@@ -238,3 +267,134 @@ def map_image(
     top = origin_xy_m[1] + occ.shape[0] * resolution_m
     mat = ((resolution_m, 0.0, 0.0), (0.0, -resolution_m, 0.0), (0.0, 0.0, 1.0))
     return MapImage(pixels, (origin_xy_m[0], top, 0.0), mat)
+
+
+# ---------------------------------------------------------------------------------------------
+# Predictive display (DESIGN 9): drawn in the world frame, dashed.
+
+DASH_M = 0.06
+GAP_M = 0.04
+
+
+def dashed(points: list[Point], dash_m: float = DASH_M, gap_m: float = GAP_M) -> list[list[Point]]:
+    """A polyline cut into dashes of ``dash_m`` with gaps of ``gap_m`` (each dash a strip).
+
+    The pattern runs on along the whole polyline (it does not restart at every vertex); a dash
+    that crosses a vertex bends with it.
+    """
+    if not (dash_m > 0 and gap_m >= 0):
+        raise ValueError("dash_m must be > 0 and gap_m >= 0")
+    period = dash_m + gap_m
+    dashes: list[list[Point]] = []
+    current: list[Point] = []
+    s = 0.0  # arc length travelled so far
+    for (x0, y0), (x1, y1) in itertools.pairwise(points):
+        length = math.hypot(x1 - x0, y1 - y0)
+        if length == 0.0:
+            continue
+        a = 0.0  # position along this segment
+        while a < length:
+            phase = (s + a) % period
+            drawing = phase < dash_m
+            step = (dash_m - phase) if drawing else (period - phase)
+            b = min(length, a + max(step, 1e-12))
+            if drawing:
+                start = (x0 + (x1 - x0) * a / length, y0 + (y1 - y0) * a / length)
+                end = (x0 + (x1 - x0) * b / length, y0 + (y1 - y0) * b / length)
+                if not current:
+                    current.append(start)
+                current.append(end)
+            elif current:
+                dashes.append(current)
+                current = []
+            a = b
+        s += length
+    if len(current) >= 2:
+        dashes.append(current)
+    return dashes
+
+
+def footprint_corners(pose: tuple[float, float, float], profile: RobotProfile) -> list[Point]:
+    """The footprint rectangle at ``pose`` in the world frame, closed (5 points, front first)."""
+    x, y, th = pose
+    hl, hw = footprint_half_size(profile)
+    c, s = math.cos(th), math.sin(th)
+    local = ((hl, hw), (-hl, hw), (-hl, -hw), (hl, -hw), (hl, hw))
+    return [(x + c * px - s * py, y + s * px + c * py) for px, py in local]
+
+
+@dataclass(frozen=True, slots=True)
+class GhostScene:
+    """The predicted footprint, its heading and the path to it, in the world frame (metres)."""
+
+    footprint: list[list[Point]]  # dashes
+    heading_origin: Point
+    heading_vector: Point
+    path: list[list[Point]]  # dashes, from the measured pose to the predicted one
+    label: str
+
+
+def ghost_scene(prediction: Prediction, profile: RobotProfile) -> GhostScene:
+    """What the world-frame view draws for one prediction."""
+    x, y, th = prediction.pose
+    ahead = (prediction.end_ns - prediction.start_ns) / 1e9
+    return GhostScene(
+        footprint=dashed(footprint_corners(prediction.pose, profile)),
+        heading_origin=(x, y),
+        heading_vector=(
+            0.5 * profile.length_m * math.cos(th),
+            0.5 * profile.length_m * math.sin(th),
+        ),
+        path=dashed([(px, py) for px, py, _ in prediction.path]),
+        label=f"{PREDICTED_LABEL}, +{ahead:.2f} s",
+    )
+
+
+def _ms(value: float | None, approx: bool = False) -> str:
+    if value is None:
+        return "--"
+    return f"{'~' if approx else ''}{value:.0f} ms"
+
+
+def link_text(
+    uplink_ms: float | None,
+    uplink_from_rtt: bool,
+    downlink_ms: float | None,
+    view_age_ms: float | None,
+    t: Telemetry | None,
+    prediction: Prediction | None,
+) -> str:
+    """The link figures in plain numbers, then what the ghost is (the view's link panel).
+
+    e.g. ``uplink 210 ms, downlink ~200 ms, view age 230 ms, loop delay 0.76 s, gap max 40 ms,
+    loss 0.0 %``. The uplink is the robot's median command age, or half the clock-sync round
+    trip (marked ``~ (rtt/2)``) before the robot reports one; the downlink is the median age of
+    the telemetry on arrival (``~``: the clock-sync error is in it).
+    """
+    uplink = _ms(uplink_ms, approx=uplink_from_rtt) + (" (rtt/2)" if uplink_from_rtt else "")
+    parts = [f"uplink {uplink}", f"downlink {_ms(downlink_ms, approx=True)}"]
+    parts.append(f"view age {_ms(view_age_ms)}")
+    loop = None if t is None else t.loop_delay_ms
+    parts.append("loop delay --" if loop is None else f"loop delay {loop / 1000.0:.2f} s")
+    parts.append(f"gap max {_ms(None if t is None else t.cmd_gap_max_ms)}")
+    loss = None if t is None else t.link_loss
+    parts.append("loss --" if loss is None else f"loss {100.0 * loss:.1f} %")
+    lines = [", ".join(parts)]
+    if t is not None and (t.cmd_age_p50_ms is not None or t.cmd_age_p90_ms is not None):
+        lines.append(
+            f"command age on arrival p50 {_ms(t.cmd_age_p50_ms)}, p90 {_ms(t.cmd_age_p90_ms)}"
+        )
+    if t is not None and t.limiter == "latency":
+        cap = "" if t.v_lim_latency is None else f" at {t.v_lim_latency:.2f} m/s"
+        lines.append(f"limit: latency - speed capped{cap}")
+    if prediction is None:
+        lines.append("ghost: no prediction (no pose, unknown profile or clock not synced)")
+    else:
+        ahead = (prediction.end_ns - prediction.start_ns) / 1e9
+        what = "stops" if prediction.stopping else "drives on"
+        clamped = " (cut at the horizon)" if prediction.clamped else ""
+        lines.append(
+            f"ghost (dashed, magenta): {PREDICTED_LABEL}, {ahead:.2f} s after the newest "
+            f"telemetry{clamped}: where the command sent now takes effect; the robot {what}"
+        )
+    return "\n".join(lines)

@@ -86,6 +86,7 @@ def test_the_file_carries_the_default_layout(recording_path) -> None:  # type: i
         "2D": {"/"},  # robot frame and world frame (each selects its subtree)
         "StateTimeline": {paths.LANES},
         "TextLog": {paths.TEXT_LOG},
+        "TextDocument": {paths.LINK_TEXT},  # the link figures in plain numbers
         "TimeSeries": {"plots/v", "plots/w", "plots/w_si", "plots/latency"},
     }
 

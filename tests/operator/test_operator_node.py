@@ -1,0 +1,189 @@
+"""The operator node's view_age_ms (DESIGN 7, 9) and the command history it gives the view.
+
+The node runs against one in-process Zenoh session (no network): the test answers the clock
+queries with a robot clock an hour ahead of the node's, publishes telemetry and records the
+commands the node sends.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any
+
+import numpy.typing as npt
+import pytest
+import zenoh
+from egc_common import keys
+from egc_common.joystick_file import JoystickSample
+from egc_common.messages import (
+    MAX_VIEW_AGE_MS,
+    OperatorCommand,
+    StateMessage,
+    Telemetry,
+    decode_command,
+    encode_clock_reply,
+)
+from egc_common.transport import ZenohOptions, open_session, payload_bytes
+from egc_operator.operator_node import OperatorNode, view_age_ms
+from egc_operator.prediction import CommandHistory
+
+MS = 1_000_000
+HOUR = 3600 * 1000 * MS
+ROBOT = "nodetest"
+
+
+def test_view_age_is_the_robot_clock_age_of_the_newest_telemetry() -> None:
+    assert view_age_ms(HOUR + 230 * MS, True, HOUR) == 230
+    assert view_age_ms(HOUR + 230 * MS + 999_999, True, HOUR) == 230  # whole milliseconds
+
+
+def test_view_age_is_unknown_before_sync_or_telemetry() -> None:
+    assert view_age_ms(HOUR, False, HOUR - 5 * MS) is None
+    assert view_age_ms(0, True, HOUR) is None  # robot_now's "unsynchronised"
+    assert view_age_ms(HOUR, True, None) is None
+
+
+def test_view_age_is_clamped_to_the_wire_range() -> None:
+    assert view_age_ms(HOUR, True, HOUR + 3 * MS) == 0  # clock-sync error: "from the future"
+    assert view_age_ms(3 * HOUR, True, 1) == MAX_VIEW_AGE_MS
+    # the clamped value is what the wire accepts
+    OperatorCommand(1, HOUR, 0.0, 0.0, "shared", True, False, False, "op", MAX_VIEW_AGE_MS)
+
+
+class Stick:
+    """A command source: half stick forward, a little left, deadman held, forever."""
+
+    finished = False
+
+    def sample(self, t_s: float) -> JoystickSample:
+        return JoystickSample(t_s, 0.5, 0.25, deadman=True, mode="shared")
+
+    def close(self) -> None:
+        pass
+
+
+class RecordingView:
+    def __init__(self) -> None:
+        self.telemetry: list[tuple[Telemetry, int | None]] = []
+        self.commands: list[tuple[int, int, int]] = []  # (robot_now, len, newest stamp)
+        self.lock = threading.Lock()
+
+    def on_telemetry(self, t: Telemetry, received_ns: int | None = None) -> None:
+        with self.lock:
+            self.telemetry.append((t, received_ns))
+
+    def on_commands(self, history: CommandHistory, robot_now_ns: int) -> None:
+        newest = history.newest
+        assert newest is not None
+        with self.lock:
+            self.commands.append((robot_now_ns, len(history), newest.stamp_ns))
+
+    def on_state(self, s: StateMessage) -> None:
+        pass
+
+    def on_text(self, level: str, text: str) -> None:
+        pass
+
+    def on_link(self, rtt_ms: float, offset_ns: int) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+    def set_world(
+        self,
+        occupancy: npt.ArrayLike,
+        resolution_m: float,
+        origin_xy_m: tuple[float, float],
+        goal_xy_m: tuple[float, float] | None = None,
+    ) -> None:
+        pass
+
+
+def robot_clock() -> int:
+    return time.monotonic_ns() + HOUR
+
+
+def wait_for(condition: Any, timeout_s: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError("timed out")
+        time.sleep(0.01)
+
+
+@pytest.fixture
+def session() -> Any:
+    s = open_session(ZenohOptions())
+    yield s
+    s.close()
+
+
+def test_commands_carry_view_age_and_the_view_gets_the_history(session: zenoh.Session) -> None:
+    sent: list[tuple[OperatorCommand, int]] = []
+
+    def on_cmd(sample: zenoh.Sample) -> None:
+        cmd = decode_command(payload_bytes(sample))
+        assert isinstance(cmd, OperatorCommand)
+        sent.append((cmd, robot_clock()))
+
+    def on_clock(query: zenoh.Query) -> None:
+        query.reply(keys.clock(ROBOT), encode_clock_reply(robot_clock()))
+
+    entities = [
+        session.declare_subscriber(keys.cmd(ROBOT), on_cmd),
+        session.declare_queryable(keys.clock(ROBOT), on_clock),
+        session.liveliness().declare_token(keys.alive_robot(ROBOT)),  # the robot is present
+    ]
+    view = RecordingView()
+    node = OperatorNode(session, ROBOT, "op1", Stick(), rate_hz=50.0, view=view)
+    stop = threading.Event()
+    runner = threading.Thread(target=node.run, args=(stop,))
+    runner.start()
+    try:
+        wait_for(lambda: any(c.stamp_ns and c.deadman for c, _ in sent))  # synchronised, driving
+        assert all(c.view_age_ms is None for c, _ in sent)  # no telemetry yet: key left out
+        stamp = robot_clock() - 150 * MS  # telemetry that spent 150 ms on the way
+        telemetry = Telemetry(
+            seq=1,
+            stamp_ns=stamp,
+            state="DRIVING",
+            mode="shared",
+            v_ref=0.07,
+            w_ref=0.125,
+            v_cmd=0.07,
+            w_cmd=0.125,
+            w_si=1.0,
+            pose=(0.0, 0.0, 0.0),
+            profile="pioneer3dx",
+        )
+        published_at = robot_clock()
+        session.put(keys.telemetry(ROBOT), telemetry.encode())
+        wait_for(lambda: len(view.telemetry) == 1)
+        n = len(sent)
+        wait_for(lambda: len(sent) >= n + 10)
+    finally:
+        stop.set()
+        runner.join(timeout=10)
+        node.close()
+        for entity in entities:
+            entity.undeclare()
+    ((shown, received),) = view.telemetry
+    assert shown.stamp_ns == stamp
+    assert received is not None and 150 * MS <= received - stamp < 2000 * MS
+    ages = [(c.view_age_ms, at) for c, at in sent if c.view_age_ms is not None]
+    assert len(ages) >= 10
+    for age, arrived in ages:
+        assert age >= 150
+        # the age grows with the command's send time: never more than the time it took to arrive
+        assert age <= (arrived - stamp) // MS + 5
+    assert ages[-1][0] >= ages[0][0] and ages[0][0] <= (robot_clock() - published_at) // MS + 150
+    # every synchronised command went into the history handed to the view, newest last
+    synced = [c for c, _ in sent if c.stamp_ns]
+    handed = [newest for _, _, newest in view.commands]
+    assert handed[: len(synced)] == [c.stamp_ns for c in synced]  # the last may be in flight
+    assert len(node.history) == len(handed)
+    assert all(now == newest for now, _, newest in view.commands)
+    command = node.history.newest
+    assert command is not None and (command.x, command.y, command.mode) == (0.5, 0.25, "shared")
