@@ -71,8 +71,11 @@ class Endpoint:
 
 
 def parse_endpoint(text: str) -> Endpoint:
-    """Parse ``PROTO/HOST:PORT``; raises ``EndpointError`` with one clear line."""
-    proto, slash, rest = text.partition("/")
+    """Parse ``PROTO/HOST:PORT``; raises ``EndpointError`` with one clear line.
+
+    Zenoh metadata and configuration (``?rel=1;mixed_rel=1``, ``#...``) are accepted and ignored:
+    the relay carries whatever the peers speak over that protocol."""
+    proto, slash, rest = text.split("#", 1)[0].split("?", 1)[0].partition("/")
     if not slash or proto not in PROTOCOLS:
         raise EndpointError(f"endpoint {text!r} must look like tcp/HOST:PORT or udp/HOST:PORT")
     if rest.startswith("["):

@@ -1,0 +1,303 @@
+"""``egc-teleop link`` as a real process between plain sockets: delay, byte order, loss,
+outages, scenarios, stopping cleanly, and one clear line with exit 2 for each bad input."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import re
+import select
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+from egc_common.transport import free_tcp_port
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(30)]
+
+LINK = [sys.executable, "-m", "egc_app.cli", "link"]
+READY = re.compile(r"^link: listening on (tcp|udp)/127\.0\.0\.1:(\d+) -> ")
+
+
+class Link:
+    """A running ``egc-teleop link``; ``port`` is the one it listens on."""
+
+    def __init__(self, *args: str) -> None:
+        self.proc = subprocess.Popen(
+            [*LINK, *args], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True
+        )
+        assert self.proc.stderr is not None
+        ready, _, _ = select.select([self.proc.stderr], [], [], 10.0)
+        line = self.proc.stderr.readline() if ready else ""
+        match = READY.match(line)
+        if match is None:
+            self.proc.kill()
+            raise AssertionError(f"no ready line: {line!r} {self.proc.communicate()[1]!r}")
+        self.ready_at = time.monotonic()
+        self.port = int(match.group(2))
+
+    def stop(self, sig: signal.Signals = signal.SIGTERM) -> str:
+        """Signal it, check it exits 0, and return what it printed after the ready line."""
+        self.proc.send_signal(sig)
+        _, err = self.proc.communicate(timeout=10)
+        assert self.proc.returncode == 0, err
+        return err
+
+
+@contextmanager
+def link(*args: str) -> Iterator[Link]:
+    running = Link(*args)
+    try:
+        yield running
+    finally:
+        if running.proc.poll() is None:
+            running.proc.kill()
+            running.proc.wait()
+
+
+@contextmanager
+def tcp_echo() -> Iterator[int]:
+    """A TCP echo server on a free port (one thread per connection)."""
+    server = socket.create_server(("127.0.0.1", 0))
+
+    def serve(conn: socket.socket) -> None:
+        with conn:
+            while data := conn.recv(65536):
+                conn.sendall(data)
+
+    def accept() -> None:
+        while True:
+            try:
+                conn, _ = server.accept()
+            except OSError:
+                return
+            threading.Thread(target=serve, args=(conn,), daemon=True).start()
+
+    threading.Thread(target=accept, daemon=True).start()
+    try:
+        yield server.getsockname()[1]
+    finally:
+        server.close()
+
+
+class UdpSink:
+    """A UDP server on a free port recording (monotonic time, datagram); echoes when asked."""
+
+    def __init__(self, echo: bool) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.port: int = self.sock.getsockname()[1]
+        self.got: list[tuple[float, bytes]] = []
+        self.echo = echo
+        threading.Thread(target=self._run, daemon=True).start()
+
+    def _run(self) -> None:
+        while True:
+            try:
+                data, addr = self.sock.recvfrom(65536)
+            except OSError:
+                return
+            self.got.append((time.monotonic(), data))
+            if self.echo:
+                self.sock.sendto(data, addr)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def tcp_round_trip_ms(sock: socket.socket, payload: bytes) -> float:
+    start = time.monotonic()
+    sock.sendall(payload)
+    got = b""
+    while len(got) < len(payload):
+        got += sock.recv(65536)
+    assert got == payload
+    return (time.monotonic() - start) * 1000.0
+
+
+def test_tcp_delay_applied_and_byte_order_kept(tmp_path: Path) -> None:
+    stats_file = tmp_path / "stats.json"
+    with tcp_echo() as port, link(
+        "--listen", "tcp/127.0.0.1:0", "--connect", f"tcp/127.0.0.1:{port}",
+        "--up", "delay=50", "--down", "delay=20,jitter=15", "--stats", str(stats_file),
+    ) as relay:  # fmt: skip
+        with socket.create_connection(("127.0.0.1", relay.port)) as sock:
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            # Down jitter of 15 ms: the floor at 0 and the hold-back keep RTT above 50 ms.
+            rtts = [tcp_round_trip_ms(sock, b"ping %d" % i) for i in range(5)]
+            assert all(55.0 <= r <= 130.0 for r in rtts), rtts
+            # Many small chunks with a jittery downlink: the byte stream must come back intact.
+            sent = b"".join(b"<%05d>" % i for i in range(2000))
+            chunks = [sent[i : i + 70] for i in range(0, len(sent), 70)]
+            got = bytearray()
+            sock.settimeout(5.0)
+            for chunk in chunks:
+                sock.sendall(chunk)
+                time.sleep(0.0002)
+            while len(got) < len(sent):
+                got += sock.recv(65536)
+            assert bytes(got) == sent
+        err = relay.stop()
+    assert re.search(r"link: up: forwarded \d+, dropped 0 \(0\.0%\), delay p50 5\d\.\d", err), err
+    assert "link: down: forwarded" in err
+    stats = json.loads(stats_file.read_text())
+    assert stats["connections"] == 1
+    assert 49.9 <= stats["up"]["p50_ms"] <= 55.0  # measured by the relay: 50 ms applied
+    assert stats["up"]["late_p99_ms"] < 5.0
+    assert stats["down"]["dropped"] == 0 and stats["down"]["max_ms"] > 20.0
+
+
+def udp_send(port: int, n: int, gap_s: float, size: int = 32) -> socket.socket:
+    client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    for i in range(n):
+        client.sendto(b"%06d" % i + b"x" * (size - 6), ("127.0.0.1", port))
+        time.sleep(gap_s)
+    return client
+
+
+def test_udp_loss_rate_and_seeded_repeatability(tmp_path: Path) -> None:
+    received: list[set[int]] = []
+    for run in range(2):
+        sink = UdpSink(echo=False)
+        stats_file = tmp_path / f"stats{run}.json"
+        with link(
+            "--listen", "udp/127.0.0.1:0", "--connect", f"udp/127.0.0.1:{sink.port}",
+            "--up", "loss=20", "--seed", "7", "--stats", str(stats_file), "--quiet",
+        ) as relay:  # fmt: skip
+            udp_send(relay.port, 1500, 0.0002).close()
+            time.sleep(0.2)
+            relay.stop(signal.SIGINT)
+        sink.close()
+        stats = json.loads(stats_file.read_text())
+        got = {int(data[:6]) for _, data in sink.got}
+        assert stats["up"]["forwarded"] + stats["up"]["dropped"] == 1500
+        assert stats["up"]["forwarded"] == len(sink.got) == len(got)
+        assert stats["up"]["loss_pct"] == pytest.approx(20.0, abs=3.0)
+        received.append(got)
+    assert received[0] == received[1]  # same seed, same datagrams lost
+
+
+def test_udp_outage_drops_and_tcp_outage_delays() -> None:
+    sink = UdpSink(echo=False)
+    with link(
+        "--listen", "udp/127.0.0.1:0", "--connect", f"udp/127.0.0.1:{sink.port}",
+        "--up", "outage=0.4+0.4",
+    ) as relay:  # fmt: skip
+        udp_send(relay.port, 120, 0.01).close()  # 1.2 s at 100 Hz
+        time.sleep(0.1)
+        err = relay.stop()
+    sink.close()
+    times = [t for t, _ in sink.got]
+    gaps = [b - a for a, b in itertools.pairwise(times)]
+    assert max(gaps) == pytest.approx(0.4, abs=0.08)  # nothing arrived during the outage
+    assert times[-1] - times[0] > 1.0  # and traffic resumed after it
+    dropped = int(re.search(r"up: forwarded \d+, dropped (\d+)", err).group(1))  # type: ignore[union-attr]
+    assert dropped == 120 - len(sink.got)
+    assert 30 <= dropped <= 45
+
+    with tcp_echo() as port, link(
+        "--listen", "tcp/127.0.0.1:0", "--connect", f"tcp/127.0.0.1:{port}",
+        "--up", "delay=10,outage=0.5+0.5",
+    ) as relay, socket.create_connection(("127.0.0.1", relay.port)) as sock:  # fmt: skip
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        assert tcp_round_trip_ms(sock, b"before") < 40.0
+        time.sleep(max(0.0, relay.ready_at + 0.6 - time.monotonic()))
+        sent_at = time.monotonic()
+        tcp_round_trip_ms(sock, b"during the outage")
+        back_at = time.monotonic()
+        # Sent 0.6 s after start, in the outage: it leaves when the link is back (1.0 s) + 10 ms.
+        assert back_at - relay.ready_at == pytest.approx(1.01, abs=0.05)
+        assert back_at - sent_at > 0.35
+        assert tcp_round_trip_ms(sock, b"after") < 40.0
+        relay.stop()
+
+
+def test_scenario_phases_change_the_delay(tmp_path: Path) -> None:
+    scenario = tmp_path / "s.toml"
+    scenario.write_text(
+        '[[phase]]\nstart_s = 0\nboth = "delay=5"\n[[phase]]\nstart_s = 0.5\nup = "delay=80"\n'
+    )
+    with tcp_echo() as port, link(
+        "--listen", "tcp/127.0.0.1:0", "--connect", f"tcp/127.0.0.1:{port}",
+        "--scenario", str(scenario),
+    ) as relay, socket.create_connection(("127.0.0.1", relay.port)) as sock:  # fmt: skip
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        first = tcp_round_trip_ms(sock, b"a")
+        time.sleep(max(0.0, relay.ready_at + 0.6 - time.monotonic()))
+        second = tcp_round_trip_ms(sock, b"b")
+        relay.stop()
+    assert 9.5 <= first <= 40.0
+    assert 79.5 <= second <= 115.0  # up 80 ms, down a perfect link in that phase
+
+
+def test_client_closing_closes_the_target_side() -> None:
+    server = socket.create_server(("127.0.0.1", 0))
+    port = server.getsockname()[1]
+    with server, link(
+        "--listen", "tcp/127.0.0.1:0", "--connect", f"tcp/127.0.0.1:{port}", "--up", "delay=30",
+    ) as relay:  # fmt: skip
+        probe, _ = server.accept()  # the start-up reachability check
+        probe.close()
+        client = socket.create_connection(("127.0.0.1", relay.port))
+        conn, _ = server.accept()
+        conn.settimeout(5.0)
+        client.sendall(b"last words")
+        client.close()
+        got = b""
+        while data := conn.recv(100):  # the bytes first, then end of stream
+            got += data
+        assert got == b"last words"
+        conn.close()
+        assert "1 connection(s)" in relay.stop()
+
+
+def one_line_exit_2(*args: str) -> str:
+    proc = subprocess.run([*LINK, *args], capture_output=True, text=True, timeout=15)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    return lines[0]
+
+
+def test_bad_inputs_exit_2_with_one_line(tmp_path: Path) -> None:
+    dead = f"tcp/127.0.0.1:{free_tcp_port()}"
+    bad_toml = tmp_path / "bad.toml"
+    bad_toml.write_text("[[phase]\n")
+    with tcp_echo() as port:
+        target = f"tcp/127.0.0.1:{port}"
+        ok = ["--listen", "tcp/127.0.0.1:0", "--connect", target]
+        cases = {
+            "is not a number": [*ok, "--up", "delay=abc"],
+            "unknown SPEC key 'latency'": [*ok, "--down", "latency=3"],
+            "loss is not possible on a TCP link: a TCP connection retransmits": [
+                *ok,
+                "--up",
+                "loss=5",
+            ],
+            "must look like tcp/HOST:PORT": ["--listen", "tcp/127.0.0.1", "--connect", target],
+            "or udp/HOST:PORT": ["--listen", "http/1.2.3.4:80", "--connect", target],
+            "must use the same protocol": ["--listen", "udp/127.0.0.1:0", "--connect", target],
+            "cannot reach --connect": ["--listen", "tcp/127.0.0.1:0", "--connect", dead],
+            "scenario file .*nope.toml does not exist": [*ok, "--scenario", "nope.toml"],
+            "not valid TOML": [*ok, "--scenario", str(bad_toml)],
+            "leave out --up and --down": [*ok, "--scenario", str(bad_toml), "--up", "delay=1"],
+            "the following arguments are required: --connect": ["--listen", "tcp/127.0.0.1:0"],
+        }
+        for message, args in cases.items():
+            assert re.search(message, one_line_exit_2(*args)), (message, args)
+        with socket.create_server(("127.0.0.1", 0)) as taken:
+            busy = taken.getsockname()[1]
+            line = one_line_exit_2("--listen", f"tcp/127.0.0.1:{busy}", "--connect", target)
+            assert re.search(r"cannot listen on tcp/127.0.0.1:\d+: .*in use", line), line
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        busy = taken.getsockname()[1]
+        line = one_line_exit_2("--listen", f"udp/127.0.0.1:{busy}", "--connect", "udp/127.0.0.1:9")
+        assert "in use" in line, line
