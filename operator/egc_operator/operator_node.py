@@ -52,7 +52,8 @@ log = logging.getLogger("egc.operator")
 NS_PER_S = 1_000_000_000
 _STATUS_PERIOD_NS = 200_000_000
 _RELEASE_AFTER_END_NS = 300_000_000
-_CLOCK_TIMEOUT_S = 0.5
+_CLOCK_TIMEOUT_S = 3.0  # above the round trip of a satellite link (2 x 500 ms + jitter)
+_START_WAIT_NS = 10 * NS_PER_S  # a script starts when the robot is seen, or after this
 _MAP_TIMEOUT_S = 1.0
 _MAP_ATTEMPTS = 10  # a robot that serves no map is asked this often, then left alone
 
@@ -229,15 +230,23 @@ class OperatorNode:
             target=self._clock_sync, args=(stop,), name="clock-sync", daemon=True
         )
         sync_thread.start()
-        start = self._clock()
-        deadline = start
-        next_status = start
+        opened = self._clock()
+        start: int | None = None  # a script's time 0: when the robot is first seen
+        deadline = opened
+        next_status = opened
         ended_at: int | None = None
         seq = 0
         while not stop.is_set():
             stop.wait(max(0, deadline - self._clock()) / NS_PER_S)
             now = self._clock()
-            sample = self._source.sample((now - start) / NS_PER_S)
+            if start is None:
+                with self._lock:
+                    present = self._robot_alive
+                if present or now - opened >= _START_WAIT_NS:
+                    start = now
+            # Until the robot is there (a slow link takes seconds to connect), the deadman is
+            # released, and a recorded script does not run ahead of the robot.
+            sample = RELEASED if start is None else self._source.sample((now - start) / NS_PER_S)
             if self._source.finished:
                 ended_at = now if ended_at is None else ended_at
                 sample = RELEASED
