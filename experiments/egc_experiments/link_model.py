@@ -547,6 +547,10 @@ class LinkModel:
         self.forwarded = 0
         self.dropped: dict[str, int] = {"loss": 0, "outage": 0, "queue": 0}
 
+    def backlog_s(self, t_s: float) -> float:
+        """Seconds of serialization still queued at ``t_s`` behind the rate limit (0 if none)."""
+        return max(0.0, self._link_free_s - t_s)
+
     @property
     def dropped_total(self) -> int:
         """All drops, whatever the reason."""

@@ -52,6 +52,10 @@ MAX_DATAGRAM: Final = 65535
 RESERVOIR: Final = 200_000  # delay samples kept per direction for the percentiles
 CONNECT_TIMEOUT_S: Final = 5.0
 _READS_PER_WAKEUP: Final = 64
+# TCP flow control: stop reading a sender while its lane holds this much (resume at half), so
+# that a rate limit fills the sender's socket buffer as a real bottleneck would.
+MAX_QUEUED_BYTES: Final = 4 * 1024 * 1024
+MAX_BACKLOG_S: Final = 0.25  # serialization queued behind a rate limit
 _PR_SET_TIMERSLACK: Final = 29
 
 
@@ -198,6 +202,7 @@ class Lane:
         send: Callable[[bytes], object],
         recorder: Recorder,
         on_eof: Callable[[], None] | None = None,
+        on_pressure: Callable[[bool], None] | None = None,
     ) -> None:
         self._loop = loop
         self._model = model
@@ -205,6 +210,9 @@ class Lane:
         self._send = send
         self._rec = recorder
         self._on_eof = on_eof
+        self._on_pressure = on_pressure
+        self._pressed = False
+        self.queued_bytes = 0
         self._heap: list[tuple[float, int, float, bytes | None]] = []
         self._seq = 0
         self._timer: asyncio.TimerHandle | None = None
@@ -212,7 +220,9 @@ class Lane:
         self.closed = False
 
     def push(self, data: bytes, now: float) -> None:
-        """A packet read at monotonic time ``now``."""
+        """A packet read at monotonic time ``now``. With ``on_pressure``, calls it with True when
+        the lane holds too much (``MAX_QUEUED_BYTES``, ``MAX_BACKLOG_S``), False once it drained
+        to half of that."""
         arrival = self._model.transit(now - self._t0, len(data))
         if arrival is None:
             self._rec.dropped += 1
@@ -223,6 +233,16 @@ class Lane:
             self._rec.record(0.0, 0.0)
             return
         self._enqueue(due, now, data)
+        self.queued_bytes += len(data)
+        if self._on_pressure is not None and not self._pressed and self._full(now, 1.0):
+            self._pressed = True
+            self._on_pressure(True)
+
+    def _full(self, now: float, share: float) -> bool:
+        return (
+            self.queued_bytes > MAX_QUEUED_BYTES * share
+            or self._model.backlog_s(now - self._t0) > MAX_BACKLOG_S * share
+        )
 
     def push_eof(self, now: float) -> None:
         """The sender closed: close the other end once what was sent before has arrived."""
@@ -252,8 +272,13 @@ class Lane:
                 if self._on_eof is not None:
                     self._on_eof()
                 return
+            self.queued_bytes -= len(data)
             self._deliver(data)
             self._rec.record(now - read_at, now - due)
+        if self._pressed and not self._full(now, 0.5):
+            self._pressed = False
+            assert self._on_pressure is not None
+            self._on_pressure(False)
         if heap:
             self._arm(heap[0][0])
 
@@ -296,14 +321,10 @@ class _Side(asyncio.Protocol):
         self.pipe.side_closed(self)
 
     def pause_writing(self) -> None:
-        other = self.pipe.other(self).transport
-        if other is not None:
-            other.pause_reading()
+        self.pipe.pause(self.pipe.other(self), "write buffer", True)
 
     def resume_writing(self) -> None:
-        other = self.pipe.other(self).transport
-        if other is not None and not other.is_closing():
-            other.resume_reading()
+        self.pipe.pause(self.pipe.other(self), "write buffer", False)
 
 
 class _TcpPipe:
@@ -317,6 +338,7 @@ class _TcpPipe:
         self._pending: list[bytes] = []
         self._closing: set[str] = set()
         self._close_when_connected = False
+        self._paused: dict[str, set[str]] = {"client": set(), "server": set()}
         loop, t0, seed = relay.loop, relay.t0, relay.seed
         self.up = Lane(
             loop,
@@ -325,6 +347,7 @@ class _TcpPipe:
             self._to_server,
             relay.recorders["up"],
             self._up_eof,
+            lambda on: self.pause(self.client, "link queue", on),
         )
         self.down = Lane(
             loop,
@@ -333,8 +356,25 @@ class _TcpPipe:
             self._to_client,
             relay.recorders["down"],
             self.close,
+            lambda on: self.pause(self.server, "link queue", on),
         )
         self.closed = False
+
+    def pause(self, side: _Side, reason: str, on: bool) -> None:
+        """Stop or resume reading from ``side``; it reads again once no reason is left."""
+        reasons = self._paused[side.name]
+        before = bool(reasons)
+        if on:
+            reasons.add(reason)
+        else:
+            reasons.discard(reason)
+        transport = side.transport
+        if transport is None or transport.is_closing() or before == bool(reasons):
+            return
+        if reasons:
+            transport.pause_reading()
+        else:
+            transport.resume_reading()
 
     def other(self, side: _Side) -> _Side:
         return self.server if side is self.client else self.client

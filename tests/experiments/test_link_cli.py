@@ -237,6 +237,24 @@ def test_scenario_phases_change_the_delay(tmp_path: Path) -> None:
     assert 79.5 <= second <= 115.0  # up 80 ms, down a perfect link in that phase
 
 
+def test_tcp_rate_limit_gives_that_throughput() -> None:
+    size = 400_000  # bytes, up at 4000 kbit/s = 500 kB/s: 0.8 s on the wire
+    with tcp_echo() as port, link(
+        "--listen", "tcp/127.0.0.1:0", "--connect", f"tcp/127.0.0.1:{port}", "--up", "rate=4000",
+    ) as relay, socket.create_connection(("127.0.0.1", relay.port)) as sock:  # fmt: skip
+        sock.settimeout(10.0)
+        payload = bytes(range(256)) * (size // 256) + bytes(size % 256)
+        start = time.monotonic()
+        threading.Thread(target=sock.sendall, args=(payload,), daemon=True).start()
+        got = bytearray()
+        while len(got) < size:
+            got += sock.recv(65536)
+        elapsed = time.monotonic() - start
+        assert bytes(got) == payload
+        relay.stop()
+    assert size / elapsed == pytest.approx(500_000, rel=0.15), elapsed
+
+
 def test_client_closing_closes_the_target_side() -> None:
     server = socket.create_server(("127.0.0.1", 0))
     port = server.getsockname()[1]

@@ -150,6 +150,8 @@ def test_rate_limit_serialises_at_the_rate() -> None:
     assert gaps == pytest.approx([0.010] * len(gaps))
     throughput = 199 * 1000 / (arrivals[-1] - arrivals[0])  # type: ignore[operator]
     assert throughput == pytest.approx(100_000, rel=1e-6)
+    assert model.backlog_s(0.2) == pytest.approx(200 * 0.010 - 0.2)
+    assert model.backlog_s(5.0) == 0.0
     # Below the rate nothing queues: only the serialization time is added.
     idle = LinkModel(parse_spec("rate=800"), seed=0, ordered=True)
     assert idle.transit(1.0, 100) == pytest.approx(1.001)
