@@ -319,3 +319,45 @@ def test_bad_inputs_exit_2_with_one_line(tmp_path: Path) -> None:
         busy = taken.getsockname()[1]
         line = one_line_exit_2("--listen", f"udp/127.0.0.1:{busy}", "--connect", "udp/127.0.0.1:9")
         assert "in use" in line, line
+
+
+@pytest.mark.parametrize("proto", ["udp", "tcp"])
+def test_zenoh_sessions_talk_through_the_relay(proto: str) -> None:
+    """Zenoh's handshake, keep-alives and pub/sub pass the relay (udp/: QUIC, mixed reliability,
+    as egc_common.transport configures it)."""
+    from egc_common.transport import ZenohOptions, open_session
+
+    kind = socket.SOCK_DGRAM if proto == "udp" else socket.SOCK_STREAM
+    with socket.socket(socket.AF_INET, kind) as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    robot = open_session(ZenohOptions(listen=(f"{proto}/127.0.0.1:{port}",)))
+    try:
+        with link(
+            "--listen", f"{proto}/127.0.0.1:0", "--connect", f"{proto}/127.0.0.1:{port}",
+            "--up", "delay=15", "--down", "delay=15",
+        ) as relay:  # fmt: skip
+            operator = open_session(ZenohOptions(connect=(f"{proto}/127.0.0.1:{relay.port}",)))
+            try:
+                up: list[bytes] = []
+                down: list[bytes] = []
+                robot.declare_subscriber("t/up", lambda s: up.append(s.payload.to_bytes()))
+                operator.declare_subscriber("t/down", lambda s: down.append(s.payload.to_bytes()))
+                deadline = time.monotonic() + 10
+                while not list(operator.info.peers_zid()) and time.monotonic() < deadline:
+                    time.sleep(0.05)
+                time.sleep(0.3)  # the subscribers' declarations cross the link
+                for i in range(5):
+                    operator.put("t/up", b"u%d" % i)
+                    robot.put("t/down", b"d%d" % i)
+                    time.sleep(0.02)
+                while (len(up) < 5 or len(down) < 5) and time.monotonic() < deadline:
+                    time.sleep(0.05)
+            finally:
+                operator.close()
+            err = relay.stop()
+    finally:
+        robot.close()
+    assert up == [b"u%d" % i for i in range(5)]
+    assert down == [b"d%d" % i for i in range(5)]
+    assert re.search(r"up: forwarded [1-9]\d*, dropped 0 .* delay p50 1[5-9]\.\d", err), err
