@@ -3,6 +3,8 @@
     python docs/screenshot_web_viewer.py --demo 20       # egc-teleop demo -> docs/web_viewer.png
     python docs/screenshot_web_viewer.py --rrd run.rrd   # any recording
     python docs/screenshot_web_viewer.py                 # a synthetic corridor run (no Zenoh)
+    python docs/screenshot_web_viewer.py --predictive    # predictive display, 300 ms each way
+                                                         #   -> docs/predictive_display.png
 
 Steps: serve the .rrd through the web viewer bundled with rerun-sdk (``python -m rerun
 --serve-web``), start ``chromium --headless`` with a DevTools port, open the viewer URL over the
@@ -15,6 +17,18 @@ made here from synthetic telemetry through the operator view's own API (what the
 (EGC + footprint sweep) filters the constant forward command, and the resulting telemetry (with
 720-beam scans) is fed to ``egc_operator.view.record_episode``. This script may import the robot
 package because it is a documentation tool, not part of the operator.
+
+``--predictive`` (``--delay-ms``, default 300) shows the predictive display (DESIGN 9) under a
+one-way delay in both directions. It is a closed loop in simulated time, without Zenoh: the
+simulator (``egc_sim.Simulator``) drives a Jackal in a room, the robot's own controller
+(``egc_robot.controller.RobotController``: state machine, command ages, link statistics,
+latency governor, EGC filter) runs at 20 Hz, a scripted operator sends 50 Hz commands, each
+command reaches the controller ``delay`` after it was sent and each telemetry message reaches
+the operator view ``delay`` after its stamp. The operator side does what ``OperatorNode`` does:
+``view_age_ms`` on every command, the command history handed to ``OperatorView.on_commands``,
+telemetry handed over with its arrival time. Both sides share one clock (a perfect clock
+sync), and the link has no jitter and no loss. The run ends while the commands of a left turn
+are on their way: the ghost turns, the robot the operator sees has not yet.
 """
 
 from __future__ import annotations
@@ -37,15 +51,22 @@ import time
 import urllib.parse
 import urllib.request
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import websocket  # websocket-client (test extra): the DevTools protocol runs over a websocket
 from egc_common.messages import Telemetry
 from PIL import Image, ImageChops
 
+if TYPE_CHECKING:
+    from egc_operator.view import OperatorView
+    from egc_sim.grid_world import World
+
 DOCS = Path(__file__).resolve().parent
 DEFAULT_PNG = DOCS / "web_viewer.png"
+DEFAULT_PREDICTIVE_PNG = DOCS / "predictive_display.png"
 CHROMIUM_FLAGS = (
     "--headless",
     "--no-sandbox",
@@ -180,6 +201,181 @@ def record_corridor_run(path: Path, seconds: float = 20.0) -> Path:
         view.on_telemetry(t)
     view.close()
     return path
+
+
+# ---------------------------------------------------------------------------------------------
+# The predictive display under delay (--predictive)
+
+ROOM_BOXES = (
+    (0.0, 0.0, 14.0, 0.2),  # south wall
+    (0.0, 8.8, 14.0, 9.0),  # north wall
+    (0.0, 0.0, 0.2, 9.0),  # west wall
+    (13.8, 0.0, 14.0, 9.0),  # east wall
+    (6.0, 0.2, 7.0, 1.0),  # a crate on the south wall
+    (10.5, 7.6, 12.0, 8.8),  # a shelf in the north-east corner
+)
+ROOM_START = (1.5, 3.0, 0.0)
+OPERATOR_PERIOD_NS = 20_000_000  # 50 Hz commands
+ROBOT_PERIOD_NS = 50_000_000  # 20 Hz control cycles
+TICK_NS = 10_000_000
+
+
+def room_world() -> World:
+    """ROOM_BOXES as an ``egc_sim`` World (rows from the bottom, 5 cm cells)."""
+    from egc_sim.grid_world import World
+
+    res = 0.05
+    w, h = round(14.0 / res), round(9.0 / res)
+    xs = (np.arange(w) + 0.5) * res
+    ys = (np.arange(h) + 0.5) * res  # row 0 = bottom (the World convention)
+    gx, gy = np.meshgrid(xs, ys)
+    occ = np.zeros((h, w), bool)
+    for x0, y0, x1, y1 in ROOM_BOXES:
+        occ |= (gx >= x0) & (gx <= x1) & (gy >= y0) & (gy <= y1)
+    return World("room", occ, np.zeros_like(occ), res, 0.0, 0.0, start_pose=ROOM_START)
+
+
+def predictive_stick(t_s: float, seconds: float) -> tuple[float, float]:
+    """The scripted operator: centred to take control, a gentle right curve, straight, and a
+    left turn begun 0.6 s before the end (still on its way to the robot when the run ends)."""
+    if t_s < 0.6:
+        return 0.0, 0.0
+    if 1.6 <= t_s < 2.6:
+        return 1.0, -0.12
+    if t_s >= seconds - 0.6:
+        return 1.0, 0.5
+    return 1.0, 0.0
+
+
+@dataclass
+class PredictiveRun:
+    """What the operator had at the end of a predictive run."""
+
+    shown: Telemetry | None  # the newest telemetry the view showed
+    status: str  # the operator's terminal status line then
+
+
+def predictive_loop(view: OperatorView, seconds: float, delay_ms: float) -> PredictiveRun:
+    """The closed loop described in the module docstring, fed to ``view``."""
+    from egc_common.messages import Odometry, OperatorCommand, StateMessage
+    from egc_common.profiles import JACKAL
+    from egc_operator.operator_node import view_age_ms
+    from egc_operator.prediction import CommandHistory, SentCommand
+    from egc_operator.status_line import Status, format_status
+    from egc_robot.controller import ControllerConfig, RobotController
+    from egc_robot.pipeline import PipelineConfig
+    from egc_sim.grid_world import map_message
+    from egc_sim.simulator import Simulator
+
+    delay = round(delay_ms * 1e6)
+    world = room_world()
+    sim = Simulator(world, JACKAL, seed=1)
+    start = 1_000_000_000
+    controller = RobotController(ControllerConfig(pipeline=PipelineConfig(profile=JACKAL)), start)
+    controller.on_operator_alive("op1", True)
+    grid = map_message(world)
+    view.set_world(grid.blocked, grid.resolution_m, (grid.origin_x_m, grid.origin_y_m))
+    view.on_text("info", f"operator op1: {delay_ms:g} ms one-way delay in both directions")
+    history = CommandHistory()
+    uplink: list[tuple[int, bytes]] = []  # (arrival, payload), in order
+    downlink: list[tuple[int, Telemetry | StateMessage]] = []  # (arrival, message), in order
+    shown: Telemetry | None = None
+    state: StateMessage | None = None
+    base = (0.0, 0.0)
+    command: OperatorCommand | None = None
+    seq = 0
+    for tick in range(round(seconds * 1e9 / TICK_NS) + 1):
+        now = start + tick * TICK_NS
+        while uplink and uplink[0][0] <= now:
+            controller.on_command(uplink.pop(0)[1], now)
+        if (now - start) % ROBOT_PERIOD_NS == 0:
+            if now > start:
+                sim.step(*base, ROBOT_PERIOD_NS / 1e9)
+            controller.on_scan(sim.scan(now), now)
+            x, y, th = sim.odometry
+            controller.on_odometry(Odometry(now, x, y, th, *sim.twist))
+            out = controller.step(now)
+            base = (out.base.linear_mps, out.base.angular_radps)
+            if out.state_changed is not None:
+                downlink.append((now + delay, out.state_changed))
+            downlink.append((now + delay, out.telemetry))
+        while downlink and downlink[0][0] <= now:
+            message = downlink.pop(0)[1]
+            if isinstance(message, StateMessage):
+                view.on_state(message)
+                state = message
+                continue
+            view.on_telemetry(message, received_ns=now)
+            shown = message
+            if message.cycle % 20 == 1:  # a clock-sync round trip about once a second
+                view.on_link(2 * delay_ms, now - time.monotonic_ns())
+        if (now - start) % OPERATOR_PERIOD_NS == 0:
+            sx, sy = predictive_stick((now - start) / 1e9, seconds)
+            seq += 1
+            command = OperatorCommand(
+                seq=seq,
+                stamp_ns=now,
+                x=sx,
+                y=sy,
+                mode="shared",
+                deadman=True,
+                estop=False,
+                reset=False,
+                op="op1",
+                view_age_ms=view_age_ms(now, True, None if shown is None else shown.stamp_ns),
+            )
+            uplink.append((now + delay, command.encode()))
+            history.add(SentCommand(now, sx, sy, "shared"))
+            view.on_commands(history, now)
+    assert command is not None
+    t = shown
+    status = Status(
+        rtt_ms=2 * delay_ms,
+        synchronised=True,
+        robot_state=None if state is None else state.state,
+        reason=None if state is None else state.reason,
+        w_si=None if t is None else t.w_si,
+        rejected=None if state is None else state.rejected,
+        mode=command.mode,
+        deadman=command.deadman,
+        in_control=None if state is None else state.operator == "op1",
+        limiter=None if t is None else t.limiter,
+        filter=None if t is None else t.filter or None,
+        v_lim_latency=None if t is None else t.v_lim_latency,
+        loop_delay_ms=None if t is None else t.loop_delay_ms,
+        cmd_age_ms=None if t is None else t.cmd_age_ms,
+        cmd_age_p50_ms=None if t is None else t.cmd_age_p50_ms,
+        cmd_age_p90_ms=None if t is None else t.cmd_age_p90_ms,
+        cmd_gap_max_ms=None if t is None else t.cmd_gap_max_ms,
+        link_loss=None if t is None else t.link_loss,
+        view_age_ms=command.view_age_ms,
+    )
+    return PredictiveRun(shown, format_status(status))
+
+
+WORLD_FRAME_HALF_M = 3.0  # the screenshot's world view: 6 m around the end of the run
+
+
+def record_predictive_run(
+    path: Path, seconds: float = 5.0, delay_ms: float = 300.0
+) -> tuple[Path, PredictiveRun]:
+    """``predictive_loop`` recorded through the operator view, its world view framed on the end
+    of the run (a first, unrecorded pass finds where that is: the loop is deterministic)."""
+    from egc_operator.view import OperatorView, record_episode
+
+    dry = predictive_loop(OperatorView(None, "sim"), seconds, delay_ms)
+    assert dry.shown is not None and dry.shown.pose is not None
+    x, y, _ = dry.shown.pose
+    r = WORLD_FRAME_HALF_M
+    view = record_episode(
+        path,
+        "sim",
+        recording_name=f"predictive display, {delay_ms:g} ms each way",
+        world_bounds_m=(x - r + 1.0, x + r + 1.0, y - r, y + r),
+    )
+    run = predictive_loop(view, seconds, delay_ms)
+    view.close()
+    return path, run
 
 
 def find_chromium() -> str | None:
@@ -338,10 +534,21 @@ def main(argv: list[str] | None = None) -> int:
     source = parser.add_mutually_exclusive_group()
     source.add_argument("--rrd", type=Path, help="recording to show (default: a synthetic run)")
     source.add_argument("--demo", type=float, metavar="S", help="record S seconds of the demo")
-    parser.add_argument("--out", type=Path, default=DEFAULT_PNG, help="PNG to write")
+    source.add_argument(
+        "--predictive",
+        action="store_true",
+        help="the predictive display under --delay-ms each way (default PNG: "
+        "docs/predictive_display.png)",
+    )
+    parser.add_argument(
+        "--delay-ms", type=float, default=300.0, help="one-way delay (--predictive)"
+    )
+    parser.add_argument("--out", type=Path, default=None, help="PNG to write")
     parser.add_argument("--wait", type=float, default=25.0, help="seconds for the viewer to load")
     parser.add_argument("--seconds", type=float, default=14.0, help="length of the synthetic run")
     args = parser.parse_args(argv)
+    if args.out is None:
+        args.out = DEFAULT_PREDICTIVE_PNG if args.predictive else DEFAULT_PNG
     chromium = find_chromium()
     if chromium is None:
         print(
@@ -355,11 +562,16 @@ def main(argv: list[str] | None = None) -> int:
             rrd = args.rrd
         elif args.demo:
             rrd = record_demo(workdir / "demo.rrd", args.demo)
+        elif args.predictive:
+            rrd, run = record_predictive_run(workdir / "predictive.rrd", delay_ms=args.delay_ms)
+            print(f"operator status line at the end: {run.status}")
         else:
             rrd = record_corridor_run(workdir / "corridor.rrd", args.seconds)
         with serve_recording(rrd, workdir) as url:
             settled = screenshot(chromium, url, args.out, workdir, args.wait)
     what = args.rrd or (f"{args.demo:g} s of egc-teleop demo" if args.demo else "a synthetic run")
+    if args.predictive:
+        what = f"the predictive display, {args.delay_ms:g} ms each way (simulated closed loop)"
     print(f"wrote {args.out} ({args.out.stat().st_size} bytes) showing {what}")
     if not settled:
         print("warning: the page was still changing at the last capture", file=sys.stderr)

@@ -11,7 +11,8 @@ The operator process also hands over every command it sends (``on_commands``, wi
 history): the view then draws the predictive display (DESIGN 9, ``prediction``) in the world
 frame, a dashed magenta ghost footprint where the robot will be when that command takes effect
 and the path to it, labelled as a prediction, and the link figures in plain numbers. It is
-logged at the robot's time of the command, so a saved recording replays what the operator saw.
+logged at the robot time of the telemetry it starts from, so a saved recording replays the ghost
+next to the measured pose the operator saw with it.
 
 Every method is thread-safe (Zenoh delivers on its own threads) and never raises on a message:
 a view must not take the operator process down.
@@ -177,9 +178,14 @@ def record_episode(
     *,
     application_id: str = "egc-teleop",
     recording_name: str | None = None,
+    world_bounds_m: tuple[float, float, float, float] | None = None,
 ) -> OperatorView:
-    """The operator view saved to ``path`` (.rrd), for headless episodes (``--record``)."""
-    return _open(ViewerTarget("save", path=Path(path)), robot_id, application_id, recording_name)
+    """The operator view saved to ``path`` (.rrd), for headless episodes (``--record``).
+
+    ``world_bounds_m`` frames the world view (see ``view_blueprint.operator_blueprint``).
+    """
+    target = ViewerTarget("save", path=Path(path))
+    return _open(target, robot_id, application_id, recording_name, world_bounds_m)
 
 
 # A saved view has no one watching live, so it batches a second of telemetry per chunk instead of
@@ -189,13 +195,17 @@ FILE_BATCHER = rr.ChunkBatcherConfig(flush_tick=timedelta(seconds=1))
 
 
 def _open(
-    target: ViewerTarget, robot_id: str, application_id: str, recording_name: str | None
+    target: ViewerTarget,
+    robot_id: str,
+    application_id: str,
+    recording_name: str | None,
+    world_bounds_m: tuple[float, float, float, float] | None = None,
 ) -> OperatorView:
     if target.kind == "none":
         return OperatorView(None, robot_id, where="operator view disabled (--no-view)")
     batcher = FILE_BATCHER if target.kind == "save" else None
     rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4(), batcher_config=batcher)
-    where = attach(rec, target, operator_blueprint(robot_id))
+    where = attach(rec, target, operator_blueprint(robot_id, world_bounds_m=world_bounds_m))
     rec.send_recording_name(recording_name or f"{robot_id}: operator view")
     return OperatorView(rec, robot_id, where=where)
 
@@ -322,7 +332,9 @@ class OperatorView:
                 prediction = predict_from_telemetry(
                     t, history.since(first), robot_now_ns, self._rtt_ms
                 )
-            _set_time(rec, robot_now_ns, self._cycle)
+            # At the robot time of the telemetry it starts from: a replay then shows the ghost
+            # next to the measured pose it was predicted from, as the operator saw them.
+            _set_time(rec, robot_now_ns if t is None else t.stamp_ns, self._cycle)
             self._log_prediction(rec, t, prediction)
             downlink = statistics.median(self._downlink_ms) if self._downlink_ms else None
             text = link_text(

@@ -81,9 +81,22 @@ def _whole_history() -> list[rrb.VisibleTimeRange]:
     ]
 
 
-def operator_blueprint(robot_id: str, view_radius_m: float = 3.0) -> rrb.Blueprint:
-    """The default layout; ``view_radius_m`` frames the robot-frame view (forward is up)."""
+def operator_blueprint(
+    robot_id: str,
+    view_radius_m: float = 3.0,
+    world_bounds_m: tuple[float, float, float, float] | None = None,
+) -> rrb.Blueprint:
+    """The default layout; ``view_radius_m`` frames the robot-frame view (forward is up).
+
+    ``world_bounds_m`` (x_min, x_max, y_min, y_max in the world frame) frames the world view;
+    by default it shows everything logged there (the whole map).
+    """
     r = view_radius_m
+    world_bounds = None
+    if world_bounds_m is not None:
+        x0, x1, y0, y1 = world_bounds_m
+        # Screen coordinates: x = x_W, y = -y_W (north up).
+        world_bounds = rrb.VisualBounds2D(x_range=[x0, x1], y_range=[-y1, -y0])
     robot_view = rrb.Spatial2DView(
         name=f"{robot_id}: robot frame, forward up (blue: operator, initial GC; red: sent, expanded GC)",
         origin="/",
@@ -95,6 +108,7 @@ def operator_blueprint(robot_id: str, view_radius_m: float = 3.0) -> rrb.Bluepri
         name="world frame (dashed magenta: predicted, not measured)",
         origin="/",
         contents=f"{WORLD}/**",
+        visual_bounds=world_bounds,
         # Latest-at for the robot and the ghost; the trajectory's segments accumulate.
         overrides={TRAJECTORY: rrb.VisibleTimeRanges(_whole_history())},
     )
@@ -119,7 +133,7 @@ def operator_blueprint(robot_id: str, view_radius_m: float = 3.0) -> rrb.Bluepri
                 world_view,
                 rrb.TextDocumentView(name="link (plain numbers)", origin=LINK_TEXT),
                 rrb.TextLogView(name="log: state changes, rejections, link", origin=TEXT_LOG),
-                row_shares=[6, 1.4, 2.6],
+                row_shares=[6, 2, 2],
             ),
             plots,
             column_shares=[4, 3, 3],

@@ -391,10 +391,10 @@ def link_text(
         lines.append("ghost: no prediction (no pose, unknown profile or clock not synced)")
     else:
         ahead = (prediction.end_ns - prediction.start_ns) / 1e9
-        what = "stops" if prediction.stopping else "drives on"
         clamped = " (cut at the horizon)" if prediction.clamped else ""
+        stops = ", the robot stops" if prediction.stopping else ""
         lines.append(
-            f"ghost (dashed, magenta): {PREDICTED_LABEL}, {ahead:.2f} s after the newest "
-            f"telemetry{clamped}: where the command sent now takes effect; the robot {what}"
+            f"ghost (dashed magenta): {PREDICTED_LABEL}, +{ahead:.2f} s{clamped}: "
+            f"where the command sent now takes effect{stops}"
         )
     return "\n".join(lines)

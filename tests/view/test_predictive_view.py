@@ -109,27 +109,29 @@ def test_the_recording_holds_the_ghost_its_path_and_the_link_figures(recorded) -
 def test_the_ghost_is_where_the_command_sent_now_takes_effect(recorded) -> None:  # type: ignore[no-untyped-def]
     rec, calls = recorded
     heading = rec[_e(paths.PREDICTED_HEADING)]
+    # (now, newest telemetry shown) of each redraw; nothing before the first telemetry arrives
+    drawn = [(now, shown) for now, shown in calls[::3] if shown is not None]
     origins = heading.column("Arrows2D:origins")
+    labels = heading.column("Arrows2D:labels")
     stamps = heading.rows.column("robot_time").cast("int64").to_pylist()
-    # once telemetry flows, the robot at full speed is predicted at x = v (now + uplink - START)
-    for now, origin in list(zip(stamps, origins, strict=True))[10:]:
+    assert len(origins) == len(drawn) == 46
+    for (now, shown), origin, label, stamp in zip(drawn, origins, labels, stamps, strict=True):
+        # the robot at full speed is predicted at x = v (now + uplink - START)
         assert origin[0][0] == pytest.approx(V * (now + DELAY - START) / 1e9, abs=1e-6)
         assert origin[0][1] == pytest.approx(0.0, abs=1e-9)
-    # labelled as a prediction, with how far it looks ahead: view age + uplink
-    shown_at = {now: t for now, t in calls}
-    labels = heading.column("Arrows2D:labels")
-    for now, label in list(zip(stamps, labels, strict=True))[10:]:
-        ahead = (now + DELAY - shown_at[now].stamp_ns) / 1e9
+        # labelled as a prediction, with how far it looks ahead: view age + uplink
+        ahead = (now + DELAY - shown.stamp_ns) / 1e9
         assert label == [f"{PREDICTED_LABEL}, +{ahead:.2f} s"]
         assert 0.4 <= ahead < 0.45
+        # logged at the stamp of the telemetry it starts from (a replay shows them together)
+        assert stamp == shown.stamp_ns
 
 
 def test_the_path_runs_from_the_measured_pose_and_the_footprint_is_the_profiles(recorded) -> None:  # type: ignore[no-untyped-def]
     rec, calls = recorded
     path = rec[_e(paths.PREDICTED_PATH)]
     strips = path.column("LineStrips2D:strips")[-1]
-    now = path.rows.column("robot_time").cast("int64").to_pylist()[-1]
-    measured = dict(calls)[now].pose
+    measured = calls[::3][-1][1].pose
     heading = rec[_e(paths.PREDICTED_HEADING)].column("Arrows2D:origins")[-1][0]
     xs = [p[0] for strip in strips for p in strip]
     assert min(xs) == pytest.approx(measured[0], abs=1e-6)  # starts at the newest measured pose
@@ -163,10 +165,10 @@ def test_the_link_figures_in_plain_numbers(recorded) -> None:  # type: ignore[no
         " loss 0.0 %"
     )
     assert second == "command age on arrival p50 200 ms, p90 230 ms"
-    assert ghost.startswith(
-        "ghost (dashed, magenta): predicted (not measured), 0.44 s after the newest telemetry"
+    assert ghost == (
+        "ghost (dashed magenta): predicted (not measured), +0.44 s: where the command sent now"
+        " takes effect"
     )
-    assert ghost.endswith("the robot drives on")
 
 
 def test_a_holding_robot_is_predicted_to_stop(tmp_path: Path) -> None:
@@ -175,7 +177,7 @@ def test_a_holding_robot_is_predicted_to_stop(tmp_path: Path) -> None:
     view.close()
     rec = read_recording(tmp_path / "hold.rrd")
     texts = [row[0] for row in rec[_e(paths.LINK_TEXT)].column("TextDocument:text")]
-    assert texts[-1].endswith("the robot stops")
+    assert texts[-1].endswith("where the command sent now takes effect, the robot stops")
     origin = rec[_e(paths.PREDICTED_HEADING)].column("Arrows2D:origins")[-1][0]
     newest_x = V * (2.0 - 0.2 - 0.01) // (V * 0.05) * (V * 0.05)  # last shown cycle's pose
     braking = V * V / (2 * PIONEER3DX.decel_max_mps2)
