@@ -69,6 +69,7 @@ class RunPoint:
     start: tuple[float, float, float] | None = None
     goal: tuple[float, float] | None = None
     max_time_s: float = 60.0
+    stall_time_s: float = 30.0  # no 0.1 m of progress for this long: the run ends "stalled"
     extra: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
 
     def __post_init__(self) -> None:
@@ -78,7 +79,7 @@ class RunPoint:
             raise ValueError(
                 f"transport must be one of {', '.join(TRANSPORTS)}, got {self.transport!r}"
             )
-        for name in ("delay_ms", "jitter_ms", "loss", "burst", "max_time_s"):
+        for name in ("delay_ms", "jitter_ms", "loss", "burst", "max_time_s", "stall_time_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")

@@ -1,0 +1,441 @@
+"""report.md and the plots of an experiment directory (DESIGN 10), from its runs.jsonl lines.
+
+Every table aggregates runs that share the columns left of the metrics: ``n`` runs, the share
+``reached`` / ``collided`` / ``stalled`` / ``timeout`` (percent), the mean ``time`` of the runs
+that reached the goal, the mean ``hold`` time and ``hold events`` (the robot not driving while
+the operator wanted to move), the mean ``stale`` commands dropped, the mean time the latency
+governor ``capped`` the speed, the mean ``speed`` (path / time) and the 10th percentile of the
+minimum clearance (``clear p10``).
+
+Sections: overview; against delay (no loss, no outage); against loss (UDP); against outages;
+TCP against UDP; per world. A section whose runs are not in the grid is left out. Plots
+(``*.png``, matplotlib's Agg backend): outcome, time and hold time against delay, one panel per
+operator, one line per mode (filter) and link-aware setting; and, when the grid has them,
+outcome against loss and hold time against outage length.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+from collections.abc import Callable, Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+Row = dict[str, Any]
+Key = Callable[[Row], Any]
+
+
+def _mean(values: Iterable[float | None]) -> float | None:
+    xs = [float(v) for v in values if v is not None]
+    return sum(xs) / len(xs) if xs else None
+
+
+def _p10(values: Iterable[float]) -> float | None:
+    xs = sorted(float(v) for v in values)
+    if not xs:
+        return None
+    pos = 0.1 * (len(xs) - 1)
+    lo = math.floor(pos)
+    hi = min(lo + 1, len(xs) - 1)
+    return float(xs[lo] + (xs[hi] - xs[lo]) * (pos - lo))
+
+
+def _pct(rows: Sequence[Row], outcome: str) -> float:
+    hits = sum(1 for r in rows if r["outcome"] == outcome)
+    return 100.0 * hits / len(rows)
+
+
+def summarise(rows: Sequence[Row]) -> dict[str, float | int | None]:
+    """The metric columns of one group of runs (module docstring)."""
+    return {
+        "n": len(rows),
+        "reached": _pct(rows, "reached"),
+        "collided": _pct(rows, "collided"),
+        "stalled": _pct(rows, "stalled"),
+        "timeout": _pct(rows, "timeout"),
+        "time": _mean(r["time_s"] for r in rows if r["outcome"] == "reached"),
+        "hold": _mean(r["hold_s"] for r in rows),
+        "hold_events": _mean(r["hold_events"] for r in rows),
+        "stale": _mean(r["stale_rejected"] for r in rows),
+        "capped": _mean(r.get("latency_limited_s", 0.0) for r in rows),
+        "speed": _mean(r["mean_speed_mps"] for r in rows),
+        "clear_p10": _p10(r["min_clearance_m"] for r in rows),
+    }
+
+
+METRIC_HEADERS = (
+    ("n", "n", "{:d}"),
+    ("reached", "reached %", "{:.0f}"),
+    ("collided", "collided %", "{:.0f}"),
+    ("stalled", "stalled %", "{:.0f}"),
+    ("timeout", "timeout %", "{:.0f}"),
+    ("time", "time s", "{:.1f}"),
+    ("hold", "hold s", "{:.1f}"),
+    ("hold_events", "hold events", "{:.1f}"),
+    ("stale", "stale", "{:.0f}"),
+    ("capped", "capped s", "{:.1f}"),
+    ("speed", "speed m/s", "{:.3f}"),
+    ("clear_p10", "clear p10 m", "{:.2f}"),
+)
+
+
+def setting(row: Row) -> str:
+    """``direct`` or ``shared (egc)``: the mode with the filter that runs in it."""
+    return row["mode"] if row["mode"] == "direct" else f"{row['mode']} ({row['filter']})"
+
+
+def link_aware(row: Row) -> str:
+    return "on" if row.get("link_aware", True) else "off"
+
+
+def outage_s(row: Row) -> float:
+    return float(sum(d for _, d in row.get("outages") or []))
+
+
+def jitter_pct(row: Row) -> float:
+    return round(100.0 * row["jitter_ms"] / row["delay_ms"]) if row["delay_ms"] else 0.0
+
+
+def loss_label(row: Row) -> str:
+    if not row["loss"]:
+        return "0"
+    return f"{row['loss']:g}" + (f" (bursts of {row['burst']:g})" if row["burst"] > 1 else "")
+
+
+COLUMNS: dict[str, tuple[str, Key]] = {
+    "operator": ("operator", lambda r: r["operator"]),
+    "setting": ("mode", setting),
+    "link_aware": ("link-aware", link_aware),
+    "delay": ("delay ms", lambda r: r["delay_ms"]),
+    "jitter": ("jitter %", jitter_pct),
+    "loss": ("loss %", loss_label),
+    "outage": ("outage s", outage_s),
+    "transport": ("transport", lambda r: r["transport"]),
+    "world": ("world", lambda r: r["world"]),
+}
+
+
+def _fmt(value: Any, spec: str = "{}") -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, float) and spec == "{}":
+        return f"{value:g}"
+    return spec.format(value)
+
+
+def _sort_key(value: Any) -> tuple[int, Any]:
+    if isinstance(value, int | float):
+        return (0, value)
+    return (1, str(value))
+
+
+def table(rows: Sequence[Row], columns: Sequence[str]) -> str:
+    """A markdown table: one line per distinct value of ``columns``, metrics after them."""
+    groups: dict[tuple[Any, ...], list[Row]] = defaultdict(list)
+    for r in rows:
+        groups[tuple(COLUMNS[c][1](r) for c in columns)].append(r)
+    heads = [COLUMNS[c][0] for c in columns] + [h for _, h, _ in METRIC_HEADERS]
+    lines = ["| " + " | ".join(heads) + " |", "|" + "|".join("---" for _ in heads) + "|"]
+    for key in sorted(groups, key=lambda k: tuple(_sort_key(v) for v in k)):
+        stats = summarise(groups[key])
+        cells = [_fmt(v) for v in key] + [_fmt(stats[m], f) for m, _, f in METRIC_HEADERS]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _plain_link(r: Row) -> bool:
+    return not r["loss"] and not r.get("outages")
+
+
+def subsets(rows: Sequence[Row]) -> dict[str, list[Row]]:
+    """The runs each section of the report looks at."""
+    return {
+        "delay": [r for r in rows if _plain_link(r)],
+        "loss": [r for r in rows if r["transport"] == "udp" and not r.get("outages")],
+        "outage": outage_comparison(rows),
+    }
+
+
+def transport_pairs(rows: Sequence[Row]) -> list[Row]:
+    """Runs without loss whose point the grid ran on both TCP and UDP."""
+
+    def point(r: Row) -> tuple[Any, ...]:
+        return tuple(
+            repr(r.get(k))
+            for k in (
+                "world", "operator", "filter", "mode", "delay_ms", "jitter_ms", "dist",
+                "outages", "seed", "link_aware", "profile", "start", "goal",
+            )
+        )  # fmt: skip
+
+    transports: dict[tuple[Any, ...], set[str]] = defaultdict(set)
+    for r in rows:
+        if not r["loss"]:
+            transports[point(r)].add(r["transport"])
+    return [r for r in rows if not r["loss"] and transports[point(r)] >= {"tcp", "udp"}]
+
+
+def outage_comparison(rows: Sequence[Row]) -> list[Row]:
+    """Runs without loss at the (delay, jitter) points that the grid also ran with outages."""
+    with_outage = {(r["delay_ms"], r["jitter_ms"]) for r in rows if r.get("outages")}
+    return [r for r in rows if not r["loss"] and (r["delay_ms"], r["jitter_ms"]) in with_outage]
+
+
+def _varies(rows: Sequence[Row], key: Key) -> bool:
+    return len({key(r) for r in rows}) > 1
+
+
+def key_numbers(rows: Sequence[Row]) -> str:
+    """reached / collided / hold for link-aware on and off at 200 and 500 ms, per mode."""
+    plain = [r for r in rows if _plain_link(r) and not r["jitter_ms"]]
+    lines = [
+        "| delay ms | mode | link-aware | n | reached % | collided % | hold s |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    found = False
+    for delay in (200.0, 500.0):
+        for mode in sorted({setting(r) for r in plain}):
+            for aware in ("on", "off"):
+                group = [
+                    r
+                    for r in plain
+                    if r["delay_ms"] == delay and setting(r) == mode and link_aware(r) == aware
+                ]
+                if not group:
+                    continue
+                found = True
+                s = summarise(group)
+                lines.append(
+                    f"| {delay:g} | {mode} | {aware} | {s['n']} | {_fmt(s['reached'], '{:.0f}')}"
+                    f" | {_fmt(s['collided'], '{:.0f}')} | {_fmt(s['hold'], '{:.1f}')} |"
+                )
+    return "\n".join(lines) if found else ""
+
+
+def write_report(
+    rows: Sequence[Row],
+    path: Path,
+    title: str,
+    description: str = "",
+    command: str = "",
+    plots: Sequence[str] = (),
+) -> None:
+    """report.md (module docstring); written to a temporary file first, then renamed."""
+    rows = list(rows)
+    parts = [f"# {title}", ""]
+    if description:
+        parts += [description.strip(), ""]
+    if command:
+        parts += ["Made with:", "", "```", command, "```", ""]
+    parts += [
+        f"{len(rows)} runs. Delay, jitter and loss apply to each direction (the round trip is "
+        "twice the delay). Columns: see `egc_experiments.report`; `time s` is the mean over "
+        "the runs that reached the goal, `hold s` the time the robot did not drive while the "
+        "operator wanted to, `capped s` the time the latency governor limited the speed.",
+        "",
+    ]
+    if not rows:
+        path.write_text("\n".join([*parts, "No runs yet."]) + "\n", encoding="utf-8")
+        return
+    by_op = ["operator"] if _varies(rows, COLUMNS["operator"][1]) else []
+    sections: list[tuple[str, str]] = [("Overview", table(rows, [*by_op, "setting", "link_aware"]))]
+    numbers = key_numbers(rows)
+    if numbers:
+        sections.append(("Key numbers (no loss, no outage, no jitter)", numbers))
+    sub = subsets(rows)
+    if _varies(sub["delay"], COLUMNS["delay"][1]):
+        cols = [*by_op, "delay"]
+        if _varies(sub["delay"], jitter_pct):
+            cols.append("jitter")
+        if _varies(sub["delay"], COLUMNS["transport"][1]):
+            cols.append("transport")
+        sections.append(
+            (
+                "Against delay (no loss, no outage)",
+                table(sub["delay"], [*cols, "setting", "link_aware"]),
+            )
+        )
+    if _varies(sub["loss"], COLUMNS["loss"][1]):
+        cols = [*by_op, "loss"]
+        if _varies(sub["loss"], COLUMNS["delay"][1]):
+            cols.append("delay")
+        sections.append(
+            ("Against loss (UDP, no outage)", table(sub["loss"], [*cols, "setting", "link_aware"]))
+        )
+    if sub["outage"]:
+        sections.append(
+            (
+                "Against outages (one outage, both directions; no loss)",
+                table(sub["outage"], [*by_op, "outage", "transport", "setting", "link_aware"]),
+            )
+        )
+    paired = transport_pairs(rows)
+    if paired:
+        sections.append(
+            (
+                "TCP against UDP (the same points on both; no loss)",
+                table(paired, [*by_op, "transport", "delay", "outage", "setting", "link_aware"]),
+            )
+        )
+    if _varies(rows, COLUMNS["world"][1]):
+        sections.append(("Per world", table(rows, ["world", *by_op, "setting", "link_aware"])))
+    for heading, body in sections:
+        parts += [f"## {heading}", "", body, ""]
+    if plots:
+        parts += ["## Plots", ""]
+        parts += [f"![{name}]({name})" for name in plots]
+        parts.append("")
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text("\n".join(parts), encoding="utf-8")
+    tmp.replace(path)
+
+
+def _series(
+    rows: Sequence[Row], x: Key, y: Callable[[Sequence[Row]], float | None]
+) -> dict[tuple[str, str], list[tuple[float, float]]]:
+    groups: dict[tuple[str, str, float], list[Row]] = defaultdict(list)
+    for r in rows:
+        groups[(setting(r), link_aware(r), float(x(r)))].append(r)
+    out: dict[tuple[str, str], list[tuple[float, float]]] = defaultdict(list)
+    for (mode, aware, xv), group in sorted(groups.items()):
+        value = y(group)
+        if value is not None:
+            out[(mode, aware)].append((xv, value))
+    return out
+
+
+def _figure(
+    rows: Sequence[Row],
+    x: Key,
+    xlabel: str,
+    panels: Sequence[tuple[str, Callable[[Sequence[Row]], float | None]]],
+    path: Path,
+    title: str,
+) -> bool:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    operators = sorted({r["operator"] for r in rows})
+    if not rows or len({x(r) for r in rows}) < 2:
+        return False
+    fig, axes = plt.subplots(
+        len(panels),
+        len(operators),
+        figsize=(4.8 * len(operators), 3.2 * len(panels)),
+        squeeze=False,
+        sharex=True,
+    )
+    styles = {"on": "-", "off": "--"}
+    colours: dict[str, str] = {}
+    palette = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple"]
+    for col, op in enumerate(operators):
+        op_rows = [r for r in rows if r["operator"] == op]
+        for row_i, (ylabel, fn) in enumerate(panels):
+            ax = axes[row_i][col]
+            for (mode, aware), points in sorted(_series(op_rows, x, fn).items()):
+                colour = colours.setdefault(mode, palette[len(colours) % len(palette)])
+                xs, ys = zip(*points, strict=True)
+                ax.plot(
+                    xs,
+                    ys,
+                    styles.get(aware, ":"),
+                    color=colour,
+                    marker="o",
+                    markersize=3,
+                    label=f"{mode}, link-aware {aware}",
+                )
+            ax.set_ylabel(ylabel)
+            ax.grid(True, alpha=0.3)
+            if row_i == 0:
+                ax.set_title(op)
+            if row_i == len(panels) - 1:
+                ax.set_xlabel(xlabel)
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    if handles:
+        fig.legend(handles, labels, loc="lower center", ncol=min(4, len(labels)), fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout(rect=(0, 0.06, 1, 0.97))
+    tmp = path.with_name(path.stem + ".tmp.png")
+    fig.savefig(tmp, dpi=100)
+    plt.close(fig)
+    tmp.replace(path)
+    return True
+
+
+def _rate(outcome: str) -> Callable[[Sequence[Row]], float]:
+    return lambda g: _pct(g, outcome)
+
+
+def write_plots(rows: Sequence[Row], out_dir: Path) -> list[str]:
+    """The plots of the module docstring; returns the file names written."""
+    written: list[str] = []
+    plain = [r for r in rows if _plain_link(r) and not r["jitter_ms"]]
+    delay: Key = COLUMNS["delay"][1]
+    figures: list[tuple[str, Sequence[Row], Key, str, list[Any], str]] = [
+        (
+            "outcome_vs_delay.png",
+            plain,
+            delay,
+            "one-way delay (ms)",
+            [("reached %", _rate("reached")), ("collided %", _rate("collided"))],
+            "Outcome against delay (no loss, no jitter)",
+        ),
+        (
+            "time_vs_delay.png",
+            plain,
+            delay,
+            "one-way delay (ms)",
+            [
+                (
+                    "time to goal (s)",
+                    lambda g: _mean(r["time_s"] for r in g if r["outcome"] == "reached"),
+                )
+            ],
+            "Time to the goal against delay (runs that reached it)",
+        ),
+        (
+            "hold_vs_delay.png",
+            plain,
+            delay,
+            "one-way delay (ms)",
+            [("hold time (s)", lambda g: _mean(r["hold_s"] for r in g))],
+            "Time held while the operator wanted to drive, against delay",
+        ),
+        (
+            "outcome_vs_loss.png",
+            [
+                r
+                for r in rows
+                if r["transport"] == "udp" and not r.get("outages") and r["burst"] <= 1
+            ],
+            lambda r: r["loss"],
+            "loss (%), independent, each direction",
+            [
+                ("reached %", _rate("reached")),
+                ("hold time (s)", lambda g: _mean(r["hold_s"] for r in g)),
+            ],
+            "Outcome and hold time against loss (UDP)",
+        ),
+        (
+            "hold_vs_outage.png",
+            outage_comparison(rows),
+            outage_s,
+            "outage (s)",
+            [
+                ("hold time (s)", lambda g: _mean(r["hold_s"] for r in g)),
+                ("reached %", _rate("reached")),
+            ],
+            "Hold time and outcome against the length of one outage",
+        ),
+    ]
+    for name, subset, x, xlabel, panels, title in figures:
+        if name == "hold_vs_outage.png" and not any(r.get("outages") for r in subset):
+            continue
+        if name == "outcome_vs_loss.png" and not any(r["loss"] for r in subset):
+            continue
+        if _figure(subset, x, xlabel, panels, out_dir / name, title):
+            written.append(name)
+    return written

@@ -1,0 +1,134 @@
+"""``egc-teleop experiment`` (DESIGN 10): outputs, resume, and exit 2 on bad input."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import pytest
+from egc_experiments.experiment_cli import run_key
+from egc_experiments.grid import load_grid
+from egc_experiments.run_point import RESULT_KEYS
+
+from egc_app.cli import main
+
+TINY = """
+description = "tiny"
+world = "random:2"
+operator = "sighted"
+filter = "none"
+max_time_s = 6
+[[sweep]]
+delay_ms = [0, 200]
+"""
+
+
+def write_grid(tmp_path, text=TINY):
+    path = tmp_path / "grid.toml"
+    path.write_text(text)
+    return path
+
+
+def experiment(grid, out, *extra):
+    return main(["experiment", "--grid", str(grid), "--out", str(out), *extra])
+
+
+def lines(path):
+    return [json.loads(line) for line in path.read_text().splitlines()]
+
+
+def test_a_tiny_grid_end_to_end(tmp_path, capsys):
+    grid, out = write_grid(tmp_path), tmp_path / "out"
+    assert experiment(grid, out, "--jobs", "2") == 0
+    rows = lines(out / "runs.jsonl")
+    assert len(rows) == 2
+    assert {r["delay_ms"] for r in rows} == {0.0, 200.0}
+    for r in rows:
+        assert set(RESULT_KEYS) <= set(r)
+        assert r["run_mode"] == "simulated" and r["key"].startswith("simulated:")
+    report = (out / "report.md").read_text()
+    assert "tiny" in report and "## Against delay" in report and "--jobs 2" in report
+    for name in ("outcome_vs_delay.png", "time_vs_delay.png", "hold_vs_delay.png"):
+        assert (out / name).read_bytes().startswith(b"\x89PNG")
+        assert f"]({name})" in report
+    err = capsys.readouterr().err
+    assert "2 of 2 runs" in err and "2 new" in err
+
+
+def test_a_rerun_skips_what_is_done_and_redoes_a_cut_line(tmp_path, capsys):
+    grid, out = write_grid(tmp_path), tmp_path / "out"
+    out.mkdir()
+    points = load_grid(grid).points
+    fake = {k: 0 for k in RESULT_KEYS} | {
+        "key": run_key("simulated", points[0]),
+        "outcome": "fake",
+        "delay_ms": 0.0,
+        "loss": 0.0,
+        "jitter_ms": 0.0,
+        "transport": "tcp",
+        "mode": "direct",
+        "filter": "none",
+        "operator": "sighted",
+        "world": "random:2",
+    }
+    cut = json.dumps({"key": run_key("simulated", points[1]), "outcome": "reached"})[:30]
+    (out / "runs.jsonl").write_text(json.dumps(fake) + "\n" + cut)
+    assert experiment(grid, out) == 0
+    rows = lines(out / "runs.jsonl")
+    assert rows[0]["outcome"] == "fake"  # kept, not run again
+    assert len(rows) == 2 and rows[1]["delay_ms"] == 200.0
+    err = capsys.readouterr().err
+    assert "dropped 1 unreadable line" in err and "1 new" in err
+    assert experiment(grid, out) == 0
+    assert len(lines(out / "runs.jsonl")) == 2
+    assert "0 new" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("grid_text", "message"),
+    [
+        ("[[sweep]\n", "not valid TOML"),
+        (TINY.replace("random:2", "atlantis"), "world 'atlantis'"),
+        (TINY.replace('filter = "none"', 'filter = "magic"'), "unknown filter"),
+        (TINY.replace('"sighted"', '"pilot"'), "operator 'pilot'"),
+        (TINY + "loss = 5\n", "loss is not possible on a TCP link"),
+        (
+            TINY.replace("delay_ms = [0, 200]", 'delay_ms = "fast"'),
+            "delay_ms values must be numbers",
+        ),
+    ],
+)
+def test_bad_grids_exit_2_with_one_line_and_write_nothing(tmp_path, capsys, grid_text, message):
+    grid, out = write_grid(tmp_path, grid_text), tmp_path / "out"
+    assert experiment(grid, out) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and "\n" not in err and err.startswith("egc-teleop experiment: error")
+    assert not out.exists()
+
+
+def test_an_unwritable_out_dir_exits_2_before_running(tmp_path, capsys):
+    grid = write_grid(tmp_path)
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    assert experiment(grid, blocker) == 2
+    assert "not a directory" in capsys.readouterr().err
+    assert experiment(grid, blocker / "sub") == 2
+    assert "cannot write to --out" in capsys.readouterr().err
+
+
+def test_bad_arguments_exit_2(tmp_path, capsys):
+    grid = write_grid(tmp_path)
+    assert experiment(tmp_path / "none.toml", tmp_path / "o") == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert experiment(grid, tmp_path / "o", "--jobs", "0") == 2
+    assert "--jobs" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as info:
+        experiment(grid, tmp_path / "o", "--mode", "real")
+    assert info.value.code == 2
+
+
+def test_emulated_mode_without_its_module_exits_2(tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "egc_experiments.emulated", None)
+    assert experiment(write_grid(tmp_path), tmp_path / "o", "--mode", "emulated") == 2
+    assert "--mode emulated needs" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
