@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import shutil
 import subprocess
 import sys
@@ -10,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from egc_operator import view_blueprint as paths
-from egc_operator.view_scene import SENT_RED, TRAJECTORY_TEAL
+from egc_operator.view_scene import PREDICTED_MAGENTA, SENT_RED, TRAJECTORY_TEAL
 from PIL import Image
 
 from tests.view.rrd import read_recording
@@ -67,3 +68,46 @@ def test_script_without_chromium_says_so(
     monkeypatch.setattr(shutil, "which", lambda name: None)
     assert screenshot_web_viewer.main(["--out", "unused.png"]) == 2
     assert "chromium is not installed" in capsys.readouterr().err
+
+
+def test_the_predictive_run_is_a_closed_loop_under_300_ms_each_way(tmp_path: Path) -> None:
+    """What docs/predictive_display.png shows: the robot's own controller sees 300 ms old
+    commands and caps the speed; the view draws the ghost ahead of the newest pose it shows."""
+    rrd, run = screenshot_web_viewer.record_predictive_run(tmp_path / "predictive.rrd")
+    rec = read_recording(rrd)
+    t = run.shown
+    assert t is not None and t.pose is not None
+    assert t.state == "DRIVING" and t.limiter == "latency"
+    assert t.cmd_age_p50_ms == pytest.approx(300.0) and t.link_loss == 0.0
+    assert t.view_age_ms is not None and 300.0 <= t.view_age_ms <= 350.0
+    assert run.status.startswith("SLOWED: link delay")
+    assert "loss 0.0 %" in run.status
+    ghost = rec["/" + paths.PREDICTED_HEADING]
+    (origin,) = ghost.column("Arrows2D:origins")[-1]
+    # about 0.6 s ahead (view age + uplink) at the capped speed, turning left (the last commands)
+    assert 0.8 < math.dist(origin, t.pose[:2]) < 1.2
+    assert origin[1] > t.pose[1]
+    assert "predicted (not measured)" in ghost.column("Arrows2D:labels")[-1][0]
+    text = rec["/" + paths.LINK_TEXT].column("TextDocument:text")[-1][0]
+    assert text.startswith("uplink 300 ms, downlink ~300 ms, view age ")
+
+
+@pytest.mark.browser
+@pytest.mark.slow
+@pytest.mark.skipif(
+    screenshot_web_viewer.find_chromium() is None,
+    reason="chromium is not installed (apt-get install chromium; CI installs it)",
+)
+def test_screenshot_of_the_predictive_display(tmp_path: Path) -> None:
+    png = tmp_path / "predictive.png"
+    done = subprocess.run(
+        [sys.executable, str(SCRIPT), "--predictive", "--out", str(png)],
+        capture_output=True,
+        text=True,
+        timeout=240,
+    )
+    assert done.returncode == 0, done.stderr
+    assert "operator status line at the end: SLOWED: link delay" in done.stdout
+    pixels = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    assert _pixels_near(pixels, PREDICTED_MAGENTA[:3], tolerance=40) > 100  # the ghost
+    assert _pixels_near(pixels, TRAJECTORY_TEAL) > 50
