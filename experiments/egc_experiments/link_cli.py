@@ -135,7 +135,8 @@ async def _serve(relay: Relay, args: argparse.Namespace) -> float:
     gc.freeze()  # keep collections short while relaying
     print(
         f"link: listening on {bound} -> {relay.connect} "
-        f"(up: {relay.up.describe()}, down: {relay.down.describe()}, seed {relay.seed})",
+        f"(up: {relay.up.describe()}, down: {relay.down.describe()}, seed {relay.seed}; "
+        f"t0 {relay.t0:.6f} on CLOCK_MONOTONIC: outages and phases count from it)",
         file=sys.stderr,
         flush=True,
     )

@@ -37,6 +37,8 @@ class ZenohDriver:
         self._scan_rx_ns = 0
         self._odometry: Odometry | None = None
         self.rejected: Counter[str] = Counter()
+        self._send_lock = threading.Lock()
+        self._closed = False
         self._publisher = command_publisher(session, keys.base_cmd(robot_id))
         self._subscribers = [
             session.declare_subscriber(keys.scan(robot_id), self._on_scan),
@@ -76,9 +78,15 @@ class ZenohDriver:
         return SensorUpdate(scan=scan, scan_rx_ns=rx_ns, odometry=odometry)
 
     def send(self, command: BaseCommand) -> None:
-        self._publisher.put(command.encode())
+        # A command callback may still be sending while the process closes: Zenoh's publisher
+        # must not be undeclared while another thread uses it ("Already borrowed").
+        with self._send_lock:
+            if not self._closed:
+                self._publisher.put(command.encode())
 
     def close(self) -> None:
         for subscriber in self._subscribers:
             subscriber.undeclare()
-        self._publisher.undeclare()
+        with self._send_lock:
+            self._closed = True
+            self._publisher.undeclare()

@@ -107,6 +107,7 @@ class RobotNode:
         self._lock = threading.Lock()
         self._last_state_ns = 0
         self._faults = 0
+        self._shut_down = False  # set under the lock: the zero command sent last stays last
         self._rejections = RejectionLog()
         self._telemetry = data_publisher(session, keys.telemetry(robot_id))
         self._state = data_publisher(session, keys.state(robot_id))
@@ -130,6 +131,8 @@ class RobotNode:
         rx_ns = self._clock()
         payload = payload_bytes(sample)
         with self._lock:
+            if self._shut_down:  # a callback that was already running when we shut down
+                return
             try:
                 if self._handle_command(payload, rx_ns):
                     now = self._clock()
@@ -175,6 +178,7 @@ class RobotNode:
         for entity in self._entities:
             entity.undeclare()
         with self._lock:
+            self._shut_down = True
             now = self._clock()
             cycle = self._controller.counters.cycles + 1
             stop_cmd = BaseCommand(stamp_ns=now, seq=cycle, linear_mps=0.0, angular_radps=0.0)
