@@ -11,7 +11,8 @@ Sections: overview; against delay (no loss, no outage); against loss (UDP); agai
 TCP against UDP; per world. A section whose runs are not in the grid is left out. Plots
 (``*.png``, matplotlib's Agg backend): outcome, time and hold time against delay, one panel per
 operator, one line per mode (filter) and link-aware setting; and, when the grid has them,
-outcome against loss and hold time against outage length.
+outcome against loss and hold time against outage length (one panel per operator and
+transport).
 """
 
 from __future__ import annotations
@@ -312,19 +313,20 @@ def _figure(
     panels: Sequence[tuple[str, Callable[[Sequence[Row]], float | None]]],
     path: Path,
     title: str,
+    facet: Key = lambda r: r["operator"],
 ) -> bool:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    operators = sorted({r["operator"] for r in rows})
+    operators = sorted({facet(r) for r in rows})
     if not rows or len({x(r) for r in rows}) < 2:
         return False
     fig, axes = plt.subplots(
         len(panels),
         len(operators),
-        figsize=(4.8 * len(operators), 3.2 * len(panels)),
+        figsize=(max(7.0, 4.8 * len(operators)), 3.2 * len(panels) + 0.6),
         squeeze=False,
         sharex=True,
     )
@@ -332,7 +334,7 @@ def _figure(
     colours: dict[str, str] = {}
     palette = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple"]
     for col, op in enumerate(operators):
-        op_rows = [r for r in rows if r["operator"] == op]
+        op_rows = [r for r in rows if facet(r) == op]
         for row_i, (ylabel, fn) in enumerate(panels):
             ax = axes[row_i][col]
             for (mode, aware), points in sorted(_series(op_rows, x, fn).items()):
@@ -348,6 +350,8 @@ def _figure(
                     label=f"{mode}, link-aware {aware}",
                 )
             ax.set_ylabel(ylabel)
+            if ylabel.endswith("%"):
+                ax.set_ylim(-3, 103)
             ax.grid(True, alpha=0.3)
             if row_i == 0:
                 ax.set_title(op)
@@ -355,9 +359,9 @@ def _figure(
                 ax.set_xlabel(xlabel)
     handles, labels = axes[0][0].get_legend_handles_labels()
     if handles:
-        fig.legend(handles, labels, loc="lower center", ncol=min(4, len(labels)), fontsize=8)
+        fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8)
     fig.suptitle(title)
-    fig.tight_layout(rect=(0, 0.06, 1, 0.97))
+    fig.tight_layout(rect=(0, 0.1, 1, 0.97))
     tmp = path.with_name(path.stem + ".tmp.png")
     fig.savefig(tmp, dpi=100)
     plt.close(fig)
@@ -431,11 +435,15 @@ def write_plots(rows: Sequence[Row], out_dir: Path) -> list[str]:
             "Hold time and outcome against the length of one outage",
         ),
     ]
+    facets: dict[str, Key] = {
+        "hold_vs_outage.png": lambda r: f"{r['operator']}, {r['transport'].upper()}",
+    }
     for name, subset, x, xlabel, panels, title in figures:
         if name == "hold_vs_outage.png" and not any(r.get("outages") for r in subset):
             continue
         if name == "outcome_vs_loss.png" and not any(r["loss"] for r in subset):
             continue
-        if _figure(subset, x, xlabel, panels, out_dir / name, title):
+        facet = facets.get(name, COLUMNS["operator"][1])
+        if _figure(subset, x, xlabel, panels, out_dir / name, title, facet):
             written.append(name)
     return written
