@@ -7,6 +7,7 @@
 - collisions: rising edges of the driver's ``collided`` flag;
 - command latency: arrival on the robot minus the operator's stamp (the operator's estimate of
   the robot clock, DESIGN 7), for every accepted synchronised command;
+- loop delay tau and the operator's view age while driving (percentiles, DESIGN 9);
 - time by state and limiter, from the telemetry stamps (cycles are not evenly spaced: an accepted
   command also runs one): ``hold_s`` and ``hold_events`` (entries into HOLD), ``latency_limited_s``
   (the latency governor capped the speed, DESIGN 9), ``first_drive_ns``/``last_stamp_ns``.
@@ -41,6 +42,8 @@ class RunStats:
         self.hold_events = 0
         self.latency_limited_s = 0.0
         self._previous: Telemetry | None = None
+        self._loop_delay_ms: list[float] = []
+        self._view_age_ms: list[float] = []
 
     def on_cycle(self, telemetry: Telemetry) -> None:
         self.cycles += 1
@@ -56,6 +59,11 @@ class RunStats:
         if telemetry.state == "HOLD" and (previous is None or previous.state != "HOLD"):
             self.hold_events += 1
         self._previous = telemetry
+        if telemetry.state == "DRIVING" and len(self._loop_delay_ms) < _MAX_LATENCIES:
+            if telemetry.loop_delay_ms is not None:
+                self._loop_delay_ms.append(telemetry.loop_delay_ms)
+            if telemetry.view_age_ms is not None:
+                self._view_age_ms.append(telemetry.view_age_ms)
         limiting = telemetry.limiter in _INTERVENING
         if limiting:
             self.interventions += 1
@@ -78,10 +86,7 @@ class RunStats:
             self._latencies_ms.append(latency_ns / 1e6)
 
     def summary(self) -> dict[str, Any]:
-        lat = np.asarray(self._latencies_ms, dtype=np.float64)
-        latency: dict[str, float | int | None] = {"n": int(lat.size)}
-        for name, q in (("p50", 50), ("p90", 90), ("p99", 99), ("max", 100)):
-            latency[f"{name}_ms"] = float(np.percentile(lat, q)) if lat.size else None
+        latency = _percentiles(self._latencies_ms)
         return {
             "distance_m": round(self.distance_m, 3),
             "interventions": self.interventions,
@@ -94,4 +99,14 @@ class RunStats:
             "hold_events": self.hold_events,
             "latency_limited_s": round(self.latency_limited_s, 3),
             "command_latency": latency,
+            "loop_delay_ms": _percentiles(self._loop_delay_ms),
+            "view_age_ms": _percentiles(self._view_age_ms),
         }
+
+
+def _percentiles(values: list[float]) -> dict[str, float | int | None]:
+    arr = np.asarray(values, dtype=np.float64)
+    out: dict[str, float | int | None] = {"n": int(arr.size)}
+    for name, q in (("p50", 50), ("p90", 90), ("p99", 99), ("max", 100)):
+        out[f"{name}_ms"] = float(np.percentile(arr, q)) if arr.size else None
+    return out
