@@ -532,8 +532,10 @@ class LinkModel:
     Counters: ``sent``, ``forwarded``, and ``dropped`` by reason (``loss``, ``outage``, ``queue``).
     """
 
-    def __init__(self, link: LinkSpec | Schedule | Trace, seed: int, ordered: bool) -> None:
-        self.schedule = as_schedule(link)
+    def __init__(
+        self, spec_or_schedule: LinkSpec | Schedule | Trace, seed: int, ordered: bool
+    ) -> None:
+        self.schedule = as_schedule(spec_or_schedule)
         self.ordered = ordered
         if ordered and self.schedule.has_loss:
             raise SpecError(TCP_LOSS_MESSAGE)

@@ -16,8 +16,7 @@ a millisecond (the stats report the lateness measured).
 
 Time is ``time.monotonic()`` here at the edge; the model sees seconds since the relay started
 (the origin of outages, phases and traces). One model per direction per TCP connection or UDP
-client address (seeded from ``--seed``, the direction and the flow's number), so a rate limit
-applies per connection.
+client address (seeded by ``flow_seed``), so a rate limit applies per connection.
 """
 
 from __future__ import annotations
@@ -57,6 +56,14 @@ _READS_PER_WAKEUP: Final = 64
 MAX_QUEUED_BYTES: Final = 4 * 1024 * 1024
 MAX_BACKLOG_S: Final = 0.25  # serialization queued behind a rate limit
 _PR_SET_TIMERSLACK: Final = 29
+
+
+def flow_seed(seed: int, direction: str, number: int) -> int:
+    """The model seed of one direction of the ``number``-th connection or UDP client (from 1).
+
+    The first one uses ``derive_seed(seed, direction)``, as the simulated experiments do, so that
+    one seed gives the same decisions in both modes; later ones get seeds of their own."""
+    return derive_seed(seed, direction if number == 1 else f"{direction}/{number}")
 
 
 class EndpointError(ValueError):
@@ -342,7 +349,7 @@ class _TcpPipe:
         loop, t0, seed = relay.loop, relay.t0, relay.seed
         self.up = Lane(
             loop,
-            LinkModel(relay.up, derive_seed(seed, f"up/{number}"), ordered=True),
+            LinkModel(relay.up, flow_seed(seed, "up", number), ordered=True),
             t0,
             self._to_server,
             relay.recorders["up"],
@@ -351,7 +358,7 @@ class _TcpPipe:
         )
         self.down = Lane(
             loop,
-            LinkModel(relay.down, derive_seed(seed, f"down/{number}"), ordered=True),
+            LinkModel(relay.down, flow_seed(seed, "down", number), ordered=True),
             t0,
             self._to_client,
             relay.recorders["down"],
@@ -471,14 +478,14 @@ class _UdpFlow:
         loop, t0, seed = relay.loop, relay.t0, relay.seed
         self.up = Lane(
             loop,
-            LinkModel(relay.up, derive_seed(seed, f"up/{number}"), ordered=False),
+            LinkModel(relay.up, flow_seed(seed, "up", number), ordered=False),
             t0,
             self.sock.send,
             relay.recorders["up"],
         )
         self.down = Lane(
             loop,
-            LinkModel(relay.down, derive_seed(seed, f"down/{number}"), ordered=False),
+            LinkModel(relay.down, flow_seed(seed, "down", number), ordered=False),
             t0,
             to_client,
             relay.recorders["down"],
