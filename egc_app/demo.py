@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from egc_common.errors import UsageError
-from egc_common.transport import free_tcp_port
+from egc_common.transport import free_port
 
 STOP_TIMEOUT_S = 10.0
 _PR_SET_PDEATHSIG = 1
@@ -136,15 +136,12 @@ def _link_cmd(args: argparse.Namespace, listen: str, connect: str) -> list[str]:
     return cmd
 
 
-def _wait_ready(proc: subprocess.Popen[bytes], host: str, port: int, udp: bool) -> None:
-    """Wait until ``proc`` listens (TCP: connectable; UDP: nothing to see, a short pause)."""
+def _wait_ready(proc: subprocess.Popen[bytes], host: str, port: int) -> None:
+    """Wait until ``proc`` accepts TCP connections on ``port``."""
     deadline = time.monotonic() + 3 * STOP_TIMEOUT_S
     while time.monotonic() < deadline:
         if proc.poll() is not None:
             raise UsageError(f"{proc.args[3]} exited with code {proc.returncode}")
-        if udp:
-            time.sleep(0.5)
-            return
         try:
             with socket.create_connection((host, port), timeout=0.2):
                 return
@@ -160,9 +157,9 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--save and --no-view exclude each other")
     linked = args.up is not None or args.down is not None or args.scenario is not None
     proto = args.transport
-    endpoint = f"{proto}/127.0.0.1:{free_tcp_port()}"
+    endpoint = f"{proto}/127.0.0.1:{free_port(proto)}"
     operator_endpoint = endpoint
-    link_port = free_tcp_port()
+    link_port = free_port(proto)
     if linked:
         operator_endpoint = f"{proto}/127.0.0.1:{link_port}"
     workdir = Path(tempfile.mkdtemp(prefix="egc-demo-"))
@@ -188,10 +185,11 @@ def run(args: argparse.Namespace) -> int:
     operator: subprocess.Popen[bytes] | None = None
     try:
         if linked:
-            if proto == "tcp":  # the relay checks that the robot side is reachable
-                _wait_ready(robot, "127.0.0.1", int(endpoint.rsplit(":", 1)[1]), False)
+            # The relay checks that the robot side is reachable (a udp/ endpoint of ours also
+            # listens on TCP, for Zenoh's reliable control link, on the same port).
+            _wait_ready(robot, "127.0.0.1", int(endpoint.rsplit(":", 1)[1]))
             relay = _start(_link_cmd(args, operator_endpoint, endpoint))
-            _wait_ready(relay, "127.0.0.1", link_port, proto == "udp")
+            _wait_ready(relay, "127.0.0.1", link_port)
         operator = _start(operator_cmd)
         while not stop.wait(0.1):
             if operator.poll() is not None or robot.poll() is not None:

@@ -5,6 +5,13 @@
 
 Prints a ready line on stderr once listening, and per-direction counts when it stops (SIGINT,
 SIGTERM or ``--duration``; exit 0). Bad input gives one line on stderr and exit 2.
+
+Our ``udp/`` transport is two links on one port number (``egc_common.transport``): best-effort
+datagrams on UDP and Zenoh's reliable control traffic on TCP. So a ``udp/`` relay also relays
+TCP between the same port numbers (the *companion*), with the same delay, jitter, rate and
+outages, on the same clock, but without loss or reordering (TCP retransmits what a lossy path
+drops: only the delay remains). ``--udp-only`` turns the companion off; it is also left out,
+with a note, when nothing accepts TCP at the target.
 """
 
 from __future__ import annotations
@@ -64,6 +71,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--stats", metavar="FILE.json", help="write the final counts as JSON")
     parser.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     parser.add_argument("--quiet", action="store_true", help="no per-connection log lines")
+    parser.add_argument(
+        "--udp-only",
+        action="store_true",
+        help="udp/: do not also relay TCP on the same ports (the reliable half of our udp/ "
+        "transport, see the module docstring)",
+    )
 
 
 def _endpoint(option: str, text: str) -> Endpoint:
@@ -122,11 +135,23 @@ def build_relay(args: argparse.Namespace) -> Relay:
     return relay
 
 
-async def _serve(relay: Relay, args: argparse.Namespace) -> float:
+async def _serve(relay: Relay, args: argparse.Namespace, companions: list[Relay]) -> float:
     try:
         bound = await relay.start()
     except OSError as exc:
         raise UsageError(f"cannot listen on {relay.listen}: {_reason(exc)}") from None
+    companion, note = _companion(relay, args, bound.port)
+    if companion is not None:
+        try:
+            await companion.start()
+        except OSError as exc:
+            await relay.close()
+            raise UsageError(
+                f"cannot listen on {companion.listen} (the TCP half of a udp/ link; "
+                f"--udp-only relays UDP alone): {_reason(exc)}"
+            ) from None
+        companion.t0 = relay.t0  # one clock for outages and phases in both
+        companions.append(companion)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -135,6 +160,7 @@ async def _serve(relay: Relay, args: argparse.Namespace) -> float:
     gc.freeze()  # keep collections short while relaying
     print(
         f"link: listening on {bound} -> {relay.connect} "
+        f"{note}"
         f"(up: {relay.up.describe()}, down: {relay.down.describe()}, seed {relay.seed}; "
         f"t0 {relay.t0:.6f} on CLOCK_MONOTONIC: outages and phases count from it)",
         file=sys.stderr,
@@ -144,17 +170,44 @@ async def _serve(relay: Relay, args: argparse.Namespace) -> float:
     with contextlib.suppress(TimeoutError):
         await asyncio.wait_for(stop.wait(), args.duration)
     elapsed = time.monotonic() - started
+    for companion in companions:
+        await companion.close()
     await relay.close()
     return elapsed
 
 
+def _companion(relay: Relay, args: argparse.Namespace, port: int) -> tuple[Relay | None, str]:
+    """The TCP relay beside a ``udp/`` one (module docstring), or None and why not."""
+    if relay.listen.proto != "udp":
+        return None, ""
+    if args.udp_only:
+        return None, "UDP only "
+    target = Endpoint("tcp", relay.connect.host, relay.connect.port)
+    try:
+        check_reachable(target)
+    except OSError as exc:
+        return None, f"UDP only: nothing accepts TCP at {target} ({_reason(exc)}) "
+    log = (lambda line: None) if args.quiet else None
+    return Relay(
+        Endpoint("tcp", relay.listen.host, port),
+        target,
+        relay.up.without_loss(),
+        relay.down.without_loss(),
+        seed=relay.seed,
+        log=log,
+    ), "and tcp (control link, no loss) "
+
+
 def run(args: argparse.Namespace) -> int:
     relay = build_relay(args)
+    companions: list[Relay] = []
     with asyncio.Runner(loop_factory=new_event_loop) as runner:
-        elapsed = runner.run(_serve(relay, args))
+        elapsed = runner.run(_serve(relay, args, companions))
     stats = relay.stats()
     lines = [f"link: stopped after {elapsed:.1f} s, {relay.connections} connection(s)"]
     lines += [f"link: {s.line(name)}" for name, s in stats.items()]
+    for companion in companions:
+        lines += [f"link: tcp {s.line(name)}" for name, s in companion.stats().items()]
     print("\n".join(lines), file=sys.stderr, flush=True)
     if args.stats:
         report = {
@@ -166,6 +219,8 @@ def run(args: argparse.Namespace) -> int:
             **{name: s.to_dict() for name, s in stats.items()},
             "send_errors": {name: r.send_errors for name, r in relay.recorders.items()},
         }
+        for companion in companions:
+            report["tcp"] = {name: s.to_dict() for name, s in companion.stats().items()}
         try:
             Path(args.stats).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
         except OSError as exc:

@@ -285,6 +285,16 @@ class Schedule:
         """True when any phase loses packets (impossible on a TCP link)."""
         return any(p.spec.loss_pct > 0 for p in self.phases)
 
+    def without_loss(self) -> Schedule:
+        """The same phases with no loss and no reordering: what a TCP connection beside a lossy
+        UDP path sees (its segments are retransmitted, so only delay and outages remain)."""
+        return Schedule(
+            tuple(
+                Phase(p.start_s, replace(p.spec, loss_pct=0.0, burst=0.0, reorder=False))
+                for p in self.phases
+            )
+        )
+
     def describe(self) -> str:
         """A short text: the spec for one phase, else the number of phases."""
         if len(self.phases) == 1 and self.phases[0].start_s == 0:

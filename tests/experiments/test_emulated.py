@@ -5,7 +5,7 @@
 - ``summarise``: path, clearance, time-weighted hold (only while the operator wants to move,
   after the robot first drove), interventions in 50 ms cycles.
 - ``Tail`` reads only complete lines of a file being appended to.
-- ``udp_endpoint`` (egc_common.transport): plain ``udp/`` becomes mixed-reliability UDP.
+- ``expand_endpoint`` (egc_common.transport): plain ``udp/`` becomes a TCP + best-effort UDP pair.
 - ``operator_model.ModelDriver`` centres until the view shows the robot driving, then steers.
 """
 
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from egc_common.messages import Telemetry
 from egc_common.profiles import get_profile
-from egc_common.transport import udp_endpoint
+from egc_common.transport import expand_endpoint
 from egc_experiments.emulated import Judge, Tail, intent_at, summarise
 from egc_experiments.operator_model import ModelDriver
 from egc_experiments.simulated import OperatorSide
@@ -108,16 +108,17 @@ def test_tail_reads_complete_lines_only(tmp_path):
 @pytest.mark.parametrize(
     ("given", "expected"),
     [
-        ("udp/10.0.0.2:7447", "udp/10.0.0.2:7447?rel=1;mixed_rel=1"),
-        ("udp/[::1]:7447?iface=lo", "udp/[::1]:7447?iface=lo;rel=1;mixed_rel=1"),
-        ("udp/h:1#x=1", "udp/h:1?rel=1;mixed_rel=1#x=1"),
-        ("udp/h:1?rel=0", "udp/h:1?rel=0"),
-        ("tcp/h:1", "tcp/h:1"),
-        ("tls/h:1", "tls/h:1"),
+        ("udp/10.0.0.2:7447", ("tcp/10.0.0.2:7447", "udp/10.0.0.2:7447?rel=0")),
+        ("udp/[::1]:7447?iface=lo", ("tcp/[::1]:7447?iface=lo", "udp/[::1]:7447?iface=lo;rel=0")),
+        ("udp/h:1#x=1", ("tcp/h:1#x=1", "udp/h:1?rel=0#x=1")),
+        ("udp/h:1?rel=0", ("udp/h:1?rel=0",)),
+        ("udp/h:1?rel=1;mixed_rel=1", ("udp/h:1?rel=1;mixed_rel=1",)),
+        ("tcp/h:1", ("tcp/h:1",)),
+        ("tls/h:1", ("tls/h:1",)),
     ],
 )
-def test_udp_endpoints_become_mixed_reliability(given, expected):
-    assert udp_endpoint(given) == expected
+def test_udp_endpoints_become_a_reliable_tcp_and_a_best_effort_udp_link(given, expected):
+    assert expand_endpoint(given) == expected
 
 
 def telemetry(state, pose=(0.6, 0.6, 0.0), stamp_ns=1):

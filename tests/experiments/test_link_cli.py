@@ -361,3 +361,53 @@ def test_zenoh_sessions_talk_through_the_relay(proto: str) -> None:
     assert up == [b"u%d" % i for i in range(5)]
     assert down == [b"d%d" % i for i in range(5)]
     assert re.search(r"up: forwarded [1-9]\d*, dropped 0 .* delay p50 1[5-9]\.\d", err), err
+
+
+def test_a_udp_relay_also_relays_tcp_on_the_same_ports_without_loss(tmp_path):
+    """Our udp/ transport is a TCP + UDP pair on one port number (egc_common.transport): the
+    relay carries both, the TCP half with the delay but no loss."""
+    import socket
+    import threading
+
+    from egc_common.transport import free_port
+
+    target = free_port("udp")
+    server = socket.create_server(("127.0.0.1", target))
+    udp_target = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    udp_target.bind(("127.0.0.1", target))
+
+    def echo() -> None:
+        while True:  # the relay's reachability check connects (and closes) first
+            try:
+                conn, _ = server.accept()
+            except OSError:
+                return
+            with conn:
+                while data := conn.recv(4096):
+                    conn.sendall(data)
+
+    threading.Thread(target=echo, daemon=True).start()
+    listen = free_port("udp")
+    stats = tmp_path / "stats.json"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "egc_app.cli", "link", "--listen", f"udp/127.0.0.1:{listen}",
+         "--connect", f"udp/127.0.0.1:{target}", "--up", "delay=40,loss=50", "--stats", str(stats)],
+        stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        ready = proc.stderr.readline()
+        assert "and tcp (control link, no loss)" in ready, ready
+        with socket.create_connection(("127.0.0.1", listen), timeout=5) as c:
+            for i in range(20):
+                sent = time.monotonic()
+                c.sendall(b"%02d" % i)
+                assert c.recv(2) == b"%02d" % i  # nothing lost
+                assert time.monotonic() - sent >= 0.035  # the up delay applies
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=10)
+        server.close()
+        udp_target.close()
+    assert proc.returncode == 0
+    report = json.loads(stats.read_text())
+    assert report["tcp"]["up"]["forwarded"] >= 20 and report["tcp"]["up"]["dropped"] == 0

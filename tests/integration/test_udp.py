@@ -1,10 +1,12 @@
 """Robot and operator over ``udp/`` endpoints (DESIGN 9 "Transport", issue 12 item 6).
 
-``egc_common.transport`` turns a plain ``udp/HOST:PORT`` into Zenoh's mixed-reliability UDP
-link (``?rel=1;mixed_rel=1``): declarations, liveliness and queries are retransmitted, commands
-and telemetry are best-effort datagrams. The robot (``--driver zenoh``: the test is its sensor
-and watches its base commands over TCP) listens on both ``tcp/`` and ``udp/``; the operator
-process reaches it only over UDP, directly or through ``egc-teleop link``.
+``egc_common.transport`` turns a plain ``udp/HOST:PORT`` into two links of one Zenoh transport:
+``tcp/HOST:PORT`` for the reliable control traffic (declarations, liveliness, queries) and
+``udp/HOST:PORT?rel=0`` for the best-effort data (commands, telemetry). The robot
+(``--driver zenoh``: the test is its sensor and watches its base commands over its own
+``tcp/`` port) also listens on such a ``udp/`` endpoint; the operator process reaches it only
+through that one, directly or through ``egc-teleop link`` with ``udp/`` endpoints (which relays
+the TCP half on the same port numbers, without loss).
 
 - Direct: the operator drives; its liveliness token, its clock queries (robot-clock stamps,
   small command ages), the robot's state and telemetry all cross the UDP link.
