@@ -13,12 +13,24 @@ nearly every driving cycle (the run prints the share).
    which cycle (``cycle``, the base command's ``seq``) used which command (``seq``), so each
    command is matched to the first base command computed from it. Targets: p50 <= 1 ms,
    p99 <= 5 ms.
+
+   Its baseline, in the same run: a bare Zenoh echo (``bench/zenoh_echo.py``, its own Python
+   process with the product's session configuration, listening on its own loopback endpoint)
+   over the same two hops. This process publishes to it at the same 50 Hz, with the same
+   publisher QoS as the operator's commands and a session connected the same way, payloads the
+   size of an OperatorCommand; the echo republishes each at once, cut to the size of a
+   BaseCommand, with the robot's base-command QoS. Half the run's length before the product's
+   latency run and half after it (the scans and the robot's 20 Hz cycle go on throughout), so
+   that drift of the machine touches both. The product's p50 and p99 are reported as ratios to
+   the echo's. Target: p50 <= 1.3x the echo's.
 2. Operator SIGKILL: a real ``egc-teleop operator`` process drives at full speed and is killed;
    time from the kill to the first zero command at the base. Target: <= 100 ms + v / decel.
 3. Operator SIGSTOP (hung, TCP link open): time to the first braking command (the watchdog's
    HOLD) and to the zero command. Target: HOLD <= command_timeout + 100 ms.
 
     python bench/bench_link.py [--seconds S] [--trials N] [--out FILE.json]
+
+The load average (``os.getloadavg``) before and after the latency runs goes into the results.
 
 Exits non-zero when a target is missed.
 """
@@ -29,7 +41,9 @@ import argparse
 import functools
 import json
 import math
+import os
 import platform
+import select
 import signal
 import subprocess
 import sys
@@ -46,6 +60,7 @@ import numpy.typing as npt
 import zenoh
 from egc_common import keys
 from egc_common.messages import (
+    BaseCommand,
     Rejection,
     ScanMessage,
     decode_base_command,
@@ -63,6 +78,33 @@ COMMAND_TIMEOUT_MS = 250.0
 BOX_M = 0.75  # the latency run: close enough that EGC modifies every command
 OPEN_BOX_M = 1.5  # the dropout trials: far enough for full speed
 STOP_MS = PIONEER3DX.v_max_mps / PIONEER3DX.decel_max_mps2 * 1000
+ECHO_SCRIPT = Path(__file__).resolve().with_name("zenoh_echo.py")
+ECHO_ROBOT = "bench-echo"  # the echo's keys have the product's shapes: .../cmd -> .../base/cmd
+ECHO_TARGET = 1.3  # product p50 <= 1.3x the bare echo's
+
+
+def command_message(seq: int, stamp_ns: int, x: float, y: float) -> dict[str, Any]:
+    """The harness operator's command (msgpack map of an OperatorCommand)."""
+    msg: dict[str, Any] = {"v": 1, "seq": seq, "stamp_ns": stamp_ns, "x": x, "y": y}
+    msg |= {"mode": "shared", "deadman": True, "estop": False, "reset": False}
+    msg |= {"op": "bench"}
+    return msg
+
+
+# Payload sizes of the echo: an OperatorCommand out (as the harness sends it mid-run), a
+# BaseCommand back (as the robot sends it mid-run).
+COMMAND_BYTES = len(msgpack.packb(command_message(1000, time.monotonic_ns(), 0.5, 0.2)))
+BASE_BYTES = len(BaseCommand(time.monotonic_ns(), 1000, 0.25, 0.1).encode())
+
+
+def operator_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
+    """The harness operator's command publisher; the echo's requests use the same QoS."""
+    return session.declare_publisher(
+        key,
+        priority=zenoh.Priority.INTERACTIVE_HIGH,
+        express=True,
+        congestion_control=zenoh.CongestionControl.DROP,
+    )
 
 
 @functools.cache
@@ -104,12 +146,7 @@ class Harness:
             s.declare_subscriber(keys.base_cmd(ROBOT), self._on_base),
             s.declare_subscriber(keys.telemetry(ROBOT), self._on_telemetry),
         ]
-        self.cmd_pub = s.declare_publisher(
-            keys.cmd(ROBOT),
-            priority=zenoh.Priority.INTERACTIVE_HIGH,
-            express=True,
-            congestion_control=zenoh.CongestionControl.DROP,
-        )
+        self.cmd_pub = operator_publisher(s, keys.cmd(ROBOT))
         self.threads = [threading.Thread(target=self._scans, daemon=True)]
         self.threads[0].start()
 
@@ -160,9 +197,7 @@ class Harness:
         while (now := time.monotonic_ns()) - start < seconds * 1e9:
             seq += 1
             x, y = (0.0, 0.0) if now - start < 500 * MS else (0.5, 0.2)
-            msg = {"v": 1, "seq": seq, "stamp_ns": now + offset, "x": x, "y": y}
-            msg |= {"mode": "shared", "deadman": True, "estop": False, "reset": False}
-            msg |= {"op": "bench"}
+            msg = command_message(seq, now + offset, x, y)
             payload = msgpack.packb(msg)
             t_pub = time.monotonic_ns()
             self.cmd_pub.put(payload)
@@ -209,6 +244,91 @@ class Harness:
         for sub in self.subs:
             sub.undeclare()
         self.session.close()
+
+
+class Echo:
+    """The baseline: this process <-> ``bench/zenoh_echo.py`` (see the module docstring)."""
+
+    def __init__(self, log: Path) -> None:
+        self.endpoint = loopback_endpoint(free_tcp_port())
+        args = ["--listen", self.endpoint, "--reply-bytes", str(BASE_BYTES)]
+        args += ["--sub", keys.cmd(ECHO_ROBOT), "--pub", keys.base_cmd(ECHO_ROBOT)]
+        with log.open("ab") as err:
+            self.proc = subprocess.Popen(
+                [sys.executable, str(ECHO_SCRIPT), *args],
+                stdout=subprocess.PIPE,
+                stderr=err,
+                stdin=subprocess.DEVNULL,
+            )
+        try:
+            assert self.proc.stdout is not None
+            ready, _, _ = select.select([self.proc.stdout], [], [], 30.0)
+            if not ready or self.proc.stdout.readline().strip() != b"ready":
+                raise SystemExit(f"bench: {ECHO_SCRIPT.name} did not start (see {log})")
+            self.session = open_session(ZenohOptions(connect=(self.endpoint,)))
+        except BaseException:
+            self.proc.kill()
+            self.proc.wait()
+            raise
+        self.lock = threading.Lock()
+        self.replies: dict[int, int] = {}  # seq -> receipt time
+        self.seq = 0
+        self.pub = operator_publisher(self.session, keys.cmd(ECHO_ROBOT))
+        self.sub = self.session.declare_subscriber(keys.base_cmd(ECHO_ROBOT), self._on_reply)
+        self.closed = False
+
+    def _on_reply(self, sample: zenoh.Sample) -> None:
+        now = time.monotonic_ns()
+        seq = int.from_bytes(sample.payload.to_bytes()[:8], "little")
+        with self.lock:
+            self.replies.setdefault(seq, now)
+
+    def _payload(self) -> bytes:
+        self.seq += 1
+        return self.seq.to_bytes(8, "little").ljust(COMMAND_BYTES, b"\0")
+
+    def wait_ready(self) -> None:
+        """Probe until the echo answers (the declarations have crossed both ways)."""
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            self.pub.put(self._payload())
+            time.sleep(0.02)
+            with self.lock:
+                if self.replies:
+                    return
+        raise SystemExit("bench: the Zenoh echo did not answer")
+
+    def run(self, seconds: float) -> tuple[list[float], int]:
+        """Publish at 50 Hz for ``seconds``, like ``Harness.drive``; publish -> echo receipt (ms)
+        of each request answered, and the number of requests sent."""
+        published: dict[int, int] = {}
+        period = 20 * MS
+        start = deadline = time.monotonic_ns()
+        while time.monotonic_ns() - start < seconds * 1e9:
+            payload = self._payload()
+            t_pub = time.monotonic_ns()
+            self.pub.put(payload)
+            with self.lock:
+                published[self.seq] = t_pub
+            deadline += period
+            time.sleep(max(0, deadline - time.monotonic_ns()) / 1e9)
+        time.sleep(0.3)
+        with self.lock:
+            lat = [(self.replies[s] - t) / MS for s, t in published.items() if s in self.replies]
+        return lat, len(published)
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        self.sub.undeclare()
+        self.session.close()
+        self.proc.send_signal(signal.SIGTERM)
+        try:
+            self.proc.wait(10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
 
 
 def start(args: list[str], log: Path) -> subprocess.Popen[bytes]:
@@ -272,6 +392,17 @@ def pct(values: list[float], q: float) -> float:
     return float(np.percentile(np.asarray(values), q))
 
 
+def summary(values: list[float], sent: int) -> dict[str, Any]:
+    return {
+        "sent": sent,
+        "matched": len(values),
+        "p50": pct(values, 50),
+        "p90": pct(values, 90),
+        "p99": pct(values, 99),
+        "max": max(values),
+    }
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=20.0, help="latency run length")
@@ -283,10 +414,18 @@ def main() -> int:
     robot_args = ["robot", "--robot", ROBOT, "--driver", "zenoh", "--listen", endpoint]
     robot = start(robot_args, workdir / "robot.log")
     h = Harness(endpoint)
+    echo: Echo | None = None
     try:
+        echo = Echo(workdir / "echo.log")
         wait_until(lambda: h.cycle_seq, 30, "the robot's first telemetry")
+        echo.wait_ready()
+        load_before = os.getloadavg()
+        echo_before, echo_sent_before = echo.run(args.seconds / 2)
         h.drive(args.seconds)
         time.sleep(0.3)
+        echo_after, echo_sent_after = echo.run(args.seconds / 2)
+        load_after = os.getloadavg()
+        echo.close()
         lat, before_cycle = h.latencies_ms()
         sent = len(h.published)
         limiters = dict(h.limiters)
@@ -298,6 +437,8 @@ def main() -> int:
             operator_trial(h, endpoint, workdir, signal.SIGSTOP, i) for i in range(args.trials)
         ]
     finally:
+        if echo is not None:
+            echo.close()
         h.close()
         robot.send_signal(signal.SIGTERM)
         robot.wait(10)
@@ -305,6 +446,14 @@ def main() -> int:
     kill_zero = [k["zero_ms"] for k in kills]
     stop_brake = [s["brake_ms"] for s in stops]
     stop_zero = [s["zero_ms"] for s in stops]
+    echo_all = echo_before + echo_after
+    echo_r = summary(echo_all, echo_sent_before + echo_sent_after)
+    echo_r |= {
+        "before": summary(echo_before, echo_sent_before),
+        "after": summary(echo_after, echo_sent_after),
+        "payload_bytes_out": COMMAND_BYTES,
+        "payload_bytes_back": BASE_BYTES,
+    }
     results = {
         "latency_ms": {
             "commands": sent,
@@ -315,7 +464,12 @@ def main() -> int:
             "max": max(lat),
             "publish_to_cycle_start_p50": pct(before_cycle, 50),
             "limiter_while_driving": limiters,
+            "p50_vs_echo": pct(lat, 50) / echo_r["p50"],
+            "p99_vs_echo": pct(lat, 99) / echo_r["p99"],
         },
+        "echo_ms": echo_r,
+        "load_average_before": list(load_before),
+        "load_average_after": list(load_after),
         "sigkill_to_zero_ms": kill_zero,
         "sigstop_to_hold_ms": stop_brake,
         "sigstop_to_zero_ms": stop_zero,
@@ -326,6 +480,8 @@ def main() -> int:
     targets = {
         "latency p50 <= 1 ms": results["latency_ms"]["p50"] <= 1.0,
         "latency p99 <= 5 ms": results["latency_ms"]["p99"] <= 5.0,
+        f"latency p50 <= {ECHO_TARGET}x the bare Zenoh echo": results["latency_ms"]["p50_vs_echo"]
+        <= ECHO_TARGET,
         f"SIGKILL -> zero <= 100 ms + v/decel ({100 + STOP_MS:.0f} ms)": max(kill_zero)
         <= 100 + STOP_MS,
         f"SIGSTOP -> HOLD <= command_timeout + 100 ms ({COMMAND_TIMEOUT_MS + 100:.0f} ms)": max(
@@ -343,6 +499,22 @@ def main() -> int:
     print(
         f"  of which publish -> robot cycle start p50 {lat_r['publish_to_cycle_start_p50']:.3f} ms,"
         f" cycle start -> base p50 {lat_r['p50'] - lat_r['publish_to_cycle_start_p50']:.3f} ms"
+    )
+    print(
+        f"bare Zenoh echo over the same two hops ({ECHO_SCRIPT.name}, {COMMAND_BYTES} B out,"
+        f" {BASE_BYTES} B back), {echo_r['matched']}/{echo_r['sent']} requests,"
+        f" {args.seconds / 2:g} s before and {args.seconds / 2:g} s after the product"
+    )
+    b, a = echo_r["before"], echo_r["after"]
+    print(
+        f"  p50 {echo_r['p50']:.3f} ms (before {b['p50']:.3f}, after {a['p50']:.3f})"
+        f"  p90 {echo_r['p90']:.3f} ms"
+        f"  p99 {echo_r['p99']:.3f} ms (before {b['p99']:.3f}, after {a['p99']:.3f})"
+        f"  max {echo_r['max']:.3f} ms"
+    )
+    print(
+        f"  product / echo: p50 {lat_r['p50_vs_echo']:.2f}x  p99 {lat_r['p99_vs_echo']:.2f}x"
+        f"  (load average {load_before[0]:.2f} before, {load_after[0]:.2f} after)"
     )
     driving = sum(limiters.values())
     print(
