@@ -46,3 +46,17 @@ def test_reset_forgets_the_session():
     stats.reset()
     f = stats.figures(t)
     assert f.cmd_age_p50_ms is None and f.link_loss is None and f.view_age_ms is None
+
+
+def test_percentiles_match_numpy():
+    import numpy as np
+
+    rng = np.random.default_rng(3)
+    stats = LinkStats()
+    ages = rng.integers(50, 400, size=37)
+    for i, age in enumerate(ages):
+        stats.on_arrival(i + 1, i * 20 * MS)
+        stats.on_accepted(int(age) * MS, None, i * 20 * MS)
+    f = stats.figures(36 * 20 * MS)
+    assert f.cmd_age_p50_ms == pytest.approx(np.percentile(ages, 50))
+    assert f.cmd_age_p90_ms == pytest.approx(np.percentile(ages, 90))
