@@ -21,7 +21,12 @@ in a robot namespace, the relay in a middle one and the operator in an operator 
 on one machine, veth pairs, no way around the relay); otherwise everything runs on loopback
 with free ports. TCP cannot lose packets in the relay (a lost chunk of a byte stream is an
 error): a TCP point with ``loss`` runs only in namespaces with ``nft``, where the loss is the
-kernel's (``TwoHosts.set_loss``) and the relay adds the delays; elsewhere it is refused.
+kernel's (``TwoHosts.set_loss``) and the relay adds the delays; elsewhere it is refused. A UDP
+point uses our ``udp/`` transport (a TCP link for Zenoh's reliable traffic and a best-effort UDP
+link on one port number, ``egc_common.transport``; the relay carries both, dropping only UDP
+datagrams); in namespaces with ``nft`` its TCP half loses packets in the kernel at the point's
+rate too. ``point.extra["udp"]`` = ``"plain"`` or ``"mixed"`` runs Zenoh's UDP link alone
+(``rel=0``) or its mixed-reliability QUIC instead, for docs/transport.md.
 
 The run ends, judged from the recorder's telemetry on the robot's clock (the same monotonic
 clock for every process of the machine) as the simulated mode judges its simulator: ``reached``
@@ -325,10 +330,35 @@ def summarise(
 # -- one run --------------------------------------------------------------------------------------
 
 
-def _relay_spec(point: RunPoint, kernel_loss: bool) -> str:
-    if kernel_loss:
+def _relay_spec(point: RunPoint, lossless: bool) -> str:
+    if lossless:
         return dataclasses.replace(point, loss=0.0, burst=0.0).link_spec()
     return point.link_spec()
+
+
+# How a udp point's Zenoh link is set up (point.extra["udp"]), to compare them (docs/transport.md):
+# "default": plain udp/ endpoints, i.e. what egc_common.transport makes of them (a TCP link for
+# Zenoh's reliable traffic and a best-effort UDP link, rel=0, on one port number; the relay
+# carries both); "plain": Zenoh's UDP link alone (rel=0); "mixed": Zenoh's mixed-reliability
+# UDP (QUIC without encryption, rel=1;mixed_rel=1).
+UDP_VARIANTS: Final = ("default", "plain", "mixed")
+_UDP_META: Final = {"default": "", "plain": "?rel=0", "mixed": "?rel=1;mixed_rel=1"}
+
+
+@dataclass(frozen=True)
+class LinkPlan:
+    robot_listen: str
+    relay_listen: str
+    relay_connect: str
+    operator_connect: str
+
+
+def link_plan(variant: str, robot: str, robot_port: int, relay: str, relay_port: int) -> LinkPlan:
+    """The robot's listen endpoint, the relay's two and the operator's connect endpoint."""
+    proto = "tcp" if variant == "tcp" else "udp"
+    meta = _UDP_META.get(variant, "")
+    r, m = f"{proto}/{robot}:{robot_port}", f"{proto}/{relay}:{relay_port}"
+    return LinkPlan(r + meta, m, r, m + meta)
 
 
 def run_emulated(point: RunPoint, workdir: Path, use_netns: bool | None = None) -> dict[str, Any]:
@@ -351,6 +381,7 @@ def run_emulated(point: RunPoint, workdir: Path, use_netns: bool | None = None) 
     if use_netns is None:
         use_netns = netns.unavailable_reason() is None
     kernel_loss = point.transport == "tcp" and point.loss > 0
+    has_nft = use_netns and netns.nft_unavailable_reason() is None
     if kernel_loss and (not use_netns or netns.nft_unavailable_reason() is not None):
         why = netns.nft_unavailable_reason() if use_netns else "not in namespaces"
         raise ValueError(
@@ -358,28 +389,34 @@ def run_emulated(point: RunPoint, workdir: Path, use_netns: bool | None = None) 
             f"cannot drop bytes of a TCP stream ({why})"
         )
     proto = point.transport
+    variant = str(point.extra.get("udp", "default")) if proto == "udp" else "tcp"
+    if variant not in (*UDP_VARIANTS, "tcp"):
+        raise ValueError(f"extra udp must be one of {', '.join(UDP_VARIANTS)}, got {variant!r}")
     files = {
         name: workdir / name for name in ("robot.json", "watch.jsonl", "intent.jsonl", "link.json")
     }
     for path in files.values():
         path.unlink(missing_ok=True)
-    spec = _relay_spec(point, kernel_loss)
     with hosts(workdir, use_netns) as h:
         if h.net is not None:
-            robot_link = f"{proto}/{netns.ROBOT_ADDR}:{LINK_PORT}"
-            relay_listen = f"{proto}/{netns.MIDDLE_OP_ADDR}:{LINK_PORT}"
+            robot_addr, relay_addr = netns.ROBOT_ADDR, netns.MIDDLE_OP_ADDR
+            robot_port = relay_port = LINK_PORT
             watch_ep = f"tcp/127.0.0.1:{WATCH_PORT}"
-            if kernel_loss:
-                h.net.set_loss("up", point.loss)
-                h.net.set_loss("down", point.loss)
+            if kernel_loss or (variant == "default" and point.loss > 0 and has_nft):
+                # TCP: the kernel drops, the relay delays. The TCP half of a udp/ link: the
+                # relay cannot drop its bytes, the kernel drops its packets at the same rate.
+                only = None if kernel_loss else "tcp"
+                h.net.set_loss("up", point.loss, only)
+                h.net.set_loss("down", point.loss, only)
         else:
-            robot_link = f"{proto}/127.0.0.1:{free_port(proto)}"
-            relay_listen = f"{proto}/127.0.0.1:{free_port(proto)}"
+            robot_addr = relay_addr = "127.0.0.1"
+            robot_port, relay_port = free_port(proto), free_port(proto)
             watch_ep = f"tcp/127.0.0.1:{free_port()}"
+        plan = link_plan(variant, robot_addr, robot_port, relay_addr, relay_port)
         robot = ["robot", "--robot", ROBOT_ID, "--driver", "sim", "--map", point.world]
         robot += [f"--start={start[0]:g},{start[1]:g},{start[2]:g}", "--profile", point.profile]
         robot += ["--filter", point.filter, "--summary", str(files["robot.json"])]
-        robot += ["--listen", robot_link, "--listen", watch_ep, "--log-level", "WARNING"]
+        robot += ["--listen", plan.robot_listen, "--listen", watch_ep, "--log-level", "WARNING"]
         robot += ["--set", f"sim.seed={point.seed}", "--set", "pipeline.no_return_is_free=true"]
         if not point.link_aware:
             robot.append("--no-link-aware")
@@ -387,12 +424,14 @@ def run_emulated(point: RunPoint, workdir: Path, use_netns: bool | None = None) 
         watch = ["--robot", ROBOT_ID, "--connect", watch_ep, "--out", str(files["watch.jsonl"])]
         h.start("watch", "rb", _module("egc_experiments.watch", *watch))
         h.wait_log("watch", "watch: ready")
-        link = ["link", "--listen", relay_listen, "--connect", robot_link, "--up", spec]
-        link += ["--down", spec, "--seed", str(point.seed), "--stats", str(files["link.json"])]
+        spec = _relay_spec(point, kernel_loss)
+        link = ["link", "--listen", plan.relay_listen, "--connect", plan.relay_connect]
+        link += ["--up", spec, "--down", spec, "--seed", str(point.seed)]
+        link += ["--stats", str(files["link.json"])]
         h.start("link", "mid", _cli(*link))
         h.wait_log("link", "listening on")
         operator = ["--robot", ROBOT_ID, "--operator-id", OPERATOR_ID]
-        operator += ["--zenoh-connect", relay_listen, "--operator", point.operator]
+        operator += ["--zenoh-connect", plan.operator_connect, "--operator", point.operator]
         operator += ["--world", point.world, f"--start={start[0]:g},{start[1]:g},{start[2]:g}"]
         operator += [f"--goal={goal[0]:g},{goal[1]:g}", "--mode", point.mode]
         operator += ["--seed", str(point.seed), "--profile", point.profile]
@@ -455,8 +494,12 @@ def run_emulated(point: RunPoint, workdir: Path, use_netns: bool | None = None) 
         "goal_distance_m": round(math.hypot(final[0] - goal[0], final[1] - goal[1]), 4),
         "cycles": figures["cycles"],
         "emulated": h.kind,
+        "t0_ns": judge.t0_ns,  # monotonic: the window of the recorder's lines (watch.jsonl)
+        "end_ns": judge.end_ns,
         "kernel_loss": kernel_loss,
         "link": {k: link_stats.get(k) for k in ("up", "down")},
+        "link_tcp": link_stats.get("tcp"),  # the TCP half of a udp/ link (the relay's companion)
+        "udp": variant if proto == "udp" else None,
         "robot_distance_m": summary.get("distance_m"),
         "robot_hold_s": summary.get("hold_s"),
         "robot_collisions": summary.get("collisions"),

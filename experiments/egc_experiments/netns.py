@@ -183,6 +183,7 @@ class TwoHosts:
     middle_rb_addr: str = MIDDLE_RB_ADDR
     created: list[str] = field(default_factory=list)
     _loss: dict[str, float] = field(default_factory=lambda: {"up": 0.0, "down": 0.0})
+    _loss_proto: str | None = None
     _outage: bool = False
     _nft_installed: bool = False
 
@@ -286,7 +287,10 @@ class TwoHosts:
                 rules.append(f'    iifname "{dev}" drop\n')
             elif self._loss[direction] > 0:
                 threshold = round(self._loss[direction] * 100)
-                rules.append(f'    iifname "{dev}" numgen random mod 10000 < {threshold} drop\n')
+                only = f"meta l4proto {self._loss_proto} " if self._loss_proto else ""
+                rules.append(
+                    f'    iifname "{dev}" {only}numgen random mod 10000 < {threshold} drop\n'
+                )
         flush = "delete table inet egc\n" if self._nft_installed else ""
         script = (
             f"{flush}table inet egc {{\n"
@@ -299,8 +303,9 @@ class TwoHosts:
         _run(["ip", "netns", "exec", self.ns("mid"), "nft", "-f", "-"], stdin=script)
         self._nft_installed = True
 
-    def set_loss(self, direction: str, percent: float) -> None:
-        """Drop ``percent`` % of the packets going ``up`` (operator -> robot) or ``down``.
+    def set_loss(self, direction: str, percent: float, proto: str | None = None) -> None:
+        """Drop ``percent`` % of the packets going ``up`` (operator -> robot) or ``down``;
+        with ``proto`` (``tcp`` or ``udp``) only that protocol's (the same for both directions).
 
         The packets are dropped as they arrive at the middle namespace (nftables input hook),
         so the sender sees a real loss (no local error; TCP has to detect and retransmit)."""
@@ -308,7 +313,10 @@ class TwoHosts:
             raise ValueError(f"direction is 'up' or 'down', got {direction!r}")
         if not 0 <= percent <= 100:
             raise ValueError(f"loss is a percentage in [0, 100], got {percent}")
+        if proto not in (None, "tcp", "udp"):
+            raise ValueError(f"proto is tcp, udp or None, got {proto!r}")
         self._loss[direction] = float(percent)
+        self._loss_proto = proto
         self._nft_apply()
 
     def set_outage(self, down: bool) -> None:

@@ -12,7 +12,7 @@ on one machine, whatever the namespace), ``state``, ``reason``, ``op`` (operator
 ``pose`` ([x, y, yaw] or null), ``v``/``w`` (sent to the base), ``vr``/``wr`` (the operator's
 command after eq. 4), ``lim`` (the limiter), ``age`` (command age, ms), ``gap`` (largest command
 gap over the last second, ms), ``loss`` (link loss from seq gaps), ``tau`` (loop delay, ms),
-``rej`` (rejected commands so far). It prints ``watch: ready`` on stderr once subscribed.
+``va`` (the operator's view age, ms), ``rej`` (rejected commands so far). It prints ``watch: ready`` on stderr once subscribed.
 """
 
 from __future__ import annotations
@@ -50,6 +50,7 @@ def telemetry_line(rx_ns: int, t: Telemetry) -> dict[str, Any]:
         "gap": t.cmd_gap_max_ms,
         "loss": t.link_loss,
         "tau": t.loop_delay_ms,
+        "va": t.view_age_ms,
         "rej": t.rejected,
     }
 
