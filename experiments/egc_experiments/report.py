@@ -191,26 +191,31 @@ def key_numbers(rows: Sequence[Row]) -> str:
     """reached / collided / hold for link-aware on and off at 200 and 500 ms, per mode."""
     plain = [r for r in rows if _plain_link(r) and not r["jitter_ms"]]
     lines = [
-        "| delay ms | mode | link-aware | n | reached % | collided % | hold s |",
-        "|---|---|---|---|---|---|---|",
+        "| operator | delay ms | mode | link-aware | n | reached % | collided % | hold s |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     found = False
-    for delay in (200.0, 500.0):
-        for mode in sorted({setting(r) for r in plain}):
-            for aware in ("on", "off"):
-                group = [
-                    r
-                    for r in plain
-                    if r["delay_ms"] == delay and setting(r) == mode and link_aware(r) == aware
-                ]
-                if not group:
-                    continue
-                found = True
-                s = summarise(group)
-                lines.append(
-                    f"| {delay:g} | {mode} | {aware} | {s['n']} | {_fmt(s['reached'], '{:.0f}')}"
-                    f" | {_fmt(s['collided'], '{:.0f}')} | {_fmt(s['hold'], '{:.1f}')} |"
-                )
+    for op in sorted({r["operator"] for r in plain}):
+        for delay in (200.0, 500.0):
+            for mode in sorted({setting(r) for r in plain}):
+                for aware in ("on", "off"):
+                    group = [
+                        r
+                        for r in plain
+                        if r["operator"] == op
+                        and r["delay_ms"] == delay
+                        and setting(r) == mode
+                        and link_aware(r) == aware
+                    ]
+                    if not group:
+                        continue
+                    found = True
+                    s = summarise(group)
+                    lines.append(
+                        f"| {op} | {delay:g} | {mode} | {aware} | {s['n']} | "
+                        f"{_fmt(s['reached'], '{:.0f}')} | {_fmt(s['collided'], '{:.0f}')} | "
+                        f"{_fmt(s['hold'], '{:.1f}')} |"
+                    )
     return "\n".join(lines) if found else ""
 
 

@@ -7,7 +7,7 @@ The pieces are the real ones, wired as the processes wire them, with the link mo
   process does it: the simulator's scan (``on_scan``) and odometry (``on_odometry``), then
   ``step``; the base command drives the simulator until the next cycle.
 - the operator: the point's operator model (``egc_sim.operators.make_operator``) asked for its
-  stick at 50 Hz; each stick becomes an ``OperatorCommand`` stamped with the robot's clock (a
+  stick at 50 Hz (at a seeded phase to the robot's cycle, as two unsynchronised loops are); each stick becomes an ``OperatorCommand`` stamped with the robot's clock (a
   synchronised operator), with ``view_age_ms`` = the age of the newest telemetry that has
   arrived, encoded, sent through the **uplink** ``LinkModel`` (``ordered`` for tcp) and handed
   to ``controller.on_command`` at its arrival time.
@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import heapq
 import math
+import random
 import time
 from typing import Any, Final
 
@@ -181,7 +182,11 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
         heapq.heappush(events, (t_ns, kind, order, data))
 
     max_ns = round(point.max_time_s * NS_PER_S)
-    push(0, _OPERATOR, None)
+    # The operator's 50 Hz is not phase-locked to the robot's 20 Hz: a seeded phase, so that
+    # commands do not arrive exactly at the robot's cycle (which would make a delay equal to
+    # max_command_age pass on every other cycle, an artefact no real link has).
+    phase_ns = random.Random(derive_seed(point.seed, "phase")).randrange(1, OPERATOR_PERIOD_NS)
+    push(phase_ns, _OPERATOR, None)
     push(0, _ROBOT, None)
     controller.on_operator_alive(OPERATOR_ID, True)
     alive = True
