@@ -80,7 +80,15 @@ def robot_side(workdir: Path, result: dict[str, Any]) -> dict[str, Any]:
             hold_s += (nxt - ln["t"]) / NS_PER_S
             before = window[i - 1]["state"] if i else "DRIVING"
             timeouts += before != "HOLD" and ln.get("reason") == "command timeout"
+    # Command arrivals: the robot runs a cycle on every accepted command, so a new ``seq`` in
+    # the telemetry marks an arrival (stamped on the robot's clock).
+    arrivals = [ln["t"] for i, ln in enumerate(window) if i and ln["seq"] > window[i - 1]["seq"]]
+    inter = np.diff(np.asarray(arrivals, dtype=np.float64)) / 1e6 if len(arrivals) > 1 else []
     return {
+        "arrival_gap_p50_ms": _pct(inter, 50),
+        "arrival_gap_p99_ms": _pct(inter, 99),
+        "arrival_gap_max_ms": round(float(np.max(inter)), 1) if len(inter) else None,
+        "arrival_gaps_over_100ms": int(np.sum(np.asarray(inter) > 100.0)),
         "gap_max_ms": round(max(gaps), 1) if gaps else None,
         "gap_p99_ms": _pct(gaps, 99),
         "robot_hold_s": round(hold_s, 2),
@@ -120,6 +128,9 @@ def main(argv: list[str] | None = None) -> int:
                 "link": result["link"],
                 "link_tcp": result.get("link_tcp"),
                 "wall_s": round(time.monotonic() - started, 1),
+                "workdir": str(workdir),
+                "t0_ns": result["t0_ns"],
+                "end_ns": result["end_ns"],
             }
             rows.append(row)
             brief = {k: v for k, v in row.items() if k not in ("link", "link_tcp")}
