@@ -15,17 +15,22 @@ the TCP half on the same port numbers, without loss).
   never HOLDs for more than a few cycles at a time.
 - A 1 s outage of the UDP relay: HOLD, then driving again without re-centring (short-gap
   resume, DESIGN 8), as over TCP (test_link_outage).
+- Session start through 20 % loss on the UDP datagrams, ten sessions in a row: every one carries
+  the declarations (the other side's liveliness token is seen, best-effort data flows), because
+  a connecting process opens the TCP half first (``egc_common.transport._tcp_first``).
 """
 
 from __future__ import annotations
 
 import json
 import re
+import threading
 import time
 from pathlib import Path
 
 import pytest
-from egc_common.transport import free_port
+import zenoh
+from egc_common.transport import ZenohOptions, free_port, open_session
 
 from tests.integration.harness import MS, joystick_file, operator_args
 from tests.integration.test_link import finish, start_robot, wait_full_speed
@@ -142,3 +147,46 @@ def test_one_second_udp_outage_resumes_without_centring(port, procs, observer, t
     assert t.reason == "resumed after a link gap", t
     assert not any("lost" in s.reason for _, s in observer.rec.state)
     finish(procs, observer)
+
+
+def test_sessions_through_heavy_udp_loss_always_carry_their_declarations(procs):
+    listen = f"udp/127.0.0.1:{free_port('udp')}"
+    relay = f"udp/127.0.0.1:{free_port('udp')}"
+    robot = open_session(ZenohOptions(listen=(listen,)))
+    try:
+        start_relay(procs, relay, listen, "--up", "loss=20", "--down", "loss=20")
+        got: list[int] = []
+        sub = robot.declare_subscriber("itest/udp/data", lambda s: got.append(1))
+        token = robot.liveliness().declare_token("itest/udp/alive/robot")
+        broken = []
+        closing: list[threading.Thread] = []
+        for trial in range(10):
+            seen: list[str] = []
+            operator = open_session(ZenohOptions(connect=(relay,)))
+            watch = operator.liveliness().declare_subscriber(
+                "itest/udp/alive/**",
+                lambda s, seen=seen: seen.append(str(s.key_expr)),
+                history=True,
+            )
+            pub = operator.declare_publisher(
+                "itest/udp/data", reliability=zenoh.Reliability.BEST_EFFORT
+            )
+            before = len(got)
+            deadline = time.monotonic() + 3.0
+            while time.monotonic() < deadline and not (seen and len(got) > before + 5):
+                pub.put(b"x" * 100)
+                time.sleep(0.02)
+            if not seen or len(got) <= before + 5:
+                broken.append((trial, len(seen), len(got) - before))
+            watch.undeclare()
+            pub.undeclare()
+            # closing over a lossy UDP link can take Zenoh ~10 s: do not wait for each one
+            closing.append(threading.Thread(target=operator.close, daemon=True))
+            closing[-1].start()
+        for thread in closing:
+            thread.join(15)
+        assert not broken, f"sessions without declarations (trial, tokens, data): {broken}"
+        token.undeclare()
+        sub.undeclare()
+    finally:
+        robot.close()
