@@ -31,6 +31,7 @@ from typing import Any
 
 from egc_common import config as config_mod
 from egc_common import keys
+from egc_common.clock_id import monotonic_clock_id
 from egc_common.errors import UsageError
 from egc_common.joystick import JoystickMapping
 from egc_common.messages import BaseCommand
@@ -278,6 +279,7 @@ def run(args: argparse.Namespace) -> int:
         rate_hz,
         recorder=_open_recorder(args),
         stats=stats,
+        clock_id=monotonic_clock_id(),
     )
     log.info(
         "robot %r ready: driver %s, profile %s, filter %s, %.0f Hz",
@@ -300,6 +302,9 @@ def run(args: argparse.Namespace) -> int:
         summary = stats.summary()
         summary["accepted"] = node.controller.counters.accepted
         summary["rejected"] = dict(node.controller.counters.rejected)
+        received, missing = node.controller.link_totals
+        summary["seq_received"] = received
+        summary["seq_missing"] = missing
         log.info("stopped: %s", json.dumps(summary))
         if args.summary:
             Path(args.summary).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")

@@ -437,12 +437,24 @@ def decode_state(payload: object) -> StateMessage | Rejection:
 # Clock reply (robot queryable)
 
 
-def encode_clock_reply(robot_now_ns: int) -> bytes:
-    return _pack({"v": SCHEMA_VERSION, "stamp_ns": int(robot_now_ns)})
+def encode_clock_reply(robot_now_ns: int, clock_id: str | None = None) -> bytes:
+    """``clock_id`` (optional key ``clock``): which clock the stamp reads, e.g. the kernel's boot
+    id for CLOCK_MONOTONIC (``egc_common.clock_id``); an operator reading the same clock knows
+    the offset is exactly 0."""
+    reply: dict[str, Any] = {"v": SCHEMA_VERSION, "stamp_ns": int(robot_now_ns)}
+    if clock_id is not None:
+        reply["clock"] = clock_id
+    return _pack(reply)
 
 
 def decode_clock_reply(payload: object) -> int | Rejection:
     return _decode(payload, MAX_SMALL_BYTES, lambda m: _int(m, "stamp_ns"))
+
+
+def decode_clock_id(payload: object) -> str | None:
+    """The reply's optional ``clock`` key, or None (absent, or not a valid id)."""
+    result = _decode(payload, MAX_SMALL_BYTES, lambda m: _opt_str(m, "clock", max_chars=128))
+    return None if isinstance(result, Rejection) else result
 
 
 # ---------------------------------------------------------------------------------------------

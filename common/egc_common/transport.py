@@ -68,6 +68,7 @@ DEFAULT_ENDPOINT = f"tcp/127.0.0.1:{DEFAULT_PORT}"
 LEASE_MS = 2000
 KEEP_ALIVES_PER_LEASE = 4
 RECONNECT_PERIOD_MS = (250, 1000)  # first retry, longest retry
+UDP_HANDSHAKE_TIMEOUT_MS = 4000
 MAX_LINKS = 2  # a TCP and a UDP link to the same peer may form one transport (docs/transport.md)
 
 
@@ -195,6 +196,11 @@ def build_config(options: ZenohOptions) -> zenoh.Config:
         _insert(config, "listen/endpoints", listen)
     if len(connect) > len(options.connect) or len(listen) > len(options.listen):
         _insert(config, "transport/unicast/max_links", 2)
+        # A lost handshake datagram on the UDP link would otherwise keep it closed for Zenoh's
+        # default 10 s (the data then takes the TCP link meanwhile, head-of-line blocking and
+        # all); 4 s still covers two round trips of a 500 ms +- 100 ms satellite link.
+        _insert(config, "transport/unicast/open_timeout", UDP_HANDSHAKE_TIMEOUT_MS)
+        _insert(config, "transport/unicast/accept_timeout", UDP_HANDSHAKE_TIMEOUT_MS)
     if options.lease_ms is not None:
         _insert(config, "transport/link/tx/lease", options.lease_ms)
     return config

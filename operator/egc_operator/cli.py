@@ -27,6 +27,7 @@ from typing import Any
 
 from egc_common import config as config_mod
 from egc_common import keys
+from egc_common.clock_id import monotonic_clock_id
 from egc_common.errors import UsageError
 from egc_common.joystick_file import JoystickFileError
 from egc_common.transport import (
@@ -204,6 +205,7 @@ def run(args: argparse.Namespace) -> int:
         source,
         rate_hz=rate_hz,
         local_clock=lambda: time.monotonic_ns() + offset_ns,
+        clock_id=monotonic_clock_id() if offset_ns == 0 else None,
         view=view,
         status=None if args.no_status else StatusLine(sys.stdout),
     )

@@ -38,12 +38,21 @@ class ClockSync:
         self._max_rtt_ns = max_rtt_ns
         self.latest: ClockSample | None = None
 
-    def add(self, send_local_ns: int, robot_ns: int, recv_local_ns: int) -> ClockSample | None:
-        """One query round trip; returns the sample, or None if it is unusable."""
+    def add(
+        self, send_local_ns: int, robot_ns: int, recv_local_ns: int, same_clock: bool = False
+    ) -> ClockSample | None:
+        """One query round trip; returns the sample, or None if it is unusable.
+
+        ``same_clock``: the robot's reply says its clock *is* ours (the same kernel's
+        CLOCK_MONOTONIC: the same host, or network namespaces of one host), so the offset is
+        exactly 0 whatever the path's asymmetry. Cristian's midpoint assumes equal delays both
+        ways; over a link that delays only one direction by d it is off by d / 2.
+        """
         rtt = recv_local_ns - send_local_ns
         if rtt < 0 or rtt > self._max_rtt_ns or robot_ns <= 0:
             return None
-        sample = ClockSample(robot_ns - (send_local_ns + recv_local_ns) // 2, rtt, recv_local_ns)
+        offset = 0 if same_clock else robot_ns - (send_local_ns + recv_local_ns) // 2
+        sample = ClockSample(offset, rtt, recv_local_ns)
         best = self.best
         if (
             best is not None

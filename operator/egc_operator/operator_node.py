@@ -35,6 +35,7 @@ from egc_common.messages import (
     Rejection,
     StateMessage,
     Telemetry,
+    decode_clock_id,
     decode_clock_reply,
     decode_map,
     decode_state,
@@ -99,6 +100,7 @@ class OperatorNode:
         source: CommandSource,
         rate_hz: float = 50.0,
         local_clock: Callable[[], int] = time.monotonic_ns,
+        clock_id: str | None = None,
         view: View | None = None,
         status: StatusLine | None = None,
     ) -> None:
@@ -108,6 +110,7 @@ class OperatorNode:
         self._source = source
         self._period_ns = round(NS_PER_S / rate_hz)
         self._clock = local_clock
+        self._clock_id = clock_id  # which clock local_clock reads (egc_common.clock_id)
         self._view = view
         self._status = status
         self._sync = ClockSync()
@@ -180,10 +183,14 @@ class OperatorNode:
                 for reply in replies:
                     received = self._clock()
                     ok = reply.ok
-                    stamp = None if ok is None else decode_clock_reply(payload_bytes(ok))
+                    payload = None if ok is None else payload_bytes(ok)
+                    stamp = None if payload is None else decode_clock_reply(payload)
                     if isinstance(stamp, int):
+                        same = self._clock_id is not None and self._clock_id == decode_clock_id(
+                            payload
+                        )
                         with self._lock:
-                            sample = self._sync.add(sent, stamp, received)
+                            sample = self._sync.add(sent, stamp, received, same_clock=same)
                         if sample is not None and self._view is not None:
                             # the view wants the offset from this process's monotonic clock
                             skew = self._clock() - time.monotonic_ns()

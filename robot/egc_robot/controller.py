@@ -241,6 +241,12 @@ class RobotController:
     def operator(self) -> str | None:
         return self._controller_op
 
+    @property
+    def link_totals(self) -> tuple[int, int]:
+        """(commands that arrived from the operator in control, seq numbers missing between
+        them) over the whole run: the link's loss as the robot measured it."""
+        return self._link.received_total, self._link.missing_total
+
     def on_command(self, payload: object, now_ns: int) -> CommandVerdict:
         """Decode and vet one payload from ``egc/<robot>/cmd``; never raises."""
         decoded = decode_command(payload)

@@ -48,6 +48,11 @@ class LinkStats:
         self._view_age_ms: float | None = None
         self._last_rx_ns: int | None = None
         self._seq_before: int | None = None  # the last seq that left the window
+        # Totals over the whole run (kept across sessions): commands that arrived, and seq
+        # numbers skipped on the way (a late one that fills a gap takes one back).
+        self.received_total = 0
+        self.missing_total = 0
+        self._max_seq: int | None = None
 
     def reset(self) -> None:
         """A new operator session: forget everything."""
@@ -56,11 +61,19 @@ class LinkStats:
         self._view_age_ms = None
         self._last_rx_ns = None
         self._seq_before = None
+        self._max_seq = None  # a new session numbers from 1 again
 
     def on_arrival(self, seq: int, rx_ns: int) -> None:
         """A decoded command of the operator in control arrived (accepted or stale)."""
         self._arrivals.append((rx_ns, seq))
         self._last_rx_ns = rx_ns
+        self.received_total += 1
+        if self._max_seq is None or seq > self._max_seq:
+            if self._max_seq is not None:
+                self.missing_total += seq - self._max_seq - 1
+            self._max_seq = seq
+        elif seq < self._max_seq and self.missing_total > 0:
+            self.missing_total -= 1
 
     def on_accepted(self, age_ns: int | None, view_age_ms: int | None, rx_ns: int) -> None:
         if age_ns is not None:

@@ -97,6 +97,7 @@ class RobotNode:
         recorder: Recorder | None = None,
         stats: RunStats | None = None,
         clock: Callable[[], int] = time.monotonic_ns,
+        clock_id: str | None = None,
     ) -> None:
         self._controller = controller
         self._driver = driver
@@ -104,6 +105,7 @@ class RobotNode:
         self._recorder = recorder
         self._stats = stats
         self._clock = clock
+        self._clock_id = clock_id  # which clock ``clock`` reads (egc_common.clock_id), if known
         self._lock = threading.Lock()
         self._last_state_ns = 0
         self._faults = 0
@@ -152,7 +154,7 @@ class RobotNode:
 
     def _on_clock_query(self, query: zenoh.Query) -> None:
         try:
-            query.reply(query.key_expr, encode_clock_reply(self._clock()))
+            query.reply(query.key_expr, encode_clock_reply(self._clock(), self._clock_id))
         except Exception as exc:  # a querier that went away must not kill the callback
             log.debug("clock reply failed: %s", exc)
 

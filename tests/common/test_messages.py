@@ -316,3 +316,15 @@ def test_map_round_trips_bit_packed_and_rejects_mismatches():
     doc["width"], doc["height"] = 10**5, 10**5
     assert decode_map(msgpack.packb(doc)).reason is RejectReason.TOO_LARGE
     assert isinstance(decode_map(raw[:-2]), Rejection)
+
+
+def test_clock_reply_names_its_clock_optionally():
+    from egc_common.clock_id import monotonic_clock_id
+    from egc_common.messages import decode_clock_id
+
+    assert decode_clock_id(encode_clock_reply(42)) is None
+    assert decode_clock_id(encode_clock_reply(42, "linux-boot:abc")) == "linux-boot:abc"
+    assert decode_clock_reply(encode_clock_reply(42, "linux-boot:abc")) == 42
+    assert decode_clock_id(b"\xc1garbage") is None
+    clock = monotonic_clock_id()
+    assert clock is None or clock.startswith("linux-boot:")

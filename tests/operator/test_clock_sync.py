@@ -47,3 +47,14 @@ def test_a_robot_clock_jump_restarts_the_window():
     sync.add(t + 10 * MS, t + 12 * MS - 9 * HOUR, t + 14 * MS)
     assert sync.best is not None and sync.best.rtt_ns == 4 * MS  # the old sample is gone
     assert sync.robot_now(t + 20 * MS) == t + 20 * MS - 9 * HOUR
+
+
+def test_same_clock_replies_give_offset_zero_on_a_one_sided_link():
+    # 100 ms on the way to the robot, nothing back: Cristian's midpoint is off by 50 ms ...
+    sync = ClockSync()
+    sync.add(0, 100 * MS, 100 * MS)
+    assert sync.robot_now(1_000 * MS) == 1_050 * MS
+    # ... while a robot that names the same clock gives the exact offset, 0.
+    same = ClockSync()
+    same.add(0, 100 * MS, 100 * MS, same_clock=True)
+    assert same.robot_now(1_000 * MS) == 1_000 * MS

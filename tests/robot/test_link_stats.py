@@ -60,3 +60,14 @@ def test_percentiles_match_numpy():
     f = stats.figures(36 * 20 * MS)
     assert f.cmd_age_p50_ms == pytest.approx(np.percentile(ages, 50))
     assert f.cmd_age_p90_ms == pytest.approx(np.percentile(ages, 90))
+
+
+def test_run_totals_count_missing_seq_and_survive_a_new_session():
+    stats = LinkStats()
+    feed(stats, [1, 2, 4, 5, 9, 10])  # 3, 6, 7, 8 missing
+    assert (stats.received_total, stats.missing_total) == (6, 4)
+    stats.on_arrival(7, 0)  # late, fills one gap
+    assert stats.missing_total == 3
+    stats.reset()
+    feed(stats, [1, 3])  # a new session numbers from 1 again
+    assert (stats.received_total, stats.missing_total) == (9, 4)
