@@ -336,14 +336,15 @@ def _figure(
         sharex=True,
     )
     styles = {"on": "-", "off": "--"}
-    colours: dict[str, str] = {}
     palette = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple"]
+    modes = sorted({setting(r) for r in rows})
+    colours = {m: palette[i % len(palette)] for i, m in enumerate(modes)}
     for col, op in enumerate(operators):
         op_rows = [r for r in rows if facet(r) == op]
         for row_i, (ylabel, fn) in enumerate(panels):
             ax = axes[row_i][col]
             for (mode, aware), points in sorted(_series(op_rows, x, fn).items()):
-                colour = colours.setdefault(mode, palette[len(colours) % len(palette)])
+                colour = colours[mode]
                 xs, ys = zip(*points, strict=True)
                 ax.plot(
                     xs,
@@ -362,7 +363,12 @@ def _figure(
                 ax.set_title(op)
             if row_i == len(panels) - 1:
                 ax.set_xlabel(xlabel)
-    handles, labels = axes[0][0].get_legend_handles_labels()
+    legend: dict[str, Any] = {}
+    for ax in axes.flat:
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            legend.setdefault(label, handle)
+    labels = sorted(legend)
+    handles = [legend[label] for label in labels]
     if handles:
         fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8)
     fig.suptitle(title)
