@@ -145,8 +145,8 @@ def _scan_rows(path: Path) -> int:
         with warnings.catch_warnings():  # no footer (yet): the server has the file open
             warnings.filterwarnings("ignore", message="RRD file has no footer")
             entity = read_recording(path).get("/" + paths.SCAN)
-    except RuntimeError:  # caught in the middle of a frame
-        return -1
+    except (RuntimeError, ValueError):  # caught in the middle of a frame, or before the first
+        return -1  # store was written ("No recording store found in RRD file")
     return -1 if entity is None else len(entity)
 
 
