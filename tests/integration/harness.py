@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -329,3 +330,26 @@ def first_zero_after(base: list[tuple[int, BaseCommand]], since_ns: int) -> int 
         if rx >= since_ns and b.linear_mps == 0.0 and b.angular_radps == 0.0:
             return rx
     return None
+
+
+def start_link(procs: Processes, listen: str, connect: str, *args: str, name: str = "link") -> int:
+    """``egc-teleop link`` between ``listen`` (operator side) and ``connect`` (robot side); waits
+    for its ready line and returns the relay's t0 (CLOCK_MONOTONIC ns), from which its outages
+    and phases count."""
+    proc = procs.start(name, "link", "--listen", listen, "--connect", connect, *args)
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline:
+        match = re.search(r"t0 ([0-9.]+)", procs.log(name))
+        if match:
+            return int(float(match.group(1)) * 1e9)
+        assert proc.poll() is None, procs.log(name)
+        time.sleep(0.02)
+    raise AssertionError(f"the relay did not print its ready line: {procs.log(name)}")
+
+
+def first_state_after(observer: Observer, state: str, since_ns: int) -> int | None:
+    """Arrival time of the first telemetry in ``state`` received after ``since_ns``."""
+    with observer._lock:
+        return next(
+            (rx for rx, t, _ in observer.rec.telemetry if rx > since_ns and t.state == state), None
+        )

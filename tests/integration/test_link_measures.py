@@ -16,10 +16,9 @@ import time
 import pytest
 from egc_common.transport import free_port
 
-from tests.integration.harness import joystick_file, operator_args
+from tests.integration.harness import joystick_file, operator_args, start_link
 from tests.integration.test_link import finish, start_robot, wait_full_speed
 from tests.integration.test_link_outage import start_relay
-from tests.integration.test_udp import start_relay as start_udp_relay
 from tests.integration.test_udp import udp_operator
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
@@ -52,7 +51,7 @@ def test_udp_loss_is_counted_from_seq_gaps(port, procs, observer, tmp_path):
     udp = f"udp/127.0.0.1:{free_port('udp')}"
     start_robot(procs, observer, port, "--listen", udp)
     relay = f"udp/127.0.0.1:{free_port('udp')}"
-    start_udp_relay(procs, relay, udp, "--up", "loss=10", "--seed", "7")
+    start_link(procs, relay, udp, "--up", "loss=10", "--seed", "7")
     # 200 commands a second, so that 2,000 commands take 10 s
     procs.start("op", *udp_operator(port, relay, "alice", forward(tmp_path), "--rate-hz", "200"))
     wait_full_speed(observer, timeout_s=20)

@@ -14,13 +14,18 @@ which it prints as ``t0`` on its ready line; CLOCK_MONOTONIC is shared by all pr
 
 from __future__ import annotations
 
-import re
 import time
 
 import pytest
 from egc_common.transport import free_tcp_port, loopback_endpoint
 
-from tests.integration.harness import MS, joystick_file, operator_args
+from tests.integration.harness import (
+    MS,
+    first_state_after,
+    joystick_file,
+    operator_args,
+    start_link,
+)
 from tests.integration.test_link import finish, start_robot, wait_full_speed
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
@@ -29,29 +34,12 @@ OUTAGE_START_S = 7.0
 
 
 def start_relay(procs, port: int, spec: str) -> tuple[int, int]:
-    """The relay in front of the robot; returns (its listen port, its t0 in monotonic ns)."""
+    """A TCP relay in front of the robot, ``spec`` both ways; returns (its port, its t0 ns)."""
     relay_port = free_tcp_port()
-    proc = procs.start(
-        "link",
-        "link",
-        "--listen",
-        loopback_endpoint(relay_port),
-        "--connect",
-        loopback_endpoint(port),
-        "--up",
-        spec,
-        "--down",
-        spec,
+    t0 = start_link(
+        procs, loopback_endpoint(relay_port), loopback_endpoint(port), "--up", spec, "--down", spec
     )
-    log = procs.workdir / "link.log"
-    deadline = time.monotonic() + 20
-    while time.monotonic() < deadline:
-        match = re.search(r"t0 ([0-9.]+)", log.read_text(errors="replace"))
-        if match:
-            return relay_port, int(float(match.group(1)) * 1e9)
-        assert proc.poll() is None, log.read_text()
-        time.sleep(0.02)
-    raise AssertionError("the relay did not print its ready line")
+    return relay_port, t0
 
 
 def first_motion_after(observer, since_ns: int) -> int | None:
@@ -68,11 +56,7 @@ def test_one_second_outage_holds_then_resumes_without_centring(port, procs, obse
     end = begin + 1_000_000_000
     assert time.monotonic_ns() < begin - 500 * MS, "the operator took too long to drive"
     hold = observer.wait_for(
-        "HOLD",
-        lambda: next(
-            (rx for rx, t, _ in observer.rec.telemetry if rx > begin and t.state == "HOLD"), None
-        ),
-        OUTAGE_START_S + 5,
+        "HOLD", lambda: first_state_after(observer, "HOLD", begin), OUTAGE_START_S + 5
     )
     assert (hold - begin) / MS <= 250 + 100
     moving = observer.wait_for("moving again", lambda: first_motion_after(observer, end), 5)
@@ -96,11 +80,7 @@ def test_three_second_outage_holds_then_waits_for_a_centred_stick(port, procs, o
     begin = t0 + int(OUTAGE_START_S * 1e9)
     end = begin + 3_000_000_000
     hold = observer.wait_for(
-        "HOLD",
-        lambda: next(
-            (rx for rx, t, _ in observer.rec.telemetry if rx > begin and t.state == "HOLD"), None
-        ),
-        OUTAGE_START_S + 5,
+        "HOLD", lambda: first_state_after(observer, "HOLD", begin), OUTAGE_START_S + 5
     )
     assert (hold - begin) / MS <= 250 + 100
     print(f"3 s outage: HOLD {(hold - begin) / MS:.0f} ms after it began")

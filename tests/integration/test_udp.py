@@ -23,7 +23,6 @@ the TCP half on the same port numbers, without loss).
 from __future__ import annotations
 
 import json
-import re
 import threading
 import time
 from pathlib import Path
@@ -32,26 +31,19 @@ import pytest
 import zenoh
 from egc_common.transport import ZenohOptions, free_port, open_session
 
-from tests.integration.harness import MS, joystick_file, operator_args
+from tests.integration.harness import (
+    MS,
+    first_state_after,
+    joystick_file,
+    operator_args,
+    start_link,
+)
 from tests.integration.test_link import finish, start_robot, wait_full_speed
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 
 
-def start_relay(procs, listen: str, connect: str, *spec_args: str, name: str = "link") -> int:
-    """``egc-teleop link`` between ``listen`` (operator side) and ``connect``; waits for its
-    ready line and returns the relay's t0 (monotonic ns: its own when it prints one, else when
-    the ready line was seen)."""
-    proc = procs.start(name, "link", "--listen", listen, "--connect", connect, *spec_args)
-    deadline = time.monotonic() + 20
-    while time.monotonic() < deadline:
-        log = procs.log(name)
-        if "listening on" in log:
-            match = re.search(r"t0 ([0-9.]+)", log)
-            return int(float(match.group(1)) * 1e9) if match else time.monotonic_ns()
-        assert proc.poll() is None, log
-        time.sleep(0.02)
-    raise AssertionError(f"the relay did not print its ready line: {procs.log(name)}")
+start_relay = start_link
 
 
 def robot_on_tcp_and_udp(procs, observer, port: int) -> str:
@@ -130,11 +122,7 @@ def test_one_second_udp_outage_resumes_without_centring(port, procs, observer, t
     end = begin + 1_000_000_000
     assert time.monotonic_ns() < begin - 500 * MS, "the operator took too long to drive"
     hold = observer.wait_for(
-        "HOLD",
-        lambda: next(
-            (rx for rx, t, _ in observer.rec.telemetry if rx > begin and t.state == "HOLD"), None
-        ),
-        outage_start_s + 5,
+        "HOLD", lambda: first_state_after(observer, "HOLD", begin), outage_start_s + 5
     )
     assert (hold - begin) / MS <= 250 + 100
     moving = observer.wait_for(
