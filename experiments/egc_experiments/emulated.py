@@ -458,16 +458,7 @@ def run_emulated(point: RunPoint, workdir: Path, use_netns: bool | None = None) 
     latency = summary.get("command_latency", {})
     final = figures["final_pose"] or list(start)
     result: dict[str, Any] = {
-        "world": point.world,
-        "operator": point.operator,
-        "filter": point.filter,
-        "mode": point.mode,
-        "transport": point.transport,
-        "delay_ms": point.delay_ms,
-        "jitter_ms": point.jitter_ms,
-        "loss": point.loss,
-        "burst": point.burst,
-        "seed": point.seed,
+        **point.identity(),
         "outcome": outcome,
         "reached": outcome == "reached",
         "collided": outcome == "collided",

@@ -92,6 +92,21 @@ class RunPoint:
         d.pop("extra")
         return repr(sorted(d.items()))
 
+    def identity(self) -> dict[str, Any]:
+        """The point's own keys of a result line (the first ten of ``RESULT_KEYS``)."""
+        return {
+            "world": self.world,
+            "operator": self.operator,
+            "filter": self.filter,
+            "mode": self.mode,
+            "transport": self.transport,
+            "delay_ms": self.delay_ms,
+            "jitter_ms": self.jitter_ms,
+            "loss": self.loss,
+            "burst": self.burst,
+            "seed": self.seed,
+        }
+
     def link_spec(self) -> str:
         """The SPEC string of ``egc-teleop link`` for this point, one direction (DESIGN 10)."""
         parts = [f"delay={self.delay_ms:g}"]

@@ -281,16 +281,7 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
     path = sim.path_m
     counters = controller.counters
     result: dict[str, Any] = {
-        "world": point.world,
-        "operator": point.operator,
-        "filter": point.filter,
-        "mode": point.mode,
-        "transport": point.transport,
-        "delay_ms": point.delay_ms,
-        "jitter_ms": point.jitter_ms,
-        "loss": point.loss,
-        "burst": point.burst,
-        "seed": point.seed,
+        **point.identity(),
         "outcome": outcome,
         "reached": outcome == "reached",
         "collided": outcome == "collided",
