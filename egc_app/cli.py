@@ -10,8 +10,9 @@ import argparse
 import importlib
 import sys
 from collections.abc import Sequence
-from typing import NoReturn
+from typing import Any, NoReturn
 
+from egc_common.cli_args import numbers_are_values
 from egc_common.errors import UsageError
 
 # name -> (module, one-line help)
@@ -39,7 +40,12 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
 
 
 class CliArgumentParser(argparse.ArgumentParser):
-    """Bad arguments: one clear line on stderr and exit code 2 (DESIGN 2)."""
+    """Bad arguments: one clear line on stderr and exit code 2 (DESIGN 2); values that start with
+    a minus and a digit are values, not options (``egc_common.cli_args``)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        numbers_are_values(self)
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")

@@ -42,6 +42,7 @@ from typing import IO, Any
 
 import numpy as np
 from egc_common import keys
+from egc_common.cli_args import numbers_are_values
 from egc_common.errors import UsageError
 from egc_common.joystick_file import JoystickSample
 from egc_common.messages import Telemetry
@@ -148,9 +149,11 @@ def _goal(text: str | None) -> tuple[float, float] | None:
     return x, y
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="python -m egc_experiments.operator_model", description=__doc__.splitlines()[0]
+def build_parser() -> argparse.ArgumentParser:
+    parser = numbers_are_values(
+        argparse.ArgumentParser(
+            prog="python -m egc_experiments.operator_model", description=__doc__.splitlines()[0]
+        )
     )
     parser.add_argument("--robot", default=keys.DEFAULT_ROBOT_ID, metavar="ID")
     parser.add_argument("--operator-id", default="model-operator", metavar="ID")
@@ -164,7 +167,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--profile", default="pioneer3dx")
     parser.add_argument("--rate-hz", type=float, default=50.0)
     parser.add_argument("--intent", metavar="FILE.jsonl")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="operator-model: %(message)s", stream=sys.stderr)
     try:
         world = load_world(args.world, seed=args.seed)

@@ -1,0 +1,50 @@
+"""DESIGN 2: coordinates are typed the way people type them; a leading minus is a number.
+
+``egc-teleop episode --start -12.5,8.5,0 --goal 13.0,1.7`` (the README's own example) failed
+with "expected one argument": argparse took ``-12.5,8.5,0`` for an option. One test per option
+that takes coordinates, in every subcommand that has one, and the negative cases that must stay
+errors.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+import pytest
+
+from egc_app.cli import SUBCOMMANDS, CliArgumentParser
+
+CASES = [
+    ("robot", "--start", "-12.5,8.5,0", "start"),
+    ("episode", "--start", "-12.5,8.5,-1.57", "start"),
+    ("episode", "--goal", "-2,3", "goal"),
+    ("episode", "--goal", "-2.5,-3e-1", "goal"),
+    ("sim", "--start", "-1,-2,-3", "start"),
+]
+
+
+def parser_for(name: str) -> CliArgumentParser:
+    parser = CliArgumentParser(prog=f"egc-teleop {name}")
+    importlib.import_module(SUBCOMMANDS[name][0]).configure(parser)
+    return parser
+
+
+@pytest.mark.parametrize(("command", "option", "value", "dest"), CASES)
+def test_negative_coordinates_are_values(command, option, value, dest):
+    args = parser_for(command).parse_args([option, value])
+    assert getattr(args, dest) == value
+
+
+def test_the_operator_model_process_takes_negative_coordinates_too():
+    from egc_experiments.operator_model import build_parser
+
+    base = ["--zenoh-connect", "tcp/h:1", "--operator", "goal", "--world", "hallway"]
+    args = build_parser().parse_args([*base, "--start", "-1,2,0", "--goal", "-2,3"])
+    assert (args.start, args.goal) == ("-1,2,0", "-2,3")
+
+
+def test_an_unknown_option_that_looks_like_a_word_is_still_an_error(capsys):
+    with pytest.raises(SystemExit) as exc:
+        parser_for("episode").parse_args(["--start", "-x"])
+    assert exc.value.code == 2
+    assert "expected one argument" in capsys.readouterr().err
