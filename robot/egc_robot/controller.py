@@ -491,7 +491,10 @@ class RobotController:
             rejected=snap.rejected,
             cycle=snap.cycle,
             reason=snap.reason,
-            filter=self.config.pipeline.filter,
+            # DESIGN 7: which filter of DESIGN 6 ran this cycle ("none" in direct mode)
+            filter=self.config.pipeline.filter
+            if cmd is not None and self.config.filtered(cmd.mode)
+            else "none",
             loop_delay_ms=snap.link.loop_delay_s * 1e3,
             cmd_age_p50_ms=snap.link.cmd_age_p50_ms,
             cmd_age_p90_ms=snap.link.cmd_age_p90_ms,

@@ -291,3 +291,10 @@ def test_telemetry_is_the_cycle_snapshot_even_when_built_later():
     assert t.state == "DRIVING" and t.operator == "alice" and t.rejected == 0
     assert t.cycle == out.base.seq and len(t.scan_xy) == 180  # 360 beams, decimation 2
     assert out.telemetry is t  # built once
+
+
+def test_telemetry_says_which_filter_ran():
+    rig = driving_rig()
+    assert rig.drive(1.0).telemetry.filter == "egc"
+    rig.send(x=1.0, mode="direct")
+    assert rig.cycle().telemetry.filter == "none"
