@@ -261,7 +261,7 @@ def predictive_loop(view: OperatorView, seconds: float, delay_ms: float) -> Pred
     from egc_common.profiles import JACKAL
     from egc_operator.operator_node import view_age_ms
     from egc_operator.prediction import CommandHistory, SentCommand
-    from egc_operator.status_line import Status, format_status
+    from egc_operator.status_line import format_status, status_of
     from egc_robot.controller import ControllerConfig, RobotController
     from egc_robot.pipeline import PipelineConfig
     from egc_sim.grid_world import map_message
@@ -328,28 +328,7 @@ def predictive_loop(view: OperatorView, seconds: float, delay_ms: float) -> Pred
             history.add(SentCommand(now, sx, sy, "shared"))
             view.on_commands(history, now)
     assert command is not None
-    t = shown
-    status = Status(
-        rtt_ms=2 * delay_ms,
-        synchronised=True,
-        robot_state=None if state is None else state.state,
-        reason=None if state is None else state.reason,
-        w_si=None if t is None else t.w_si,
-        rejected=None if state is None else state.rejected,
-        mode=command.mode,
-        deadman=command.deadman,
-        in_control=None if state is None else state.operator == "op1",
-        limiter=None if t is None else t.limiter,
-        filter=None if t is None else t.filter or None,
-        v_lim_latency=None if t is None else t.v_lim_latency,
-        loop_delay_ms=None if t is None else t.loop_delay_ms,
-        cmd_age_ms=None if t is None else t.cmd_age_ms,
-        cmd_age_p50_ms=None if t is None else t.cmd_age_p50_ms,
-        cmd_age_p90_ms=None if t is None else t.cmd_age_p90_ms,
-        cmd_gap_max_ms=None if t is None else t.cmd_gap_max_ms,
-        link_loss=None if t is None else t.link_loss,
-        view_age_ms=command.view_age_ms,
-    )
+    status = status_of(command, shown, state, 2 * delay_ms, True)
     return PredictiveRun(shown, format_status(status))
 
 

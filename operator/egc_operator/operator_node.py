@@ -46,7 +46,7 @@ from egc_common.transport import command_publisher, payload_bytes
 from egc_operator.clock_sync import ClockSync
 from egc_operator.command_source import CommandSource
 from egc_operator.prediction import CommandHistory, SentCommand
-from egc_operator.status_line import Status, StatusLine
+from egc_operator.status_line import Status, StatusLine, status_of
 
 log = logging.getLogger("egc.operator")
 
@@ -302,27 +302,8 @@ class OperatorNode:
             t, s, alive = self._telemetry, self._state, self._robot_alive
             latest = self._sync.latest
             synced = self._sync.synchronised
-        return Status(
-            rtt_ms=None if latest is None else latest.rtt_ns / 1e6,
-            synchronised=synced,
-            robot_state=None if s is None or not alive else s.state,
-            reason=None if s is None or not alive else s.reason,
-            w_si=None if t is None else t.w_si,
-            rejected=None if s is None else s.rejected,
-            mode=command.mode,
-            deadman=command.deadman,
-            in_control=None if s is None else s.operator == self._op,
-            limiter=None if t is None else t.limiter,
-            filter=None if t is None else t.filter or None,
-            v_lim_latency=None if t is None else t.v_lim_latency,
-            loop_delay_ms=None if t is None else t.loop_delay_ms,
-            cmd_age_ms=None if t is None else t.cmd_age_ms,
-            cmd_age_p50_ms=None if t is None else t.cmd_age_p50_ms,
-            cmd_age_p90_ms=None if t is None else t.cmd_age_p90_ms,
-            cmd_gap_max_ms=None if t is None else t.cmd_gap_max_ms,
-            link_loss=None if t is None else t.link_loss,
-            view_age_ms=command.view_age_ms,
-        )
+        rtt_ms = None if latest is None else latest.rtt_ns / 1e6
+        return status_of(command, t, s, rtt_ms, synced, alive)
 
     def close(self) -> None:
         for entity in self._entities:

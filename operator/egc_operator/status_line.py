@@ -20,6 +20,8 @@ import shutil
 from dataclasses import dataclass
 from typing import TextIO
 
+from egc_common.messages import OperatorCommand, StateMessage, Telemetry
+
 # DESIGN 8 defaults, as the operator cannot read the robot's configuration.
 RESUME_WINDOW_S = 2.0
 MAX_COMMAND_AGE_MS = {"direct": 300, "shared": 1000}
@@ -185,3 +187,37 @@ class StatusLine:
         if self._tty:
             self._stream.write("\n")
             self._stream.flush()
+
+
+def status_of(
+    command: OperatorCommand,
+    telemetry: Telemetry | None,
+    state: StateMessage | None,
+    rtt_ms: float | None,
+    synchronised: bool,
+    robot_alive: bool = True,
+) -> Status:
+    """The status line's inputs from the newest messages (robot gone: no state shown)."""
+    t = telemetry
+    s = state if robot_alive else None
+    return Status(
+        rtt_ms=rtt_ms,
+        synchronised=synchronised,
+        robot_state=None if s is None else s.state,
+        reason=None if s is None else s.reason,
+        w_si=None if t is None else t.w_si,
+        rejected=None if state is None else state.rejected,
+        mode=command.mode,
+        deadman=command.deadman,
+        in_control=None if state is None else state.operator == command.op,
+        limiter=None if t is None else t.limiter,
+        filter=None if t is None else t.filter or None,
+        v_lim_latency=None if t is None else t.v_lim_latency,
+        loop_delay_ms=None if t is None else t.loop_delay_ms,
+        cmd_age_ms=None if t is None else t.cmd_age_ms,
+        cmd_age_p50_ms=None if t is None else t.cmd_age_p50_ms,
+        cmd_age_p90_ms=None if t is None else t.cmd_age_p90_ms,
+        cmd_gap_max_ms=None if t is None else t.cmd_gap_max_ms,
+        link_loss=None if t is None else t.link_loss,
+        view_age_ms=command.view_age_ms,
+    )
