@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -27,6 +26,8 @@ from pathlib import Path
 import pytest
 from egc_experiments import netns
 
+from tests.integration.harness import Processes
+
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 
 _REASON = netns.unavailable_reason()
@@ -34,13 +35,12 @@ needs_netns = pytest.mark.skipif(_REASON is not None, reason=str(_REASON))
 PORT = 7447
 
 
-class Spawner:
-    """Processes in the namespaces, output in files, all stopped at the end."""
+class Spawner(Processes):
+    """``harness.Processes`` whose children run inside one of the namespaces."""
 
     def __init__(self, net: netns.TwoHosts, workdir: Path) -> None:
+        super().__init__(workdir)
         self.net = net
-        self.workdir = workdir
-        self.children: dict[str, subprocess.Popen[bytes]] = {}
 
     def start(self, name: str, side: str, *args: str) -> subprocess.Popen[bytes]:
         env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONFAULTHANDLER="1")
@@ -56,32 +56,12 @@ class Spawner:
         self.children[name] = proc
         return proc
 
-    def log(self, name: str) -> str:
-        return (self.workdir / f"{name}.log").read_text(errors="replace")
-
     def wait_log(self, name: str, text: str, timeout_s: float = 20.0) -> None:
         deadline = time.monotonic() + timeout_s
         while text not in self.log(name):
             assert self.children[name].poll() is None, self.log(name)
             assert time.monotonic() < deadline, f"{name}: no {text!r} in\n{self.log(name)}"
             time.sleep(0.05)
-
-    def stop(self, name: str) -> int:
-        proc = self.children[name]
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-        return proc.returncode
-
-    def cleanup(self) -> None:
-        for proc in self.children.values():
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait(5)
 
 
 @needs_netns
@@ -105,8 +85,8 @@ def test_operator_drives_the_robot_across_namespaces_through_the_relay(proto, tm
                       "--duration", "8")  # fmt: skip
             run.children["op"].wait(30)
             assert run.children["op"].returncode == 0, run.log("op")
-            assert run.stop("robot") == 0, run.log("robot")
-            assert run.stop("link") == 0, run.log("link")
+            assert run.stop("robot", timeout_s=10) == 0, run.log("robot")
+            assert run.stop("link", timeout_s=10) == 0, run.log("link")
         finally:
             run.cleanup()
     robot = json.loads(summary.read_text())
