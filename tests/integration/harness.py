@@ -129,6 +129,11 @@ def operator_args(port: int, op_id: str, joystick_file: Path, *extra: str) -> li
     ]
 
 
+def forward_file(workdir: Path, seconds: float = 60) -> Path:
+    """A joystick file: centred with the deadman for 0.5 s, then full forward until ``seconds``."""
+    return joystick_file(workdir / "fwd.csv", [(0, 0, 0, 1), (0.5, 1, 0, 1), (seconds, 1, 0, 1)])
+
+
 def joystick_file(path: Path, rows: list[tuple[float, float, float, int]]) -> Path:
     """rows of (t_s, x, y, deadman) in the recorded-joystick CSV format."""
     lines = ["t_s,x,y,deadman,mode"] + [f"{t},{x},{y},{d},shared" for t, x, y, d in rows]

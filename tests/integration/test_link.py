@@ -28,6 +28,7 @@ from tests.integration.harness import (
     Observer,
     assert_no_jump,
     first_zero_after,
+    forward_file,
     joystick_file,
     operator_args,
     robot_args,
@@ -110,7 +111,7 @@ def test_operator_sigkill_stops_the_robot_and_resume_needs_a_centred_stick(
     port, procs, observer, tmp_path
 ):
     start_robot(procs, observer, port)
-    js = joystick_file(tmp_path / "fwd.csv", [(0, 0, 0, 1), (0.5, 1, 0, 1), (60, 1, 0, 1)])
+    js = forward_file(tmp_path)
     procs.start("op", *operator_args(port, "alice", js))
     wait_full_speed(observer)
     killed = time.monotonic_ns()
@@ -136,7 +137,7 @@ def test_operator_sigkill_stops_the_robot_and_resume_needs_a_centred_stick(
 
 def test_operator_sigstop_holds_within_the_command_timeout(port, procs, observer, tmp_path):
     start_robot(procs, observer, port)
-    js = joystick_file(tmp_path / "fwd.csv", [(0, 0, 0, 1), (0.5, 1, 0, 1), (60, 1, 0, 1)])
+    js = forward_file(tmp_path)
     procs.start("op", *operator_args(port, "alice", js))
     wait_full_speed(observer)
     stopped = time.monotonic_ns()
@@ -176,7 +177,7 @@ def test_operator_sigstop_holds_within_the_command_timeout(port, procs, observer
 
 def test_operator_clock_an_hour_off_still_drives(port, procs, observer, tmp_path):
     start_robot(procs, observer, port)
-    js = joystick_file(tmp_path / "fwd.csv", [(0, 0, 0, 1), (0.5, 1, 0, 1), (60, 1, 0, 1)])
+    js = forward_file(tmp_path)
     procs.start("op", *operator_args(port, "alice", js, "--clock-offset-s", "3600"))
     wait_full_speed(observer)
     driving = [t for t in observer.telemetry() if t.state == "DRIVING"]
@@ -211,7 +212,7 @@ def test_operator_paused_for_one_second_resumes_without_centring(port, procs, ob
     robot drives again without re-centring, ramping up from standstill.
     """
     start_robot(procs, observer, port)
-    js = joystick_file(tmp_path / "fwd.csv", [(0, 0, 0, 1), (0.5, 1, 0, 1), (60, 1, 0, 1)])
+    js = forward_file(tmp_path)
     procs.start("op", *operator_args(port, "alice", js))
     wait_full_speed(observer)
     stopped = time.monotonic_ns()
@@ -344,7 +345,7 @@ def test_malformed_payloads_interleaved_with_valid_ones(port, procs, observer):
 
 def test_a_second_operator_cannot_drive(port, procs, observer, tmp_path):
     start_robot(procs, observer, port)
-    fwd = joystick_file(tmp_path / "fwd.csv", [(0, 0, 0, 1), (0.5, 1, 0, 1), (60, 1, 0, 1)])
+    fwd = forward_file(tmp_path)
     rev = joystick_file(tmp_path / "rev.csv", [(0, -1, 0, 1), (60, -1, 0, 1)])
     procs.start("alice", *operator_args(port, "alice", fwd))
     wait_full_speed(observer)
@@ -417,7 +418,7 @@ def test_robot_and_operator_as_clients_of_a_router(port, procs, tmp_path):
         procs.start("robot", "robot", "--robot", ROBOT, "--driver", "zenoh", *client)
         observer.wait_for("robot telemetry", observer.last_telemetry, 15)
         observer.start_scans()
-        js = joystick_file(tmp_path / "fwd.csv", [(0, 0, 0, 1), (0.5, 1, 0, 1), (60, 1, 0, 1)])
+        js = forward_file(tmp_path)
         op = operator_args(port, "alice", js, "--zenoh-mode", "client")
         procs.start("op", *op)
         wait_full_speed(observer)

@@ -16,16 +16,12 @@ import time
 import pytest
 from egc_common.transport import free_port
 
-from tests.integration.harness import joystick_file, operator_args, start_link
+from tests.integration.harness import forward_file, operator_args, start_link
 from tests.integration.test_link import finish, start_robot, wait_full_speed
 from tests.integration.test_link_outage import start_relay
 from tests.integration.test_udp import udp_operator
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
-
-
-def forward(tmp_path, seconds=60):
-    return joystick_file(tmp_path / "fwd.csv", [(0, 0, 0, 1), (0.5, 1, 0, 1), (seconds, 1, 0, 1)])
 
 
 def stop_and_summary(procs, observer, path):
@@ -37,7 +33,7 @@ def test_one_way_delay_is_measured_as_command_age(port, procs, observer, tmp_pat
     summary_path = tmp_path / "robot.json"
     start_robot(procs, observer, port, "--summary", str(summary_path))
     relay_port, _ = start_relay(procs, port, "delay=100,jitter=20")
-    procs.start("op", *operator_args(relay_port, "alice", forward(tmp_path)))
+    procs.start("op", *operator_args(relay_port, "alice", forward_file(tmp_path)))
     wait_full_speed(observer, timeout_s=20)
     time.sleep(4.0)
     assert procs.stop("op") == 0, procs.log("op")
@@ -53,7 +49,9 @@ def test_udp_loss_is_counted_from_seq_gaps(port, procs, observer, tmp_path):
     relay = f"udp/127.0.0.1:{free_port('udp')}"
     start_link(procs, relay, udp, "--up", "loss=10", "--seed", "7")
     # 200 commands a second, so that 2,000 commands take 10 s
-    procs.start("op", *udp_operator(port, relay, "alice", forward(tmp_path), "--rate-hz", "200"))
+    procs.start(
+        "op", *udp_operator(port, relay, "alice", forward_file(tmp_path), "--rate-hz", "200")
+    )
     wait_full_speed(observer, timeout_s=20)
     # The UDP link of a udp/ endpoint opens beside the TCP one; a lost handshake datagram
     # delays it by up to 4 s (transport.UDP_HANDSHAKE_TIMEOUT_MS), the data taking the TCP link

@@ -22,7 +22,7 @@ from egc_common.transport import free_tcp_port, loopback_endpoint
 from tests.integration.harness import (
     MS,
     first_state_after,
-    joystick_file,
+    forward_file,
     operator_args,
     start_link,
 )
@@ -49,7 +49,7 @@ def first_motion_after(observer, since_ns: int) -> int | None:
 def test_one_second_outage_holds_then_resumes_without_centring(port, procs, observer, tmp_path):
     start_robot(procs, observer, port)
     relay_port, t0 = start_relay(procs, port, f"outage={OUTAGE_START_S}+1")
-    js = joystick_file(tmp_path / "fwd.csv", [(0, 0, 0, 1), (0.5, 1, 0, 1), (60, 1, 0, 1)])
+    js = forward_file(tmp_path)
     procs.start("op", *operator_args(relay_port, "alice", js))
     wait_full_speed(observer)
     begin = t0 + int(OUTAGE_START_S * 1e9)
@@ -74,7 +74,7 @@ def test_one_second_outage_holds_then_resumes_without_centring(port, procs, obse
 def test_three_second_outage_holds_then_waits_for_a_centred_stick(port, procs, observer, tmp_path):
     start_robot(procs, observer, port)
     relay_port, t0 = start_relay(procs, port, f"outage={OUTAGE_START_S}+3")
-    js = joystick_file(tmp_path / "fwd.csv", [(0, 0, 0, 1), (0.5, 1, 0, 1), (90, 1, 0, 1)])
+    js = forward_file(tmp_path, 90)
     procs.start("op", *operator_args(relay_port, "alice", js))
     wait_full_speed(observer)
     begin = t0 + int(OUTAGE_START_S * 1e9)

@@ -17,7 +17,7 @@ import time
 import pytest
 from egc_common.transport import free_port
 
-from tests.integration.harness import ROBOT, Observer, joystick_file, operator_args
+from tests.integration.harness import ROBOT, Observer, forward_file, operator_args
 from tests.integration.test_link import wait_full_speed
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(90)]
@@ -46,7 +46,7 @@ def test_robot_and_operator_drive_through_egc_teleop_router(proto, port, procs, 
         procs.start("robot", "robot", "--robot", ROBOT, "--driver", "zenoh", *client)
         observer.wait_for("robot telemetry through the router", observer.last_telemetry, 15)
         observer.start_scans()
-        js = joystick_file(tmp_path / "fwd.csv", [(0, 0, 0, 1), (0.5, 1, 0, 1), (60, 1, 0, 1)])
+        js = forward_file(tmp_path)
         op = operator_args(port, "alice", js, "--zenoh-mode", "client")
         op[op.index("--zenoh-connect") + 1] = clients  # over UDP in the udp case
         procs.start("op", *op)

@@ -34,7 +34,7 @@ from egc_common.transport import ZenohOptions, free_port, open_session
 from tests.integration.harness import (
     MS,
     first_state_after,
-    joystick_file,
+    forward_file,
     operator_args,
     start_link,
 )
@@ -59,13 +59,9 @@ def udp_operator(port: int, endpoint: str, op_id: str, js: Path, *extra: str) ->
     return args
 
 
-def forward(tmp_path: Path, seconds: float = 60) -> Path:
-    return joystick_file(tmp_path / "fwd.csv", [(0, 0, 0, 1), (0.5, 1, 0, 1), (seconds, 1, 0, 1)])
-
-
 def test_an_operator_drives_the_robot_over_udp(port, procs, observer, tmp_path):
     udp = robot_on_tcp_and_udp(procs, observer, port)
-    procs.start("op", *udp_operator(port, udp, "alice", forward(tmp_path)))
+    procs.start("op", *udp_operator(port, udp, "alice", forward_file(tmp_path)))
     wait_full_speed(observer)
     since = time.monotonic_ns()
     time.sleep(1.0)
@@ -88,7 +84,7 @@ def test_udp_through_a_lossy_relay(port, procs, observer, tmp_path):
     spec = "delay=20,loss=5"
     stats = tmp_path / "link.json"
     start_relay(procs, relay, udp, "--up", spec, "--down", spec, "--stats", str(stats))
-    procs.start("op", *udp_operator(port, relay, "alice", forward(tmp_path)))
+    procs.start("op", *udp_operator(port, relay, "alice", forward_file(tmp_path)))
     wait_full_speed(observer, timeout_s=20)
     since = time.monotonic_ns()
     time.sleep(4.0)
@@ -116,7 +112,7 @@ def test_one_second_udp_outage_resumes_without_centring(port, procs, observer, t
     outage_start_s = 7.0
     t0 = start_relay(procs, relay, udp, "--up", f"outage={outage_start_s:g}+1", "--down",
                      f"outage={outage_start_s:g}+1")  # fmt: skip
-    procs.start("op", *udp_operator(port, relay, "alice", forward(tmp_path, 90)))
+    procs.start("op", *udp_operator(port, relay, "alice", forward_file(tmp_path, 90)))
     wait_full_speed(observer)
     begin = t0 + int(outage_start_s * 1e9)
     end = begin + 1_000_000_000
