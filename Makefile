@@ -5,13 +5,16 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN     = $(VENV)/bin
 DEMO_ARGS ?=
+# The ROS 2 extra (DESIGN 11) is part of the test install so CI runs the ROS 2 tests;
+# `make venv EXTRAS=` leaves it out.
+EXTRAS  ?= ,ros2
 
 .PHONY: demo test venv lint typecheck pytest bench clean
 
 $(BIN)/egc-teleop: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet -e '.[test$(EXTRAS)]'
 	touch $@
 
 venv: $(BIN)/egc-teleop
