@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -217,33 +218,59 @@ def egc_filter(
     v_mps: float, w_radps: float, points: npt.ArrayLike | ObstaclePoints, params: EgcParams
 ) -> EgcResult:
     """Filter one command against scan points (N, 2) in {R}; see the module docstring."""
-    kT, r_min, r_max = params.horizon_s, params.r_min_m, params.r_max_m
     if not (abs(v_mps) <= MAX_ABS_INPUT and abs(w_radps) <= MAX_ABS_INPUT):  # also NaN
         return _stop(EgcCase.INVALID_INPUT, 0.0, (0.0, 0.0), 0.0, Region.UNSAFE)
 
     obstacles = obstacle_points(points)
-    px, py = obstacles.x, obstacles.y
+    p_igc = predicted_position(v_mps, w_radps, params.horizon_s)  # eq. 6
+    if obstacles.x.size == 0:
+        return no_points(v_mps, w_radps, p_igc, params)
+    return guide_circles(
+        v_mps, w_radps, p_igc, obstacles.x, obstacles.y, params, command_from_point
+    )
 
-    p_igc = predicted_position(v_mps, w_radps, kT)  # eq. 6
+
+def no_points(v_mps: float, w_radps: float, p_igc: Point, params: EgcParams) -> EgcResult:
+    """DESIGN 5.9: no valid point at all; a stop unless the driver declares no return as free."""
+    r_rc = math.hypot(*p_igc)
+    if params.no_return_is_free:
+        return EgcResult(
+            v_mps,
+            w_radps,
+            1.0,
+            Region.SAFE,
+            None,
+            False,
+            EgcCase.NO_POINTS_FREE,
+            r_rc,
+            p_igc,
+            params.r_max_m,
+        )
+    return _stop(EgcCase.NO_POINTS_UNKNOWN, r_rc, p_igc, 0.0, Region.UNSAFE)
+
+
+def guide_circles(
+    v_mps: float,
+    w_radps: float,
+    p_igc: Point,
+    px: FloatArray,
+    py: FloatArray,
+    params: EgcParams,
+    to_command: Callable[[Point, float, float], tuple[float, float]],
+) -> EgcResult:
+    """DESIGN 5.2-5.6 and the rules of 5.9 on given points and a given P_IGC.
+
+    Shared by ``egc`` (points and P_IGC in {R}) and ``ek-egc`` (both in the ego-kinematic
+    space). ``to_command(P_EGC, w_SI, kT)`` turns the expanded centre back into (v', w') (eqs.
+    14-15 for EGC, DESIGN 6 step 4 for EK-EGC); every other branch is the same rule for both:
+    CLEAR passes (v, w), NO_TRANSLATION keeps (0, w), NO_INTERSECTION scales (v, w) by w_SI,
+    ZERO_WEIGHTS stops. No point at all (possible after the EK transform drops points) is
+    nothing within r_max: CLEAR. Callers decide the empty-scan rule (``no_points``) before.
+    """
+    r_min, r_max = params.r_min_m, params.r_max_m
     r_rc = math.hypot(*p_igc)  # eq. 7
 
-    if px.size == 0:
-        if params.no_return_is_free:
-            return EgcResult(
-                v_mps,
-                w_radps,
-                1.0,
-                Region.SAFE,
-                None,
-                False,
-                EgcCase.NO_POINTS_FREE,
-                r_rc,
-                p_igc,
-                r_max,
-            )
-        return _stop(EgcCase.NO_POINTS_UNKNOWN, r_rc, p_igc, 0.0, Region.UNSAFE)
-
-    d_igc, i_igc = _nearest(px, py, p_igc)  # eq. 8
+    d_igc, i_igc = _nearest(px, py, p_igc) if px.size else (math.inf, -1)  # eq. 8
     r_igc = _clamp(d_igc, r_max)  # eq. 9
     if d_igc >= r_max:  # Table 1, lines 4-6
         return EgcResult(
@@ -329,7 +356,7 @@ def egc_filter(
     )
     r_egc = _clamp(_nearest(px, py, p_egc)[0], r_max)  # eq. 13
     w_si = safety_index(r_egc, r_min, r_max)  # eq. 16
-    v_out, w_out = command_from_point(p_egc, w_si, kT)  # eqs. 14-15
+    v_out, w_out = to_command(p_egc, w_si, params.horizon_s)  # eqs. 14-15 / DESIGN 6.4
     return EgcResult(
         v_out,
         w_out,
