@@ -3,7 +3,9 @@
 Wires the pure ``RobotController`` to a driver and a Zenoh session and runs the
 ``RobotNode`` loop until SIGINT/SIGTERM. Drivers: ``sim`` runs sim_robot in this process
 (``SimDriver`` below; egc_robot may not import egc_sim, the entry point may), ``zenoh`` talks
-to a base-and-sensor process over ``scan`` / ``base/cmd`` / ``base/odom`` (``egc-teleop sim``).
+to a base-and-sensor process over ``scan`` / ``base/cmd`` / ``base/odom`` (``egc-teleop sim``),
+``ros2`` makes this process the ROS 2 node ``egc_teleop`` on a ROS 2 robot's ``/scan``, ``/odom``
+and ``/cmd_vel`` (``egc_robot.ros2_driver``, DESIGN 11).
 
 Configuration: defaults < ``--config FILE`` (TOML) < ``--set section.key=value`` < explicit
 flags. Tables and keys (units in the names):
@@ -15,6 +17,12 @@ flags. Tables and keys (units in the names):
                blind_time_filtered_s (DESIGN 8 short-gap resume, DESIGN 9 latency governor)
     [pipeline] horizon_s, gamma_v, gamma_w, no_return_is_free
     [sim]      scan_hz, beams, seed
+    [ros2]     scan, odom, cmd, cmd_type, namespace, laser_pose ("X,Y,YAW" or [x, y, yaw]),
+               laser_upside_down (flags --ros-scan ... --laser-upside-down override them)
+
+With ``--driver ros2``, ``pipeline.no_return_is_free`` defaults to true: REP 117's ``+inf`` means
+nothing within range_max, and the driver never delivers a scan without any information
+(``egc_robot.ros2_core``).
 """
 
 from __future__ import annotations
@@ -46,6 +54,7 @@ from egc_common.transport import (
 from egc_robot.controller import ControllerConfig, RobotController
 from egc_robot.drivers import Driver, SensorUpdate
 from egc_robot.pipeline import FILTERS, PipelineConfig
+from egc_robot.ros2_core import CMD_TYPES, ROS2_KEYS, ros2_settings
 from egc_robot.run_stats import RunStats
 from egc_robot.zenoh_node import Recorder, RobotNode
 
@@ -71,6 +80,7 @@ SECTIONS: dict[str, tuple[str, ...]] = {
     ),
     "pipeline": ("horizon_s", "gamma_v", "gamma_w", "no_return_is_free"),
     "sim": ("scan_hz", "beams", "seed"),
+    "ros2": ROS2_KEYS,
 }
 
 
@@ -103,10 +113,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--driver",
-        choices=("sim", "zenoh"),
+        choices=("sim", "zenoh", "ros2"),
         default="sim",
         help="sim: the simulator in this process; zenoh: a base-and-sensor process over "
-        "scan, base/cmd, base/odom, e.g. 'egc-teleop sim' (default: sim)",
+        "scan, base/cmd, base/odom, e.g. 'egc-teleop sim'; ros2: a ROS 2 robot's LaserScan, "
+        "Odometry and cmd_vel, this process being the node egc_teleop (default: sim)",
     )
     parser.add_argument(
         "--map", default="hallway", metavar="SPEC", help="world for --driver sim (default: hallway)"
@@ -140,6 +151,31 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--summary", metavar="FILE.json", help="write run statistics at exit")
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
+    ros = parser.add_argument_group(
+        "ROS 2 (--driver ros2; same keys in the config's [ros2] table; ROS_DOMAIN_ID and "
+        "RMW_IMPLEMENTATION as ROS 2 reads them)"
+    )
+    ros.add_argument("--ros-scan", metavar="TOPIC", help="sensor_msgs/LaserScan (default: /scan)")
+    ros.add_argument("--ros-odom", metavar="TOPIC", help="nav_msgs/Odometry (default: /odom)")
+    ros.add_argument("--ros-cmd", metavar="TOPIC", help="velocity commands (default: /cmd_vel)")
+    ros.add_argument(
+        "--ros-cmd-type",
+        choices=CMD_TYPES,
+        default=None,
+        help="geometry_msgs/Twist or TwistStamped (default: twist)",
+    )
+    ros.add_argument("--ros-namespace", metavar="NS", help="the node's namespace (default: none)")
+    ros.add_argument(
+        "--laser-pose",
+        metavar="X,Y,YAW",
+        help="the laser in the base frame, metres and radians (default: 0,0,0)",
+    )
+    ros.add_argument(
+        "--laser-upside-down",
+        action="store_true",
+        default=None,
+        help="the laser is mounted upside down (mirrors its sweep)",
+    )
     add_zenoh_arguments(parser, default_listen=(DEFAULT_ENDPOINT,))
 
 
@@ -172,7 +208,9 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
             ),
             filter=args.filter,
             horizon_s=None if horizon is None else _number(pipe, "horizon_s", 0.0),
-            no_return_is_free=bool(pipe.get("no_return_is_free", False)),
+            no_return_is_free=bool(
+                pipe.get("no_return_is_free", getattr(args, "driver", None) == "ros2")
+            ),
         )
         rate_hz = args.rate_hz if args.rate_hz is not None else _number(robot, "rate_hz", 20.0)
         if not 1.0 <= rate_hz <= 1000.0:
@@ -209,7 +247,30 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
         raise UsageError(str(exc)) from None
 
 
+def _open_ros2_driver(args: argparse.Namespace, cfg: dict[str, Any]) -> Driver:
+    """``--driver ros2``: settings from ``[ros2]`` and the flags; one line if rclpy is missing."""
+    from egc_robot.ros2_driver import Ros2Driver, require_rclpy
+
+    flags = {
+        "scan": args.ros_scan,
+        "odom": args.ros_odom,
+        "cmd": args.ros_cmd,
+        "cmd_type": args.ros_cmd_type,
+        "namespace": args.ros_namespace,
+        "laser_pose": args.laser_pose,
+        "laser_upside_down": args.laser_upside_down,
+    }
+    try:
+        settings = ros2_settings(config_mod.section(cfg, "ros2", SECTIONS["ros2"]), flags)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    require_rclpy()
+    return Ros2Driver(settings)
+
+
 def _open_driver(args: argparse.Namespace, cfg: dict[str, Any], session: Any) -> Driver:
+    if args.driver == "ros2":
+        return _open_ros2_driver(args, cfg)
     if args.driver == "zenoh":
         from egc_robot.zenoh_driver import ZenohDriver
 

@@ -1,0 +1,253 @@
+"""The pure half of the ROS 2 driver (DESIGN 11): settings, REP 117 scans, odometry, no rclpy.
+
+``egc_robot.ros2_driver`` is the thin rclpy adapter; everything it decides lives here, so it is
+unit-tested without ROS 2 installed.
+
+Scans (``scan_from_laser``) follow REP 117:
+
+- ``+inf``: no object within ``range_max`` on that beam. Free (REP 117 defines it so); dropped
+  from the points, but it is information: a scan of nothing but ``+inf`` says "all free".
+- ``NaN``: no information on that beam (unknown); dropped.
+- ``-inf``: an object closer than ``range_min``: an obstacle *at* ``range_min``, kept.
+- finite readings outside ``[range_min, range_max]`` (an older driver's "no return" code, 0.0,
+  ``range_max + 1``): dropped, and not information.
+
+A scan that carries no information at all (no valid reading, no ``-inf``, no ``+inf``: all NaN,
+all out of range, or no beams) is rejected: the driver does not deliver it, so the robot's
+sensor goes stale and it holds (``scan_timeout``). That is what lets the driver declare
+``no_return_is_free`` for the scans it does deliver without ever taking "nothing seen" for
+"free".
+
+Any beam count, angular range and sweep direction (``angle_increment`` may be negative). The
+laser's pose in the base frame {R} (``LaserPose``) is applied before filtering: beam angle
+``a`` becomes ``yaw + a`` (``yaw - a`` when mounted upside down, which mirrors the laser's y
+axis), and the point is offset by the mount position.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from egc_common.messages import Odometry
+from egc_common.scan import Scan
+
+# Bounds on what a scan from the network may be; beyond them it is rejected, not processed.
+MAX_BEAMS = 100_000
+MAX_RANGE_M = 1e5
+CMD_TYPES = ("twist", "twist-stamped")
+DEFAULT_SCAN_TOPIC = "/scan"
+DEFAULT_ODOM_TOPIC = "/odom"
+DEFAULT_CMD_TOPIC = "/cmd_vel"
+# The [ros2] keys of the robot TOML; flags of the same name (scan -> --ros-scan) override them.
+ROS2_KEYS = ("scan", "odom", "cmd", "cmd_type", "namespace", "laser_pose", "laser_upside_down")
+
+# ROS 2 topic and namespace names (design article "Topic and Service name mapping"): tokens of
+# alphanumerics and underscores, not starting with a digit, separated by '/'; '~' and
+# substitutions are not accepted here.
+_TOKEN = r"[A-Za-z_][A-Za-z0-9_]*"
+_TOPIC = re.compile(rf"^/?{_TOKEN}(/{_TOKEN})*$")
+_NAMESPACE = re.compile(rf"^(/|/{_TOKEN}(/{_TOKEN})*)$")
+
+
+@dataclass(frozen=True, slots=True)
+class LaserPose:
+    """Where the laser sits in the base frame {R}: position (m), yaw (rad), and whether it is
+    mounted upside down (its y axis, and so its sweep, mirrored)."""
+
+    x_m: float = 0.0
+    y_m: float = 0.0
+    yaw_rad: float = 0.0
+    upside_down: bool = False
+
+    def __post_init__(self) -> None:
+        if not all(math.isfinite(v) for v in (self.x_m, self.y_m, self.yaw_rad)):
+            raise ValueError("the laser pose must be finite")
+        if max(abs(self.x_m), abs(self.y_m)) > 100.0:
+            raise ValueError("the laser must be within 100 m of the base")
+
+
+@dataclass(frozen=True, slots=True)
+class Ros2Settings:
+    """Topics, command type, namespace and laser mounting of ``--driver ros2`` (DESIGN 11)."""
+
+    scan_topic: str = DEFAULT_SCAN_TOPIC
+    odom_topic: str = DEFAULT_ODOM_TOPIC
+    cmd_topic: str = DEFAULT_CMD_TOPIC
+    cmd_type: str = "twist"
+    namespace: str = ""
+    laser: LaserPose = field(default_factory=LaserPose)
+
+    def __post_init__(self) -> None:
+        for what, topic in (
+            ("scan", self.scan_topic),
+            ("odom", self.odom_topic),
+            ("cmd", self.cmd_topic),
+        ):
+            if not _TOPIC.match(topic):
+                raise ValueError(f"ros2 {what} topic {topic!r} is not a valid ROS 2 topic name")
+        if self.cmd_type not in CMD_TYPES:
+            raise ValueError(f"ros2 cmd_type must be one of {', '.join(CMD_TYPES)}")
+        if self.namespace and not _NAMESPACE.match(self.namespace):
+            raise ValueError(f"ros2 namespace {self.namespace!r} is not a valid ROS 2 namespace")
+
+
+def parse_laser_pose(text: str) -> tuple[float, float, float]:
+    """``X,Y,YAW`` (metres, metres, radians), e.g. ``-0.1,0,3.14159``; ValueError if not."""
+    parts = text.split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        raise ValueError(f"laser pose must be X,Y,YAW in metres and radians, got {text!r}")
+    return values[0], values[1], values[2]
+
+
+def ros2_settings(table: Mapping[str, Any], flags: Mapping[str, Any]) -> Ros2Settings:
+    """Settings from the robot TOML's ``[ros2]`` table, overridden by flags that are not None.
+
+    Both use the keys of ``ROS2_KEYS``; ``laser_pose`` is ``"X,Y,YAW"`` or a list of three
+    numbers. Raises ValueError with a message naming the key.
+    """
+    unknown = sorted(set(table) - set(ROS2_KEYS))
+    if unknown:
+        raise ValueError(
+            f"unknown [ros2] key(s) {', '.join(unknown)} (known: {', '.join(ROS2_KEYS)})"
+        )
+    merged = dict(table)
+    merged.update({k: v for k, v in flags.items() if v is not None})
+    for key in ("scan", "odom", "cmd", "cmd_type", "namespace"):
+        if key in merged and not isinstance(merged[key], str):
+            raise ValueError(f"ros2 {key} must be a string, got {merged[key]!r}")
+    pose_value = merged.get("laser_pose", (0.0, 0.0, 0.0))
+    if isinstance(pose_value, str):
+        pose = parse_laser_pose(pose_value)
+    elif (
+        isinstance(pose_value, (list, tuple))
+        and len(pose_value) == 3
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in pose_value)
+    ):
+        pose = (float(pose_value[0]), float(pose_value[1]), float(pose_value[2]))
+    else:
+        raise ValueError(f"ros2 laser_pose must be 'X,Y,YAW' or [x, y, yaw], got {pose_value!r}")
+    upside_down = merged.get("laser_upside_down", False)
+    if not isinstance(upside_down, bool):
+        raise ValueError(f"ros2 laser_upside_down must be true or false, got {upside_down!r}")
+    return Ros2Settings(
+        scan_topic=merged.get("scan", DEFAULT_SCAN_TOPIC),
+        odom_topic=merged.get("odom", DEFAULT_ODOM_TOPIC),
+        cmd_topic=merged.get("cmd", DEFAULT_CMD_TOPIC),
+        cmd_type=merged.get("cmd_type", "twist"),
+        namespace=merged.get("namespace", ""),
+        laser=LaserPose(pose[0], pose[1], pose[2], upside_down),
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class Rejected:
+    """Why a LaserScan was not turned into a Scan (counted and logged by the driver)."""
+
+    reason: str
+    detail: str
+
+
+def scan_from_laser(
+    ranges_m: npt.ArrayLike,
+    angle_min_rad: float,
+    angle_increment_rad: float,
+    range_min_m: float,
+    range_max_m: float,
+    pose: LaserPose,
+    stamp_ns: int = 0,
+) -> Scan | Rejected:
+    """A ``sensor_msgs/LaserScan``'s fields as a Scan in {R} (REP 117; see the module docstring).
+
+    Never raises on any input: a malformed or empty scan is a ``Rejected``.
+    """
+    try:
+        r = np.array(ranges_m, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError) as exc:
+        return Rejected("malformed", f"ranges are not numbers: {exc}")
+    numbers = (angle_min_rad, angle_increment_rad, range_min_m, range_max_m)
+    if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in numbers):
+        return Rejected(
+            "malformed", "angle_min, angle_increment, range_min, range_max must be finite"
+        )
+    if not 0.0 <= range_min_m < range_max_m <= MAX_RANGE_M:
+        return Rejected(
+            "malformed",
+            f"needs 0 <= range_min < range_max <= {MAX_RANGE_M:g} m, got "
+            f"[{range_min_m:g}, {range_max_m:g}]",
+        )
+    if r.size > MAX_BEAMS:
+        return Rejected("malformed", f"{r.size} beams (at most {MAX_BEAMS})")
+    beam_angles = angle_min_rad + angle_increment_rad * np.arange(r.size, dtype=np.float64)
+    if r.size and not (np.all(np.isfinite(beam_angles)) and np.abs(beam_angles).max() <= 1e3):
+        return Rejected("malformed", "beam angles are not finite")
+    r[r == -np.inf] = range_min_m  # REP 117: an object closer than range_min
+    free = r == np.inf
+    with np.errstate(invalid="ignore"):
+        valid = (r >= range_min_m) & (r <= range_max_m)  # False for NaN and +inf
+    if not (free.any() or valid.any()):
+        return Rejected(
+            "no_information", f"{r.size} beams, none valid, none +inf (all NaN or out of range)"
+        )
+    sign = -1.0 if pose.upside_down else 1.0
+    angles = pose.yaw_rad + sign * beam_angles
+    return Scan(
+        angles,
+        r,
+        float(range_min_m),
+        float(range_max_m),
+        stamp_ns=stamp_ns,
+        no_return_is_free=True,  # scans with no information at all were rejected above
+        mount_x_m=pose.x_m,
+        mount_y_m=pose.y_m,
+    )
+
+
+def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
+    """The yaw (rad, about +z) of a rotation quaternion; NaN if it is not a finite, non-zero one."""
+    if not all(math.isfinite(v) for v in (x, y, z, w)) or x * x + y * y + z * z + w * w < 1e-12:
+        return math.nan
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def quaternion_from_yaw(yaw_rad: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation by ``yaw_rad`` about +z."""
+    return 0.0, 0.0, math.sin(yaw_rad / 2.0), math.cos(yaw_rad / 2.0)
+
+
+def odometry_from_ros(
+    x_m: float,
+    y_m: float,
+    orientation_xyzw: tuple[float, float, float, float],
+    linear_mps: float,
+    angular_radps: float,
+    rx_ns: int,
+) -> Odometry | Rejected:
+    """A ``nav_msgs/Odometry``'s pose and (body-frame) twist as our Odometry, stamped with its
+    arrival time on the robot's clock; a Rejected("malformed_odometry") if not finite."""
+    theta = yaw_from_quaternion(*orientation_xyzw)
+    values = (x_m, y_m, theta, linear_mps, angular_radps)
+    if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in values):
+        return Rejected("malformed_odometry", "odometry pose or twist is not finite")
+    return Odometry(
+        stamp_ns=rx_ns,
+        x_m=float(x_m),
+        y_m=float(y_m),
+        theta_rad=theta,
+        linear_mps=float(linear_mps),
+        angular_radps=float(angular_radps),
+    )
+
+
+def command_is_finite(linear_mps: float, angular_radps: float) -> bool:
+    """Whether a velocity may go on the wire (a bug upstream must not put NaN on /cmd_vel)."""
+    return math.isfinite(linear_mps) and math.isfinite(angular_radps)

@@ -1,0 +1,269 @@
+"""The ROS 2 driver: the robot process as the ROS 2 node ``egc_teleop`` (DESIGN 11, issue 14).
+
+Behind the Driver seam (``egc_robot.drivers``), like the Zenoh driver: the robot's loop polls it
+once per control cycle and sends it one command per cycle. The operator link stays Zenoh.
+
+- ``sensor_msgs/LaserScan`` on ``--ros-scan`` (default ``/scan``) and ``nav_msgs/Odometry`` on
+  ``--ros-odom`` (``/odom``), sensor-data QoS (best effort, keep last 5; it also receives reliable
+  publishers). Scans become Scans in {R} by ``egc_robot.ros2_core.scan_from_laser`` (REP 117, the
+  laser pose, upside-down mounting), in the executor's thread, so the command path finds them
+  ready. What arrives is stamped with its *arrival* time on the robot's monotonic clock: the
+  watchdog judges freshness by that, never by the sensor's header stamp.
+- ``geometry_msgs/Twist`` (or ``TwistStamped``, frame ``base_link``, stamped now) on
+  ``--ros-cmd`` (``/cmd_vel``), reliable, keep last 10, every control cycle; in HOLD and ESTOP the
+  controller's zero (or decelerating) command goes out like any other. ``close()`` publishes one
+  last zero twist and waits (briefly) for the subscribers to acknowledge it before the node goes.
+- The rclpy executor spins in its own thread. ``poll`` and ``send`` never wait on it: ``poll``
+  swaps two references under a lock the callbacks hold for no longer; ``send`` publishes.
+- Nothing received can raise out of a callback: malformed scans and odometry are counted by
+  reason and logged (rate-limited).
+
+``ROS_DOMAIN_ID``, ``RMW_IMPLEMENTATION`` and ``ROS_AUTOMATIC_DISCOVERY_RANGE`` are read by ROS 2
+itself, as ROS users expect. This module and ``egc_sim.ros2_base`` are the only ones importing
+rclpy (tests/test_layout.py); without it, ``require_rclpy`` raises a UsageError naming the extra.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import Counter
+from typing import Any
+
+from egc_common.errors import UsageError
+from egc_common.messages import BaseCommand, Odometry
+from egc_common.scan import Scan
+
+from egc_robot.drivers import SensorUpdate
+from egc_robot.ros2_core import (
+    Rejected,
+    Ros2Settings,
+    command_is_finite,
+    odometry_from_ros,
+    scan_from_laser,
+)
+
+log = logging.getLogger("egc.robot.ros2")
+
+NODE_NAME = "egc_teleop"
+MISSING_RCLPY = (
+    "--driver ros2 needs ROS 2's rclpy: pip install -e '.[ros2]' (the ros2 extra), or create the "
+    "venv with --system-site-packages from a shell with a sourced ROS 2"
+)
+_ACK_TIMEOUT_S = 0.5
+# Header stamps within this of our ROS clock at arrival mean the sensor's clock agrees with ours.
+_CLOCKS_AGREE_NS = 1_000_000_000
+
+
+def require_rclpy() -> None:
+    """Raise UsageError (one line naming the extra) unless rclpy and the messages import."""
+    try:
+        import geometry_msgs.msg  # noqa: F401
+        import nav_msgs.msg  # noqa: F401
+        import rclpy  # noqa: F401
+        import sensor_msgs.msg  # noqa: F401
+    except ImportError as exc:
+        raise UsageError(f"{MISSING_RCLPY} ({exc})") from None
+
+
+class Ros2Driver:
+    """The Driver of ``egc-teleop robot --driver ros2`` (see the module docstring)."""
+
+    def __init__(self, settings: Ros2Settings, node_name: str = NODE_NAME) -> None:
+        require_rclpy()
+        import rclpy
+        from geometry_msgs.msg import Twist, TwistStamped
+        from nav_msgs.msg import Odometry as OdometryMsg
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+        from rclpy.signals import SignalHandlerOptions
+        from sensor_msgs.msg import LaserScan
+
+        self.settings = settings
+        self._lock = threading.Lock()
+        self._scan: Scan | None = None
+        self._scan_rx_ns = 0
+        self._odometry: Odometry | None = None
+        self.rejected: Counter[str] = Counter()
+        self.scans_received = 0
+        self._header_age_ns: int | None = None
+        self._send_lock = threading.Lock()
+        self._closed = False
+        self._stamped = settings.cmd_type == "twist-stamped"
+        self._twist_type: Any = TwistStamped if self._stamped else Twist
+
+        # Our own context: rclpy installs no signal handlers (the robot process owns SIGINT and
+        # SIGTERM, to send the last zero twist) and nothing global is touched.
+        self._context = rclpy.Context()
+        rclpy.init(context=self._context, signal_handler_options=SignalHandlerOptions.NO)
+        try:
+            self._node = rclpy.create_node(
+                node_name, namespace=settings.namespace or None, context=self._context
+            )
+            node = self._node
+            self._publisher = node.create_publisher(
+                self._twist_type,
+                settings.cmd_topic,
+                QoSProfile(
+                    depth=10,
+                    history=HistoryPolicy.KEEP_LAST,
+                    reliability=ReliabilityPolicy.RELIABLE,
+                ),
+            )
+            node.create_subscription(
+                LaserScan, settings.scan_topic, self._on_scan, qos_profile_sensor_data
+            )
+            node.create_subscription(
+                OdometryMsg, settings.odom_topic, self._on_odometry, qos_profile_sensor_data
+            )
+            self._executor = SingleThreadedExecutor(context=self._context)
+            self._executor.add_node(node)
+        except Exception:
+            self._context.try_shutdown()
+            raise
+        self._thread = threading.Thread(target=self._spin, name="ros2-executor", daemon=True)
+        self._thread.start()
+        log.info(
+            "ROS 2 node %s: scans %s, odometry %s, commands %s (%s); laser at %s",
+            node.get_fully_qualified_name(),
+            node.resolve_topic_name(settings.scan_topic),
+            node.resolve_topic_name(settings.odom_topic),
+            node.resolve_topic_name(settings.cmd_topic),
+            settings.cmd_type,
+            settings.laser,
+        )
+
+    # -- the executor's thread --------------------------------------------------------------------
+
+    def _spin(self) -> None:
+        try:
+            self._executor.spin()
+        except Exception as exc:  # shutdown races end the spin with an exception; nothing to do
+            if not self._closed:
+                log.error("ROS 2 executor stopped: %s", exc)
+
+    def _on_scan(self, msg: Any) -> None:
+        rx_ns = time.monotonic_ns()
+        try:
+            result = scan_from_laser(
+                msg.ranges,
+                msg.angle_min,
+                msg.angle_increment,
+                msg.range_min,
+                msg.range_max,
+                self.settings.laser,
+                stamp_ns=rx_ns,
+            )
+            if isinstance(result, Rejected):
+                self._count(result, "scan")
+                return
+            result.obstacles()  # prepared here, off the command path
+            age_ns = self._node.get_clock().now().nanoseconds - (
+                msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            )
+        except Exception as exc:  # never out of a callback
+            self._count(Rejected("malformed", repr(exc)), "scan")
+            return
+        with self._lock:
+            self._scan, self._scan_rx_ns = result, rx_ns
+            self.scans_received += 1
+            self._header_age_ns = age_ns if abs(age_ns) <= _CLOCKS_AGREE_NS else None
+
+    def _on_odometry(self, msg: Any) -> None:
+        rx_ns = time.monotonic_ns()
+        try:
+            pose, twist = msg.pose.pose, msg.twist.twist
+            q = pose.orientation
+            result = odometry_from_ros(
+                pose.position.x,
+                pose.position.y,
+                (q.x, q.y, q.z, q.w),
+                twist.linear.x,
+                twist.angular.z,
+                rx_ns,
+            )
+        except Exception as exc:
+            result = Rejected("malformed_odometry", repr(exc))
+        if isinstance(result, Rejected):
+            self._count(result, "odometry")
+            return
+        with self._lock:
+            self._odometry = result
+
+    def _count(self, rejection: Rejected, what: str) -> None:
+        with self._lock:
+            self.rejected[rejection.reason] += 1
+            n = self.rejected[rejection.reason]
+        if n == 1 or n % 100 == 0:
+            log.warning(
+                "dropped %s (%s, %d so far): %s", what, rejection.reason, n, rejection.detail
+            )
+
+    # -- the Driver seam (the robot's loop) -------------------------------------------------------
+
+    @property
+    def header_age_ms(self) -> float | None:
+        """Age of the newest scan from its header stamp at arrival, when the clocks agree."""
+        with self._lock:
+            age = self._header_age_ns
+        return None if age is None else age / 1e6
+
+    def poll(self, now_ns: int) -> SensorUpdate:
+        with self._lock:
+            scan, rx_ns, odometry = self._scan, self._scan_rx_ns, self._odometry
+            self._scan, self._odometry = None, None
+        return SensorUpdate(scan=scan, scan_rx_ns=rx_ns, odometry=odometry)
+
+    def send(self, command: BaseCommand) -> None:
+        v, w = command.linear_mps, command.angular_radps
+        if not command_is_finite(v, w):
+            v, w = 0.0, 0.0
+        with self._send_lock:
+            if not self._closed:
+                self._publish(v, w)
+
+    def _publish(self, linear_mps: float, angular_radps: float) -> None:
+        msg = self._twist_type()
+        twist = msg.twist if self._stamped else msg
+        twist.linear.x = float(linear_mps)
+        twist.angular.z = float(angular_radps)
+        if self._stamped:
+            msg.header.frame_id = "base_link"
+            msg.header.stamp = self._node.get_clock().now().to_msg()
+        self._publisher.publish(msg)
+
+    def close(self) -> None:
+        """One last zero twist, acknowledged by the subscribers if they do so within 0.5 s (a
+        base that keeps its last command must not drive on), then the node goes."""
+        from rclpy.duration import Duration
+
+        with self._send_lock:
+            if self._closed:
+                return
+            try:
+                self._publish(0.0, 0.0)
+                acked = self._publisher.wait_for_all_acked(Duration(seconds=_ACK_TIMEOUT_S))
+                if not acked and self._publisher.get_subscription_count():
+                    log.warning(
+                        "the last zero twist was not acknowledged within %.1f s", _ACK_TIMEOUT_S
+                    )
+            except Exception as exc:
+                log.error("could not send the last zero twist: %s", exc)
+            self._closed = True
+        with self._lock:
+            rejected = dict(self.rejected)
+            scans = self.scans_received
+            age = self._header_age_ns
+        log.info(
+            "ROS 2 driver closed: %d scans, dropped %s, header age of the last scan %s",
+            scans,
+            rejected or "none",
+            "unknown (the sensor's clock is not ours)" if age is None else f"{age / 1e6:.1f} ms",
+        )
+        try:
+            self._executor.shutdown(timeout_sec=1.0)
+            self._node.destroy_node()
+        finally:
+            self._context.try_shutdown()
+            self._thread.join(2.0)
