@@ -36,6 +36,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "run a grid of network-delay experiments; runs.jsonl, report.md and plots out",
     ),
     "router": ("egc_app.router_cmd", "an embedded Zenoh router, for sites without zenohd"),
+    "replay": (
+        "egc_app.replay_cmd",
+        "replay a recorded robot log (.bag, ROS 2 bag, .db3, .mcap) through a filter",
+    ),
 }
 
 

@@ -1,0 +1,390 @@
+"""Replay of a recorded robot log through a filter of the family, as pure functions (DESIGN 11).
+
+``egc-teleop replay`` (``egc_app.replay_cmd``) reads the log and hands this module plain values:
+scans (``LogScan``), the commanded velocity (``VelocitySample``, from a Twist topic or derived
+here from odometry poses with ``velocities_from_poses``) and gets back, per scan, what the
+robot's own pipeline (``egc_robot.pipeline``) would have sent (``ScanVerdict``), and for the
+whole log the summary (``ReplaySummary``). No files, no clocks, no Rerun here.
+
+Times. A log has two clocks: the recorder's receive time (``log_ns``, one clock for every
+topic) and each message's header stamp (``stamp_ns``, the sensor's or the driver's clock).
+Scans are paired with the command in effect at their receive time, because a Twist has no
+header; odometry is differentiated, and hold time measured, by header stamps, because real logs
+give several messages one receive time (``../shared/bags/README.md``).
+
+Scans follow REP 117: ``+inf`` nothing within range_max (free), ``NaN`` no information
+(unknown), ``-inf`` an object closer than range_min (an obstacle at range_min); finite readings
+outside [range_min, range_max] are dropped. A scan whose every beam is ``+inf`` is free space;
+any other scan without a valid reading is unknown, which the filters treat as a reason to stop
+(DESIGN 5.9).
+"""
+
+from __future__ import annotations
+
+import bisect
+import inspect
+import itertools
+import math
+import statistics
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from egc_common.profiles import RobotProfile
+from egc_common.scan import ObstaclePoints, obstacle_points
+
+from egc_robot import pipeline
+from egc_robot.pipeline import PipelineConfig, PipelineResult
+
+FloatArray = npt.NDArray[np.float64]
+
+CHANGED_MPS = 0.01  # DESIGN 11: a command is "changed" when filtered v or w differs by more
+MOVING = 0.01  # |v| (m/s) or |w| (rad/s) above this is a moving command
+MAX_GAP_S = 1.0  # a gap between scans (or poses) longer than this is not driving time
+ODOMETRY_MAX_AGE_S = 1.0  # a pose-derived velocity older than this is not known any more
+_NS = 1_000_000_000
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class LogScan:
+    """One ``sensor_msgs/LaserScan`` from a log, in the laser frame (taken as {R})."""
+
+    log_ns: int  # the recorder's receive time
+    stamp_ns: int  # header stamp; 0 when the log left it unset
+    angle_min_rad: float
+    angle_increment_rad: float
+    range_min_m: float
+    range_max_m: float
+    ranges_m: FloatArray
+
+
+@dataclass(frozen=True, slots=True)
+class Pose2D:
+    """One odometry pose in its (world) frame."""
+
+    log_ns: int
+    stamp_ns: int
+    x_m: float
+    y_m: float
+    yaw_rad: float
+
+
+@dataclass(frozen=True, slots=True)
+class VelocitySample:
+    """The velocity commanded (or driven) from ``log_ns`` on, in {R}."""
+
+    log_ns: int
+    linear_mps: float
+    angular_radps: float
+
+
+@dataclass(frozen=True, slots=True)
+class ScanPoints:
+    """A scan's points in {R} after REP 117, and whether an empty scan means free space."""
+
+    xy_m: FloatArray  # (N, 2)
+    free_if_empty: bool
+    closest_m: float | None  # nearest valid reading, None when there is none
+
+
+@dataclass(frozen=True, slots=True)
+class ScanVerdict:
+    """What the filter made of the command in effect when one scan arrived."""
+
+    log_ns: int
+    stamp_ns: int
+    has_command: bool
+    v_ref_mps: float
+    w_ref_radps: float
+    v_cmd_mps: float
+    w_cmd_radps: float
+    limiter: str  # egc_robot.pipeline.Limiter value ("none" without a command)
+    closest_m: float | None
+
+    @property
+    def changed(self) -> bool:
+        """Filtered v or w differs from the recorded command by more than 0.01 (DESIGN 11)."""
+        return self.has_command and (
+            abs(self.v_cmd_mps - self.v_ref_mps) > CHANGED_MPS
+            or abs(self.w_cmd_radps - self.w_ref_radps) > CHANGED_MPS
+        )
+
+    @property
+    def held(self) -> bool:
+        """The filter stopped a moving command: a translating command lost its translation, or
+        a turn in place was stopped."""
+        if not self.has_command:
+            return False
+        if abs(self.v_ref_mps) > MOVING:
+            return abs(self.v_cmd_mps) <= MOVING
+        return abs(self.w_ref_radps) > MOVING and abs(self.w_cmd_radps) <= MOVING
+
+
+@dataclass(frozen=True, slots=True)
+class ReplaySummary:
+    """The summary of one replay; ``as_dict`` gives the JSON with DESIGN 11's pinned keys."""
+
+    filter: str
+    profile: str
+    scans: int
+    commands: int  # scans that had a command in effect (each went through the filter)
+    changed: int
+    max_cut_mps: float  # largest |v_ref - v_cmd|
+    max_cut_radps: float  # largest |w_ref - w_cmd|
+    hold_s: float  # log time during which the filter would have stopped a moving command
+    holds: int  # separate stretches of holding
+    closest_m: float | None  # nearest valid reading over the whole log
+    duration_s: float  # log time covered by the scans
+    moving_s: float  # log time during which the recorded command moved the robot
+    limiters: dict[str, int] = field(default_factory=dict)  # what limited each command
+    extra: dict[str, Any] = field(default_factory=dict)  # log facts from the IO layer
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready: the pinned keys (``scans``, ``commands``, ``changed``, ``max_cut_mps``,
+        ``hold_s``, ``closest_m``, ``filter``, ``profile``) and a few more."""
+        out: dict[str, Any] = {
+            "scans": self.scans,
+            "commands": self.commands,
+            "changed": self.changed,
+            "max_cut_mps": round(self.max_cut_mps, 6),
+            "hold_s": round(self.hold_s, 6),
+            "closest_m": None if self.closest_m is None else round(self.closest_m, 6),
+            "filter": self.filter,
+            "profile": self.profile,
+            "max_cut_radps": round(self.max_cut_radps, 6),
+            "holds": self.holds,
+            "duration_s": round(self.duration_s, 6),
+            "moving_s": round(self.moving_s, 6),
+            "limiters": dict(sorted(self.limiters.items())),
+        }
+        out.update(self.extra)
+        return out
+
+
+def wrap_angle(a_rad: float) -> float:
+    """An angle in [-pi, pi)."""
+    return (a_rad + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
+    """Yaw (rotation about z) of a unit quaternion, rad."""
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def scan_points(scan: LogScan) -> ScanPoints:
+    """REP 117 ranges to points in {R}: finite readings within [range_min, range_max], plus
+    ``-inf`` readings as obstacles at range_min; ``+inf``, ``NaN`` and finite readings outside
+    the range are dropped."""
+    r = np.asarray(scan.ranges_m, dtype=np.float64)
+    angles = scan.angle_min_rad + scan.angle_increment_rad * np.arange(r.size, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        valid = np.isfinite(r) & (r >= scan.range_min_m) & (r <= scan.range_max_m)
+    too_close = np.isneginf(r)
+    keep = valid | too_close
+    rr_m = np.where(too_close, scan.range_min_m, r)[keep]
+    a = angles[keep]
+    xy = np.empty((rr_m.size, 2), dtype=np.float64)
+    xy[:, 0] = rr_m * np.cos(a)
+    xy[:, 1] = rr_m * np.sin(a)
+    free = rr_m.size == 0 and r.size > 0 and bool(np.all(np.isposinf(r)))
+    closest = float(rr_m.min()) if rr_m.size else None
+    return ScanPoints(xy, free, closest)
+
+
+def velocities_from_poses(
+    poses: Sequence[Pose2D], max_gap_s: float = MAX_GAP_S
+) -> list[VelocitySample]:
+    """Forward speed and turn rate in {R} from successive odometry poses, by header stamp.
+
+    An odometry message's twist may be in the world frame (Stage's ground truth is), so the
+    velocity comes from the poses: between two poses the robot is taken to drive one arc, whose
+    chord points along the mean heading; the forward speed is the arc length (chord projected on
+    the mean heading, lengthened from chord to arc) over the stamp difference, signed (negative
+    when reversing), and the turn rate the wrapped yaw change over it. Poses are ordered by
+    stamp (the log's receive order breaks ties and stands in for missing stamps); repeated
+    stamps and gaps longer than ``max_gap_s`` give no sample. Each sample takes effect at the
+    receive time of the later pose.
+    """
+    ordered = sorted(poses, key=lambda p: (p.stamp_ns or p.log_ns, p.log_ns))
+    out: list[VelocitySample] = []
+    for a, b in itertools.pairwise(ordered):
+        dt_s = ((b.stamp_ns or b.log_ns) - (a.stamp_ns or a.log_ns)) / _NS
+        if not 0.0 < dt_s <= max_gap_s:
+            continue
+        dyaw = wrap_angle(b.yaw_rad - a.yaw_rad)
+        heading = a.yaw_rad + 0.5 * dyaw
+        along = (b.x_m - a.x_m) * math.cos(heading) + (b.y_m - a.y_m) * math.sin(heading)
+        half = 0.5 * dyaw
+        arc_per_chord = half / math.sin(half) if abs(half) > 1e-9 else 1.0
+        out.append(
+            VelocitySample(max(a.log_ns, b.log_ns), along * arc_per_chord / dt_s, dyaw / dt_s)
+        )
+    out.sort(key=lambda s: s.log_ns)
+    return out
+
+
+@dataclass(frozen=True, slots=True)
+class CommandTrack:
+    """The commanded velocity over log time: each sample holds until the next one (a base
+    keeps its last command), or for at most ``max_age_ns`` when set."""
+
+    log_ns: tuple[int, ...]
+    samples: tuple[VelocitySample, ...]
+    max_age_ns: int | None = None
+
+    @staticmethod
+    def of(samples: Sequence[VelocitySample], max_age_s: float | None = None) -> CommandTrack:
+        ordered = tuple(sorted(samples, key=lambda s: s.log_ns))
+        age = None if max_age_s is None else int(max_age_s * _NS)
+        return CommandTrack(tuple(s.log_ns for s in ordered), ordered, age)
+
+    def at(self, log_ns: int) -> VelocitySample | None:
+        """The sample in effect at ``log_ns`` (the latest at or before it), or None."""
+        i = bisect.bisect_right(self.log_ns, log_ns) - 1
+        if i < 0:
+            return None
+        sample = self.samples[i]
+        if self.max_age_ns is not None and log_ns - sample.log_ns > self.max_age_ns:
+            return None
+        return sample
+
+
+@dataclass(frozen=True, slots=True)
+class Replayer:
+    """The robot's pipeline for one filter and profile, applied to one scan at a time.
+
+    Built once per replay (``Replayer.for_filter``). Stateless filters give the same answer
+    for a scan whatever came before; a filter with memory (``assist``) gets its memory back
+    through ``step``'s return value.
+    """
+
+    config: PipelineConfig  # an empty scan is unknown: stop
+    config_free: PipelineConfig  # an empty scan is free space (REP 117: every beam +inf)
+
+    @staticmethod
+    def for_filter(
+        filter_name: str, profile: RobotProfile, horizon_s: float | None = None
+    ) -> Replayer:
+        config = PipelineConfig(profile=profile, filter=filter_name, horizon_s=horizon_s)
+        return Replayer(config, replace(config, no_return_is_free=True))
+
+    def step(
+        self,
+        scan: LogScan,
+        points: ScanPoints,
+        command: VelocitySample | None,
+        memory: object | None = None,
+    ) -> tuple[ScanVerdict, PipelineResult | None, ObstaclePoints, object | None]:
+        """One scan through the pipeline with the command in effect; without a command the scan
+        is only measured. Returns the verdict, the pipeline's result (None without a command),
+        the obstacle points it saw and the filter's memory for the next scan."""
+        obstacles = obstacle_points(points.xy_m)
+        if command is None:
+            verdict = ScanVerdict(
+                scan.log_ns, scan.stamp_ns, False, 0.0, 0.0, 0.0, 0.0, "none", points.closest_m
+            )
+            return verdict, None, obstacles, memory
+        config = self.config_free if points.free_if_empty else self.config
+        v, w = command.linear_mps, command.angular_radps
+        result = _filter_velocity(config, v, w, obstacles, scan.log_ns, memory)
+        verdict = ScanVerdict(
+            scan.log_ns,
+            scan.stamp_ns,
+            True,
+            v,
+            w,
+            result.v_cmd_mps,
+            result.w_cmd_radps,
+            result.limiter.value,
+            points.closest_m,
+        )
+        return verdict, result, obstacles, getattr(result, "memory", None)
+
+
+def _accepted_keywords() -> frozenset[str]:
+    return frozenset(inspect.signature(pipeline.filter_velocity).parameters)
+
+
+def _filter_velocity(
+    config: PipelineConfig,
+    v_mps: float,
+    w_radps: float,
+    obstacles: ObstaclePoints,
+    now_ns: int,
+    memory: object | None,
+) -> PipelineResult:
+    """``pipeline.filter_velocity`` in shared mode, stateless (no acceleration limits: each scan
+    stands alone), with the robot state, time and filter memory when the pipeline takes them.
+    The robot is taken to be moving as recorded."""
+    keywords: dict[str, Any] = {}
+    accepted = _accepted_keywords()
+    if "state" in accepted:
+        state_type = getattr(pipeline, "RobotState", None)
+        if state_type is not None:
+            keywords["state"] = state_type(v_mps, w_radps)
+    if "now_ns" in accepted:
+        keywords["now_ns"] = now_ns
+    if "memory" in accepted:
+        keywords["memory"] = memory
+    return pipeline.filter_velocity(
+        config, v_mps, w_radps, "shared", obstacles, None, 0.0, **keywords
+    )
+
+
+def scan_durations_s(verdicts: Sequence[ScanVerdict], max_gap_s: float = MAX_GAP_S) -> list[float]:
+    """How long each scan stood: until the next scan by header stamp (receive time when stamps
+    are missing or go backwards), gaps over ``max_gap_s`` cut to the median period; the last
+    scan stands for the median period."""
+    if not verdicts:
+        return []
+    stamps = [v.stamp_ns for v in verdicts]
+    use_stamps = all(s > 0 for s in stamps) and all(b >= a for a, b in itertools.pairwise(stamps))
+    times = stamps if use_stamps else [v.log_ns for v in verdicts]
+    gaps = [max(0, b - a) / _NS for a, b in itertools.pairwise(times)]
+    positive = [g for g in gaps if 0.0 < g <= max_gap_s]
+    period = statistics.median(positive) if positive else 0.0
+    return [g if g <= max_gap_s else period for g in gaps] + [period]
+
+
+def summarize(
+    verdicts: Sequence[ScanVerdict],
+    filter_name: str,
+    profile_name: str,
+    extra: dict[str, Any] | None = None,
+) -> ReplaySummary:
+    """The replay's summary over every scan's verdict, in log order."""
+    durations = scan_durations_s(verdicts)
+    with_cmd = [v for v in verdicts if v.has_command]
+    hold_s = 0.0
+    moving_s = 0.0
+    holds = 0
+    holding = False
+    for verdict, dt in zip(verdicts, durations, strict=True):
+        if verdict.has_command and (
+            abs(verdict.v_ref_mps) > MOVING or abs(verdict.w_ref_radps) > MOVING
+        ):
+            moving_s += dt
+        if verdict.held:
+            hold_s += dt
+            holds += 0 if holding else 1
+        holding = verdict.held
+    closest = [v.closest_m for v in verdicts if v.closest_m is not None]
+    return ReplaySummary(
+        filter=filter_name,
+        profile=profile_name,
+        scans=len(verdicts),
+        commands=len(with_cmd),
+        changed=sum(1 for v in with_cmd if v.changed),
+        max_cut_mps=max((abs(v.v_ref_mps - v.v_cmd_mps) for v in with_cmd), default=0.0),
+        max_cut_radps=max((abs(v.w_ref_radps - v.w_cmd_radps) for v in with_cmd), default=0.0),
+        hold_s=hold_s,
+        holds=holds,
+        closest_m=min(closest) if closest else None,
+        duration_s=sum(durations),
+        moving_s=moving_s,
+        limiters=dict(Counter(v.limiter for v in with_cmd)),
+        extra=dict(extra or {}),
+    )
