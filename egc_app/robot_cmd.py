@@ -54,7 +54,7 @@ from egc_common.transport import (
 from egc_robot.controller import ControllerConfig, RobotController
 from egc_robot.drivers import Driver, SensorUpdate
 from egc_robot.pipeline import FILTERS, PipelineConfig
-from egc_robot.ros2_core import CMD_TYPES, ROS2_KEYS, ros2_settings
+from egc_robot.ros2_core import CMD_TYPES, ROS2_KEYS, Ros2Settings, ros2_settings
 from egc_robot.run_stats import RunStats
 from egc_robot.zenoh_node import Recorder, RobotNode
 
@@ -247,9 +247,10 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
         raise UsageError(str(exc)) from None
 
 
-def _open_ros2_driver(args: argparse.Namespace, cfg: dict[str, Any]) -> Driver:
-    """``--driver ros2``: settings from ``[ros2]`` and the flags; one line if rclpy is missing."""
-    from egc_robot.ros2_driver import Ros2Driver, require_rclpy
+def _ros2_settings(args: argparse.Namespace, cfg: dict[str, Any]) -> Ros2Settings:
+    """``--driver ros2``: settings from ``[ros2]`` and the flags, checked before anything opens;
+    one line naming the extra if rclpy is missing."""
+    from egc_robot.ros2_driver import require_rclpy
 
     flags = {
         "scan": args.ros_scan,
@@ -265,12 +266,18 @@ def _open_ros2_driver(args: argparse.Namespace, cfg: dict[str, Any]) -> Driver:
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     require_rclpy()
-    return Ros2Driver(settings)
+    return settings
 
 
 def _open_driver(args: argparse.Namespace, cfg: dict[str, Any], session: Any) -> Driver:
     if args.driver == "ros2":
-        return _open_ros2_driver(args, cfg)
+        from egc_robot.ros2_driver import Ros2Driver
+
+        settings = _ros2_settings(args, cfg)
+        try:
+            return Ros2Driver(settings)
+        except Exception as exc:  # rclpy's own errors (e.g. ROS_DOMAIN_ID out of range)
+            raise UsageError(f"cannot start the ROS 2 node: {exc}") from None
     if args.driver == "zenoh":
         from egc_robot.zenoh_driver import ZenohDriver
 
@@ -325,6 +332,8 @@ def run(args: argparse.Namespace) -> int:
     except config_mod.ConfigError as exc:
         raise UsageError(str(exc)) from None
     controller_config = build_controller_config(args, cfg)
+    if args.driver == "ros2":
+        _ros2_settings(args, cfg)  # bad settings or no rclpy: one line, before anything opens
     rate_hz = 1.0 / controller_config.nominal_period_s
     session = open_session(options_from_args(args))
     stop = threading.Event()
