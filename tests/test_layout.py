@@ -70,3 +70,22 @@ def test_stdlib_operator_is_not_shadowed_from_the_repo_root():
         [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
     )
     assert "egc" not in out.stdout
+
+
+# DESIGN 11: rclpy (and the ROS 2 message packages) only in the two ROS 2 adapters, so that
+# everything else runs without ROS 2 installed.
+ROS2_MODULES = {"rclpy", "sensor_msgs", "geometry_msgs", "nav_msgs", "builtin_interfaces"}
+ROS2_ADAPTERS = {
+    ROOT / "robot" / "egc_robot" / "ros2_driver.py",
+    ROOT / "sim_robot" / "egc_sim" / "ros2_base.py",
+}
+
+
+def test_only_the_ros2_adapters_import_rclpy():
+    folders = [*PACKAGES.values(), ROOT / "egc_app", ROOT / "experiments"]
+    for folder in folders:
+        for path in folder.rglob("*.py"):
+            if path in ROS2_ADAPTERS:
+                continue
+            bad = imported_top_levels(path) & ROS2_MODULES
+            assert not bad, f"{path.relative_to(ROOT)} imports {sorted(bad)} (DESIGN 11)"

@@ -1,0 +1,235 @@
+"""The pure half of the ROS 2 driver (DESIGN 11): REP 117 scans, laser pose, settings, odometry.
+
+No rclpy here: these run everywhere.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from egc_common.messages import Odometry
+from egc_common.profiles import get_profile
+from egc_common.scan import Scan
+from egc_robot.pipeline import PipelineConfig, step_command
+from egc_robot.ros2_core import (
+    LaserPose,
+    Rejected,
+    Ros2Settings,
+    odometry_from_ros,
+    parse_laser_pose,
+    quaternion_from_yaw,
+    ros2_settings,
+    scan_from_laser,
+    yaw_from_quaternion,
+)
+from hypothesis import given
+from hypothesis import strategies as st
+
+INF = math.inf
+NAN = math.nan
+HERE = LaserPose()
+
+
+def points(result: Scan | Rejected) -> np.ndarray:
+    assert isinstance(result, Scan), result
+    return result.points()
+
+
+def test_plus_inf_is_free_and_still_information():
+    scan = scan_from_laser([INF] * 8, -math.pi, math.pi / 4, 0.1, 10.0, HERE)
+    assert isinstance(scan, Scan)
+    assert len(scan.points()) == 0
+    assert scan.no_return_is_free
+
+
+def test_nan_everywhere_is_no_information():
+    result = scan_from_laser([NAN] * 8, -math.pi, math.pi / 4, 0.1, 10.0, HERE)
+    assert isinstance(result, Rejected) and result.reason == "no_information"
+
+
+def test_finite_out_of_range_is_dropped_and_not_information():
+    # An older driver's "no return" codes: 0.0 and range_max + 1.
+    result = scan_from_laser([0.0, 11.0, 0.05], 0.0, 0.1, 0.1, 10.0, HERE)
+    assert isinstance(result, Rejected) and result.reason == "no_information"
+    p = points(scan_from_laser([0.0, 11.0, 2.0], 0.0, 0.5, 0.1, 10.0, HERE))
+    np.testing.assert_allclose(p, [[2.0 * math.cos(1.0), 2.0 * math.sin(1.0)]])
+
+
+def test_minus_inf_is_an_obstacle_at_range_min():
+    p = points(scan_from_laser([NAN, -INF, INF], -0.1, 0.1, 0.25, 10.0, HERE))
+    np.testing.assert_allclose(p, [[0.25, 0.0]], atol=1e-12)
+
+
+def test_no_beams_is_no_information():
+    assert isinstance(scan_from_laser([], 0.0, 0.1, 0.1, 10.0, HERE), Rejected)
+
+
+def test_negative_increment_gives_the_same_points_as_the_forward_sweep():
+    rng = np.random.default_rng(3)
+    ranges = rng.uniform(0.2, 5.0, 271)
+    inc = math.radians(1.0)
+    forward = points(scan_from_laser(ranges, -math.radians(135), inc, 0.1, 10.0, HERE))
+    backward = points(scan_from_laser(ranges[::-1], math.radians(135), -inc, 0.1, 10.0, HERE))
+    order = lambda p: p[np.lexsort((p[:, 1], p[:, 0]))]  # noqa: E731
+    np.testing.assert_allclose(order(forward), order(backward[::-1]), atol=1e-9)
+
+
+@pytest.mark.parametrize("beams", [1, 2, 7, 360, 1081, 4000])
+def test_any_beam_count_and_angular_range(beams):
+    span = 4.7 if beams > 1 else 0.0
+    inc = span / max(beams - 1, 1)
+    p = points(scan_from_laser(np.full(beams, 2.0), -span / 2, inc, 0.1, 10.0, HERE))
+    assert len(p) == beams
+    np.testing.assert_allclose(np.hypot(p[:, 0], p[:, 1]), 2.0)
+
+
+def test_laser_pose_turns_and_offsets_the_points():
+    # A laser 0.2 m behind the centre, looking backwards: 1 m straight ahead of the laser is
+    # 1.2 m behind the robot's centre; its left is the robot's right.
+    pose = LaserPose(-0.2, 0.0, math.pi)
+    p = points(scan_from_laser([1.0, 1.0], 0.0, math.pi / 2, 0.1, 10.0, pose))
+    np.testing.assert_allclose(p, [[-1.2, 0.0], [-0.2, -1.0]], atol=1e-12)
+
+
+def test_upside_down_mirrors_the_laser_sweep():
+    # Upside down, the laser's left (+90 deg) is the robot's right.
+    up = points(scan_from_laser([1.0], math.pi / 2, 0.1, 0.1, 10.0, LaserPose(0.1, 0.05, 0.0)))
+    down = points(
+        scan_from_laser([1.0], math.pi / 2, 0.1, 0.1, 10.0, LaserPose(0.1, 0.05, 0.0, True))
+    )
+    np.testing.assert_allclose(up, [[0.1, 1.05]], atol=1e-12)
+    np.testing.assert_allclose(down, [[0.1, -0.95]], atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("args", "reason"),
+    [
+        ((0.0, 0.1, 2.0, 1.0), "range_min > range_max"),
+        ((0.0, 0.1, -1.0, 1.0), "negative range_min"),
+        ((NAN, 0.1, 0.1, 1.0), "NaN angle_min"),
+        ((0.0, INF, 0.1, 1.0), "inf increment"),
+        ((0.0, 0.1, 0.1, INF), "inf range_max"),
+        ((0.0, 1e300, 0.1, 1.0), "angles overflow"),
+    ],
+)
+def test_malformed_scans_are_rejected(args, reason):
+    result = scan_from_laser([1.0, 1.0, 1.0], *args, HERE)
+    assert isinstance(result, Rejected) and result.reason == "malformed", reason
+
+
+def test_too_many_beams_and_non_numbers_are_rejected():
+    assert isinstance(scan_from_laser(np.ones(200_000), 0.0, 1e-5, 0.1, 10.0, HERE), Rejected)
+    assert isinstance(scan_from_laser(["a", "b"], 0.0, 0.1, 0.1, 10.0, HERE), Rejected)
+
+
+@given(
+    ranges=st.lists(st.floats(allow_nan=True, allow_infinity=True, width=32), max_size=50),
+    angle_min=st.floats(allow_nan=True, allow_infinity=True),
+    inc=st.floats(allow_nan=True, allow_infinity=True),
+    range_min=st.floats(allow_nan=True, allow_infinity=True),
+    range_max=st.floats(allow_nan=True, allow_infinity=True),
+    upside_down=st.booleans(),
+)
+def test_any_input_gives_a_scan_or_a_rejection(
+    ranges, angle_min, inc, range_min, range_max, upside_down
+):
+    result = scan_from_laser(
+        ranges, angle_min, inc, range_min, range_max, LaserPose(0.1, 0.0, 1.0, upside_down)
+    )
+    assert isinstance(result, (Scan, Rejected))
+    if isinstance(result, Scan):
+        p = result.points()
+        assert np.all(np.isfinite(p))
+        # Every point is within range_max of the laser (at most range_max from its mount).
+        assert np.all(np.hypot(p[:, 0] - 0.1, p[:, 1]) <= range_max * (1 + 1e-9))
+
+
+def test_a_minus_inf_reading_ahead_stops_forward_motion_in_shared_mode():
+    """No forward motion into -inf: an object closer than range_min ahead is an obstacle."""
+    config = PipelineConfig(get_profile("pioneer3dx"), no_return_is_free=True)
+    ranges = np.full(360, INF)
+    ranges[178:183] = -INF  # straight ahead
+    scan = scan_from_laser(ranges, -math.pi, 2 * math.pi / 360, 0.2, 10.0, HERE)
+    assert isinstance(scan, Scan)
+    out = step_command(config, 1.0, 0.0, "shared", scan.obstacles(), (0.14, 0.0), 0.05)
+    assert out.v_cmd_mps <= 0.0, out
+    # The same scan with +inf there instead lets it drive on.
+    free = scan_from_laser(np.full(360, INF), -math.pi, 2 * math.pi / 360, 0.2, 10.0, HERE)
+    assert isinstance(free, Scan)
+    out = step_command(config, 1.0, 0.0, "shared", free.obstacles(), (0.14, 0.0), 0.05)
+    assert out.v_cmd_mps == pytest.approx(0.14)
+
+
+# -- settings -----------------------------------------------------------------------------------
+
+
+def test_settings_defaults_are_the_pinned_ones():
+    s = ros2_settings({}, {})
+    assert (s.scan_topic, s.odom_topic, s.cmd_topic, s.cmd_type) == (
+        "/scan",
+        "/odom",
+        "/cmd_vel",
+        "twist",
+    )
+    assert s.namespace == "" and s.laser == LaserPose()
+
+
+def test_flags_override_the_toml_table():
+    table = {"scan": "base_scan", "laser_pose": [0.1, 0.0, 3.0], "cmd_type": "twist-stamped"}
+    flags = {"scan": "/front/scan", "laser_pose": "-0.12,0.5,-3.14", "laser_upside_down": True}
+    s = ros2_settings(table, flags | {"odom": None})
+    assert s.scan_topic == "/front/scan" and s.cmd_type == "twist-stamped"
+    assert s.laser == LaserPose(-0.12, 0.5, -3.14, True)
+    assert s.odom_topic == "/odom"
+
+
+@pytest.mark.parametrize(
+    ("table", "message"),
+    [
+        ({"scna": "/scan"}, "unknown [ros2] key"),
+        ({"scan": "has space"}, "not a valid ROS 2 topic"),
+        ({"cmd": 3}, "must be a string"),
+        ({"cmd_type": "twist_stamped"}, "cmd_type"),
+        ({"namespace": "robot1/"}, "namespace"),
+        ({"laser_pose": "1,2"}, "X,Y,YAW"),
+        ({"laser_pose": [1, 2, "x"]}, "laser_pose"),
+        ({"laser_pose": "nan,0,0"}, "X,Y,YAW"),
+        ({"laser_upside_down": "yes"}, "true or false"),
+    ],
+)
+def test_bad_settings_name_the_key(table, message):
+    with pytest.raises(ValueError, match=message.replace("[", r"\[")):
+        ros2_settings(table, {})
+
+
+def test_namespaces_and_relative_topics_are_accepted():
+    s = Ros2Settings(scan_topic="front/scan", namespace="/robot1")
+    assert s.namespace == "/robot1"
+
+
+def test_parse_laser_pose_takes_negative_numbers():
+    assert parse_laser_pose("-0.1,-0.05,-3.14159") == (-0.1, -0.05, -3.14159)
+
+
+# -- odometry -----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("yaw", [0.0, 1.0, -2.5, math.pi - 1e-9])
+def test_yaw_quaternion_round_trip(yaw):
+    assert yaw_from_quaternion(*quaternion_from_yaw(yaw)) == pytest.approx(yaw)
+
+
+def test_odometry_is_stamped_with_arrival_and_checked():
+    odo = odometry_from_ros(1.0, -2.0, quaternion_from_yaw(0.5), 0.3, -0.1, 123)
+    assert odo == Odometry(
+        stamp_ns=123,
+        x_m=1.0,
+        y_m=-2.0,
+        theta_rad=pytest.approx(0.5),
+        linear_mps=0.3,
+        angular_radps=-0.1,
+    )
+    assert isinstance(odometry_from_ros(NAN, 0.0, (0, 0, 0, 1), 0.0, 0.0, 1), Rejected)
+    assert isinstance(odometry_from_ros(0.0, 0.0, (0, 0, 0, 0), 0.0, 0.0, 1), Rejected)
