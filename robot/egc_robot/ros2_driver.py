@@ -75,6 +75,7 @@ class Ros2Driver:
         import rclpy
         from geometry_msgs.msg import Twist, TwistStamped
         from nav_msgs.msg import Odometry as OdometryMsg
+        from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
         from rclpy.signals import SignalHandlerOptions
@@ -95,7 +96,7 @@ class Ros2Driver:
 
         # Our own context: rclpy installs no signal handlers (the robot process owns SIGINT and
         # SIGTERM, to send the last zero twist) and nothing global is touched.
-        self._context = rclpy.Context()
+        self._context = Context()
         rclpy.init(context=self._context, signal_handler_options=SignalHandlerOptions.NO)
         try:
             self._node = rclpy.create_node(
@@ -105,7 +106,7 @@ class Ros2Driver:
             self._publisher = node.create_publisher(
                 self._twist_type,
                 settings.cmd_topic,
-                QoSProfile(
+                QoSProfile(  # type: ignore[no-untyped-call]
                     depth=10,
                     history=HistoryPolicy.KEEP_LAST,
                     reliability=ReliabilityPolicy.RELIABLE,
@@ -263,7 +264,7 @@ class Ros2Driver:
         )
         try:
             self._executor.shutdown(timeout_sec=1.0)
-            self._node.destroy_node()
+            self._node.destroy_node()  # type: ignore[no-untyped-call]
         finally:
             self._context.try_shutdown()
             self._thread.join(2.0)
