@@ -19,6 +19,11 @@ def cmd(robot: str) -> str:
     return f"egc/{validate_id(robot)}/cmd"
 
 
+def goal(robot: str) -> str:
+    """Operator -> robot via points (DESIGN 7)."""
+    return f"egc/{validate_id(robot)}/goal"
+
+
 def telemetry(robot: str) -> str:
     return f"egc/{validate_id(robot)}/telemetry"
 

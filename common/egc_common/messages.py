@@ -32,6 +32,11 @@ MAX_MAP_BYTES: Final = MAX_MAP_CELLS // 8 + 4096
 MAX_VIEW_AGE_MS: Final = 3_600_000
 
 MODES: Final = ("direct", "shared")
+# The filter family of DESIGN 6, pinned names ("none" is direct mode).
+FILTER_NAMES: Final = ("none", "egc", "ek-egc", "assist", "dwa")
+GOAL_FRAMES: Final = ("odom", "map")
+MAX_GOAL_POINTS: Final = 64
+MAX_GOAL_COORD_M: Final = 1e6
 # Telemetry keys pinned by DESIGN 7 (outside tools read them); the rest are view extras.
 TELEMETRY_PINNED_KEYS: Final = (
     "v",
@@ -237,6 +242,8 @@ class OperatorCommand:
     reset: bool
     op: str
     view_age_ms: int | None = None  # DESIGN 7, 9: age of the newest telemetry the view showed
+    # The filter the operator picked for shared mode (DESIGN 6); absent: the robot's default.
+    filter: str | None = None
 
     def __post_init__(self) -> None:
         rejection = decode_command(_pack(self._wire()))
@@ -245,8 +252,9 @@ class OperatorCommand:
 
     def _wire(self) -> dict[str, Any]:
         wire = {"v": SCHEMA_VERSION, **{k: getattr(self, k) for k in self.__slots__}}
-        if self.view_age_ms is None:
-            del wire["view_age_ms"]  # optional key: absent when unknown (DESIGN 7)
+        for optional in ("view_age_ms", "filter"):
+            if wire[optional] is None:
+                del wire[optional]  # optional keys: absent when unknown (DESIGN 7)
         return wire
 
     def encode(self) -> bytes:
@@ -267,6 +275,7 @@ def _build_command(m: Mapping[Any, Any]) -> OperatorCommand:
         "view_age_ms": (
             None if m.get("view_age_ms") is None else _int(m, "view_age_ms", 0, MAX_VIEW_AGE_MS)
         ),
+        "filter": _opt_str(m, "filter", FILTER_NAMES),
     }
     cmd = object.__new__(OperatorCommand)
     for key, value in fields_.items():
@@ -325,11 +334,17 @@ class Telemetry:
     link_loss: float | None = None  # fraction of seq missing over the last second
     view_age_ms: float | None = None  # the controlling operator's latest report
     v_lim_latency: float | None = None  # the latency governor's cap, m/s
+    # Via points (DESIGN 7 goal): the active one in its frame, how many remain after it, and
+    # the direction the filter suggests in {R} (rad; assist), for the view.
+    goal: tuple[float, float] | None = None
+    goal_frame: str | None = None
+    goals_left: int = 0
+    suggested_rad: float | None = None
 
     def encode(self) -> bytes:
         d = _shallow_fields(self)
         d["scan_xy"] = np.ascontiguousarray(self.scan_xy, dtype="<f4").tobytes()
-        for key in ("igc", "agc", "egc", "pose"):
+        for key in ("igc", "agc", "egc", "pose", "goal"):
             if d[key] is not None:
                 d[key] = [float(v) for v in d[key]]
         return _pack({"v": SCHEMA_VERSION, **d})
@@ -393,6 +408,10 @@ def _build_telemetry(m: Mapping[Any, Any]) -> Telemetry:
         "link_loss": None if m.get("link_loss") is None else _float(m, "link_loss", 0.0, 1.0),
         "view_age_ms": _opt_float(m, "view_age_ms"),
         "v_lim_latency": _opt_float(m, "v_lim_latency"),
+        "goal": _opt_tuple(m, "goal", 2),
+        "goal_frame": _opt_str(m, "goal_frame", GOAL_FRAMES),
+        "goals_left": _int(m, "goals_left", 0, MAX_GOAL_POINTS) if "goals_left" in m else 0,
+        "suggested_rad": _opt_float(m, "suggested_rad"),
     }
     for key, value in values.items():
         object.__setattr__(t, key, value)
@@ -401,6 +420,74 @@ def _build_telemetry(m: Mapping[Any, Any]) -> Telemetry:
 
 def decode_telemetry(payload: object) -> Telemetry | Rejection:
     return _decode(payload, MAX_TELEMETRY_BYTES, _build_telemetry)
+
+
+# ---------------------------------------------------------------------------------------------
+# Via points (operator -> robot, DESIGN 7 ``egc/<robot>/goal``)
+
+
+@dataclass(frozen=True, slots=True)
+class GoalMessage:
+    """The operator's via points, in order, in ``frame`` (metres); an empty list clears them."""
+
+    seq: int
+    stamp_ns: int
+    op: str
+    frame: str
+    points: tuple[tuple[float, float], ...]
+
+    def __post_init__(self) -> None:
+        rejection = decode_goal(self.encode())
+        if isinstance(rejection, Rejection):
+            raise ValueError(f"invalid GoalMessage: {rejection}")
+
+    def encode(self) -> bytes:
+        wire = {
+            "v": SCHEMA_VERSION,
+            "seq": self.seq,
+            "stamp_ns": self.stamp_ns,
+            "op": self.op,
+            "frame": self.frame,
+            "points": [[float(x), float(y)] for x, y in self.points],
+        }
+        return _pack(wire)
+
+
+def _goal_points(m: Mapping[Any, Any]) -> tuple[tuple[float, float], ...]:
+    value = _get(m, "points")
+    if not isinstance(value, list):
+        raise _InvalidError(RejectReason.WRONG_TYPE, "'points' must be a list of [x, y]")
+    if len(value) > MAX_GOAL_POINTS:
+        raise _InvalidError(RejectReason.TOO_LARGE, f"more than {MAX_GOAL_POINTS} via points")
+    points = []
+    for i, item in enumerate(value):
+        if not isinstance(item, list) or len(item) != 2:
+            raise _InvalidError(RejectReason.WRONG_TYPE, f"via point {i} must be [x, y]")
+        lim = MAX_GOAL_COORD_M
+        xy = (
+            _float({"x": item[0]}, "x", -lim, lim),
+            _float({"y": item[1]}, "y", -lim, lim),
+        )
+        points.append(xy)
+    return tuple(points)
+
+
+def _build_goal(m: Mapping[Any, Any]) -> GoalMessage:
+    goal = object.__new__(GoalMessage)
+    values = {
+        "seq": _int(m, "seq"),
+        "stamp_ns": _int(m, "stamp_ns"),
+        "op": _str(m, "op"),
+        "frame": _str(m, "frame", GOAL_FRAMES),
+        "points": _goal_points(m),
+    }
+    for key, value in values.items():
+        object.__setattr__(goal, key, value)
+    return goal
+
+
+def decode_goal(payload: object) -> GoalMessage | Rejection:
+    return _decode(payload, MAX_SMALL_BYTES, _build_goal)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -536,12 +623,21 @@ class Odometry:
     linear_mps: float
     angular_radps: float
     collided: bool = False
+    # The pose in the ``map`` frame when the driver localises (x, y, theta); None otherwise.
+    # The simulator knows its true pose, so it reports both (odom == map, no drift).
+    map_pose: tuple[float, float, float] | None = None
 
     def encode(self) -> bytes:
-        return _pack({"v": SCHEMA_VERSION, **_shallow_fields(self)})
+        d = _shallow_fields(self)
+        if self.map_pose is None:
+            del d["map_pose"]
+        else:
+            d["map_pose"] = [float(v) for v in self.map_pose]
+        return _pack({"v": SCHEMA_VERSION, **d})
 
 
 def _build_odom(m: Mapping[Any, Any]) -> Odometry:
+    map_pose = _opt_tuple(m, "map_pose", 3)
     return Odometry(
         stamp_ns=_int(m, "stamp_ns"),
         x_m=_float(m, "x_m"),
@@ -550,6 +646,7 @@ def _build_odom(m: Mapping[Any, Any]) -> Odometry:
         linear_mps=_float(m, "linear_mps"),
         angular_radps=_float(m, "angular_radps"),
         collided=_bool(m, "collided") if "collided" in m else False,
+        map_pose=None if map_pose is None else (map_pose[0], map_pose[1], map_pose[2]),
     )
 
 

@@ -26,6 +26,12 @@ stopping is always allowed (DESIGN 1: nothing from the network can do more than 
 ``step`` runs one control cycle: state machine, then ``pipeline.step_command`` while DRIVING,
 ``safety.decelerate`` in HOLD and IDLE, zero in ESTOP; it returns the base command and the
 telemetry of the cycle.
+
+The filter of shared mode is the robot's configured one unless the operator in control picked
+another of the family (OperatorCommand ``filter``, DESIGN 6); a filter that keeps memory
+(``assist``) starts afresh whenever the filter changes or the robot stops driving. Via points
+(``egc/<robot>/goal``, DESIGN 7) are accepted from the operator in control only, and the active
+one goes to the filter in {R}.
 """
 
 from __future__ import annotations
@@ -40,6 +46,7 @@ import numpy as np
 import numpy.typing as npt
 from egc_common.messages import (
     BaseCommand,
+    GoalMessage,
     Odometry,
     OperatorCommand,
     Rejection,
@@ -47,12 +54,13 @@ from egc_common.messages import (
     StateMessage,
     Telemetry,
     decode_command,
+    decode_goal,
 )
 from egc_common.scan import ObstaclePoints, Scan
 
 from egc_robot.latency_governor import govern, latency_speed_limit
 from egc_robot.link_stats import LinkFigures, LinkStats
-from egc_robot.pipeline import Limiter, PipelineConfig, PipelineResult, step_command
+from egc_robot.pipeline import FILTERS, Limiter, PipelineConfig, PipelineResult, step_command
 from egc_robot.safety import decelerate
 from egc_robot.state_machine import (
     COMMAND_TIMEOUT,
@@ -62,6 +70,13 @@ from egc_robot.state_machine import (
     State,
     Transition,
     next_state,
+)
+from egc_robot.via_points import (
+    DEFAULT_TOLERANCE_M,
+    NO_ROUTE,
+    ViaPoints,
+    advance,
+    to_robot_frame,
 )
 
 NS_PER_S = 1_000_000_000
@@ -89,6 +104,7 @@ class ControllerConfig:
     require_clock_sync: bool = False
     telemetry_scan_decimation: int = 2
     nominal_period_s: float = 0.05
+    via_tolerance_m: float = DEFAULT_TOLERANCE_M  # a via point within this is reached
 
     def __post_init__(self) -> None:
         for name in (
@@ -102,6 +118,7 @@ class ControllerConfig:
             "scan_timeout_s",
             "release_timeout_s",
             "nominal_period_s",
+            "via_tolerance_m",
         ):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -173,6 +190,8 @@ class _TelemetrySnapshot:
     cycle: int
     link: LinkFigures
     v_lim_mps: float | None
+    filter: str
+    route: ViaPoints
 
 
 @dataclass(slots=True)
@@ -218,6 +237,11 @@ class RobotController:
         self._scan: _Scan | None = None
         self._telemetry_xy = np.zeros((0, 2), np.float32)
         self._pose: tuple[float, float, float] | None = None
+        self._map_pose: tuple[float, float, float] | None = None
+        self._route = NO_ROUTE
+        self._goal_seq: tuple[str, int] | None = None  # (operator, last accepted goal seq)
+        self._filter_memory: object | None = None
+        self._memory_filter = ""  # which filter the memory belongs to
         self._previous = (0.0, 0.0)
         self._last_step_ns: int | None = None
         self._last_drive_epoch = -1  # control epoch of the last DRIVING cycle (resume)
@@ -311,6 +335,59 @@ class RobotController:
         self.counters.accepted += 1
         return CommandVerdict(cmd, None, took_control, latency_ns)
 
+    @property
+    def route(self) -> ViaPoints:
+        """The operator's via points and which one is active."""
+        return self._route
+
+    def on_goal(self, payload: object, now_ns: int) -> Rejection | None:
+        """Decode and vet one payload from ``egc/<robot>/goal``; never raises.
+
+        Only the operator in control may set via points; the seq must increase per operator;
+        a frame the driver gives no pose in is refused (the robot could not follow it).
+        """
+        decoded = decode_goal(payload)
+        if isinstance(decoded, Rejection):
+            return self._reject_goal(decoded)
+        goal: GoalMessage = decoded
+        if goal.op != self._controller_op:
+            holder = self._controller_op or "nobody"
+            return self._reject_goal(
+                Rejection(
+                    RejectReason.NOT_IN_CONTROL, f"goal from {goal.op}: control held by {holder}"
+                )
+            )
+        if (
+            self._goal_seq is not None
+            and self._goal_seq[0] == goal.op
+            and goal.seq <= self._goal_seq[1]
+        ):
+            return self._reject_goal(
+                Rejection(
+                    RejectReason.OUT_OF_ORDER, f"goal seq {goal.seq} after {self._goal_seq[1]}"
+                )
+            )
+        if goal.points and self._pose_in(goal.frame) is None:
+            return self._reject_goal(
+                Rejection(
+                    RejectReason.OUT_OF_RANGE, f"no pose in frame {goal.frame!r} from the driver"
+                )
+            )
+        self._goal_seq = (goal.op, goal.seq)
+        current = self._route
+        if (current.op, current.frame, current.points) == (goal.op, goal.frame, goal.points):
+            return None  # the operator repeats its route (it does, at 1 Hz): keep the progress
+        route = ViaPoints(goal.frame, goal.points, goal.op)
+        self._route = advance(route, self._pose_in(goal.frame), self.config.via_tolerance_m)
+        return None
+
+    def _reject_goal(self, rejection: Rejection) -> Rejection:
+        self.counters.rejected["goal_" + rejection.reason.value] += 1
+        return rejection
+
+    def _pose_in(self, frame: str) -> tuple[float, float, float] | None:
+        return self._map_pose if frame == "map" else self._pose
+
     def on_scan(self, scan: Scan, now_ns: int) -> None:
         """The newest scan; its arrival time decides freshness (scan_timeout)."""
         points = scan.obstacles()
@@ -320,6 +397,10 @@ class RobotController:
 
     def on_odometry(self, odometry: Odometry) -> None:
         self._pose = (odometry.x_m, odometry.y_m, odometry.theta_rad)
+        self._map_pose = odometry.map_pose
+        if self._route.active is not None:
+            pose = self._pose_in(self._route.frame)
+            self._route = advance(self._route, pose, self.config.via_tolerance_m)
 
     def on_operator_alive(self, operator_id: str, alive: bool) -> None:
         """A liveliness token ``alive/operator/<id>`` appeared or went away."""
@@ -396,20 +477,36 @@ class RobotController:
                 profile.decel_max_mps2,
                 cfg.blind_time_s(cmd.mode if cmd is not None else "shared"),
             )
+        filter_name = self._filter_for(cmd)
         if state is State.DRIVING and cmd is not None and scan is not None:
             self._last_drive_epoch = self._control_epoch
             self._last_drive_ns = self._command_rx_ns  # the gap is timed from this command
+            if filter_name != self._memory_filter:
+                self._filter_memory, self._memory_filter = None, filter_name
             result = step_command(
-                cfg.pipeline, cmd.x, cmd.y, cmd.mode, scan.points, self._previous, dt_s
+                cfg.pipeline,
+                cmd.x,
+                cmd.y,
+                cmd.mode,
+                scan.points,
+                self._previous,
+                dt_s,
+                filter_name=filter_name,
+                goal_xy_m=self._goal_in_robot_frame(),
+                now_ns=now_ns,
+                memory=self._filter_memory,
             )
+            self._filter_memory = result.memory
             v, w, limiter = result.v_cmd_mps, result.w_cmd_radps, result.limiter
             if v_lim is not None:
                 v, w, capped = govern(v, w, v_lim)
                 if capped:
                     limiter = Limiter.LATENCY
         elif state is State.ESTOP:
+            self._filter_memory = None
             v, w, limiter = 0.0, 0.0, Limiter.ESTOP
         else:
+            self._filter_memory = None
             v, w = decelerate(self._previous, dt_s, cfg.pipeline.profile)
             limiter = Limiter.WATCHDOG if self.reason in LINK_REASONS else Limiter.HOLD
         self._previous = (v, w)
@@ -427,6 +524,8 @@ class RobotController:
             cycle=self.counters.cycles,
             link=link,
             v_lim_mps=v_lim,
+            filter=filter_name if cmd is not None and cmd.mode == "shared" else "none",
+            route=self._route,
         )
         build = partial(self._telemetry, now_ns, cmd, fresh, v, w, limiter, result, snapshot)
         return CycleOutput(base, self.state_message(now_ns) if changed else None, result, build)
@@ -441,6 +540,20 @@ class RobotController:
         )
 
     # -- helpers ------------------------------------------------------------------------------
+
+    def _filter_for(self, cmd: OperatorCommand | None) -> str:
+        """The shared-mode filter: the operator's pick when this robot runs it, else ours."""
+        default = self.config.pipeline.filter
+        if cmd is None or cmd.filter is None or default == "none":
+            return default  # a robot configured without a filter stays without one
+        return cmd.filter if cmd.filter in FILTERS and cmd.filter != "none" else default
+
+    def _goal_in_robot_frame(self) -> tuple[float, float] | None:
+        active = self._route.active
+        pose = self._pose_in(self._route.frame)
+        if active is None or pose is None:
+            return None
+        return to_robot_frame(active, pose)
 
     def _command_fresh(self, cmd: OperatorCommand, now_ns: int) -> bool:
         cfg = self.config
@@ -491,10 +604,8 @@ class RobotController:
             rejected=snap.rejected,
             cycle=snap.cycle,
             reason=snap.reason,
-            # DESIGN 7: which filter of DESIGN 6 ran this cycle ("none" in direct mode)
-            filter=self.config.pipeline.filter
-            if cmd is not None and self.config.filtered(cmd.mode)
-            else "none",
+            # DESIGN 7: which filter of DESIGN 6 runs ("none" in direct mode)
+            filter=snap.filter,
             loop_delay_ms=snap.link.loop_delay_s * 1e3,
             cmd_age_p50_ms=snap.link.cmd_age_p50_ms,
             cmd_age_p90_ms=snap.link.cmd_age_p90_ms,
@@ -502,6 +613,12 @@ class RobotController:
             link_loss=snap.link.link_loss,
             view_age_ms=snap.link.view_age_ms,
             v_lim_latency=snap.v_lim_mps,
+            goal=snap.route.active,
+            goal_frame=snap.route.frame if snap.route.active is not None else None,
+            goals_left=snap.route.remaining_after_active,
+            suggested_rad=None
+            if result is None or result.family is None
+            else result.family.suggested_rad,
         )
 
     def _reject(
@@ -526,3 +643,5 @@ class RobotController:
         self._link.reset()
         self._command = None
         self._no_operator_reason = reason
+        self._route = NO_ROUTE  # via points belong to the operator who set them
+        self._goal_seq = None

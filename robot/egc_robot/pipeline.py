@@ -1,7 +1,8 @@
 """The robot's command pipeline, one control cycle, as a pure function.
 
-joystick deflection -> eq. 4 -> filter (EGC in shared mode) -> anti-dead-lock rule ->
-profile velocity and acceleration limits -> footprint sweep (DESIGN 4, 5, 5.10).
+joystick deflection -> eq. 4 -> filter of the family (DESIGN 6; shared mode) -> anti-dead-lock
+rule -> profile velocity and acceleration limits -> footprint sweep (DESIGN 4, 5, 5.10, 6).
+Every filter runs inside the same pipeline; ``filters.family`` holds the one interface.
 
 The robot process, the headless episode runner and the benchmarks all call ``step_command``;
 none of them has a copy of it. Watchdog, staleness and e-stop are the state machine's job
@@ -19,7 +20,15 @@ from egc_common.joystick import JoystickMapping, deflection_to_velocity
 from egc_common.profiles import RobotProfile
 from egc_common.scan import ObstaclePoints, obstacle_points
 
-from egc_robot.filters.egc import EgcCase, EgcParams, EgcResult, Region, Side, egc_filter
+from egc_robot.filters.egc import EgcParams, EgcResult, Region, Side
+from egc_robot.filters.family import (
+    FilterInput,
+    FilterResult,
+    FilterSettings,
+    RobotState,
+    available_filters,
+    run_filter,
+)
 from egc_robot.safety import (
     SweepParams,
     increases_clearance,
@@ -28,12 +37,9 @@ from egc_robot.safety import (
     sweep_scale,
 )
 
-FILTERS = ("none", "egc")
+FILTERS = available_filters()
 MODES = ("direct", "shared")
 
-# Cases in which the paper's equations stopped the robot for being close to something; the
-# anti-dead-lock rule may then let through a reference command that increases clearance.
-_STOPPED_NEAR_OBSTACLE = (EgcCase.EXPANDED, EgcCase.NO_INTERSECTION, EgcCase.ZERO_WEIGHTS)
 _CLEARANCE_HORIZON_S = 1.0
 _SAME = 1e-9
 
@@ -42,7 +48,10 @@ class Limiter(enum.Enum):
     """What limited the command sent to the base this cycle (shown in the operator view)."""
 
     NONE = "none"
-    EGC = "egc"
+    EGC = "egc"  # the filters of DESIGN 6 changed the command: each under its own name
+    EK_EGC = "ek-egc"
+    ASSIST = "assist"
+    DWA = "dwa"
     SWEEP = "sweep"
     LIMITS = "limits"
     LATENCY = "latency"  # the latency governor (DESIGN 9) capped the speed
@@ -59,7 +68,9 @@ class PipelineConfig:
     horizon_s: float | None = None
     no_return_is_free: bool = False
     sweep: SweepParams = field(default_factory=SweepParams)
+    extra_params: tuple[tuple[str, object], ...] = ()  # per-filter params (dwa, assist)
     egc_params: EgcParams = field(init=False, repr=False, compare=False)  # derived, once
+    settings: FilterSettings = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.filter not in FILTERS:
@@ -73,6 +84,7 @@ class PipelineConfig:
         if self.no_return_is_free:
             params = EgcParams(params.r_min_m, params.r_max_m, params.horizon_s, True)
         object.__setattr__(self, "egc_params", params)
+        object.__setattr__(self, "settings", FilterSettings(p, params, dict(self.extra_params)))
 
 
 @dataclass(frozen=True, slots=True)
@@ -82,21 +94,35 @@ class PipelineResult:
     v_cmd_mps: float
     w_cmd_radps: float
     limiter: Limiter
-    filtered: EgcResult | None
+    family: FilterResult | None  # what the filter of DESIGN 6 said (None: no filter ran)
     sweep_scale: float = 1.0
     escape: bool = False
 
     @property
+    def filter_name(self) -> str:
+        return "none" if self.family is None else self.family.name
+
+    @property
+    def filtered(self) -> EgcResult | None:
+        """The guide circles of egc / ek-egc (ek-egc: in EK coordinates), else None."""
+        return None if self.family is None else self.family.egc
+
+    @property
+    def memory(self) -> object | None:
+        """What the filter wants back next cycle (assist's histograms)."""
+        return None if self.family is None else self.family.memory
+
+    @property
     def w_si(self) -> float:
-        return 1.0 if self.filtered is None else self.filtered.w_si
+        return 1.0 if self.family is None else self.family.w_si
 
     @property
     def region(self) -> Region:
-        return Region.SAFE if self.filtered is None else self.filtered.region
+        return Region.SAFE if self.family is None else self.family.region
 
     @property
     def side(self) -> Side | None:
-        return None if self.filtered is None else self.filtered.side
+        return None if self.family is None else self.family.side
 
 
 def filter_velocity(
@@ -107,26 +133,34 @@ def filter_velocity(
     points: npt.ArrayLike | ObstaclePoints,
     previous_cmd: tuple[float, float] | None,
     dt_s: float,
+    *,
+    filter_name: str | None = None,
+    goal_xy_m: tuple[float, float] | None = None,
+    now_ns: int = 0,
+    memory: object | None = None,
 ) -> PipelineResult:
     """One cycle from a velocity reference (after eq. 4) to the command for the base.
 
-    ``previous_cmd`` is what the base was last sent; None skips the acceleration limits (for
-    stateless tools such as ``egc-teleop filter``).
+    ``previous_cmd`` is what the base was last sent (None skips the acceleration limits, for
+    stateless tools such as ``egc-teleop filter``). ``filter_name`` overrides the configured
+    filter of shared mode (the operator's choice); ``goal_xy_m`` is the active via point in {R};
+    ``memory`` is the previous cycle's ``PipelineResult.memory`` for the same filter.
     """
     profile = config.profile
     obstacles = obstacle_points(points)
     pts = obstacles.xy
-    shared = mode == "shared" and config.filter == "egc"
-    filtered: EgcResult | None = None
+    name = config.filter if filter_name is None else filter_name
+    shared = mode == "shared" and name != "none"
+    family: FilterResult | None = None
     v, w = v_ref_mps, w_ref_radps
     escape = False
     if shared:
-        filtered = egc_filter(v_ref_mps, w_ref_radps, obstacles, config.egc_params)
-        v, w = filtered.v_mps, filtered.w_radps
-        if (
-            filtered.case in _STOPPED_NEAR_OBSTACLE
-            and filtered.w_si == 0.0
-            and increases_clearance(v_ref_mps, w_ref_radps, _CLEARANCE_HORIZON_S, pts, profile)
+        state = RobotState(*previous_cmd) if previous_cmd is not None else RobotState()
+        inp = FilterInput(v_ref_mps, w_ref_radps, obstacles, state, goal_xy_m, now_ns)
+        family = run_filter(name, inp, config.settings, memory)
+        v, w = family.v_mps, family.w_radps
+        if family.stopped_near_obstacle and increases_clearance(
+            v_ref_mps, w_ref_radps, _CLEARANCE_HORIZON_S, pts, profile
         ):
             v, w, escape = v_ref_mps, w_ref_radps, True  # DESIGN 5.10: no dead-lock
 
@@ -141,16 +175,16 @@ def filter_velocity(
         v, w = scale * v, scale * w
         limiter = Limiter.SWEEP
     elif (
-        filtered is not None
+        family is not None
         and not escape
         and (abs(after_filter[0] - v_ref_mps) > _SAME or abs(after_filter[1] - w_ref_radps) > _SAME)
     ):
-        limiter = Limiter.EGC
+        limiter = Limiter(family.name)
     elif limited:
         limiter = Limiter.LIMITS
     else:
         limiter = Limiter.NONE
-    return PipelineResult(v_ref_mps, w_ref_radps, v, w, limiter, filtered, scale, escape)
+    return PipelineResult(v_ref_mps, w_ref_radps, v, w, limiter, family, scale, escape)
 
 
 def step_command(
@@ -161,8 +195,25 @@ def step_command(
     points: npt.ArrayLike | ObstaclePoints,
     previous_cmd: tuple[float, float],
     dt_s: float,
+    *,
+    filter_name: str | None = None,
+    goal_xy_m: tuple[float, float] | None = None,
+    now_ns: int = 0,
+    memory: object | None = None,
 ) -> PipelineResult:
     """One cycle from normalised stick deflection (x_o forward, y_o left) to the base command."""
     p = config.profile
     v_ref, w_ref = deflection_to_velocity(x_o, y_o, p.v_max_mps, p.w_max_radps, config.mapping)
-    return filter_velocity(config, v_ref, w_ref, mode, points, previous_cmd, dt_s)
+    return filter_velocity(
+        config,
+        v_ref,
+        w_ref,
+        mode,
+        points,
+        previous_cmd,
+        dt_s,
+        filter_name=filter_name,
+        goal_xy_m=goal_xy_m,
+        now_ns=now_ns,
+        memory=memory,
+    )

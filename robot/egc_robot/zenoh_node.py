@@ -111,12 +111,14 @@ class RobotNode:
         self._faults = 0
         self._shut_down = False  # set under the lock: the zero command sent last stays last
         self._rejections = RejectionLog()
+        self._goal_log_ns = -_LOG_PERIOD_NS
         self._telemetry = data_publisher(session, keys.telemetry(robot_id))
         self._state = data_publisher(session, keys.state(robot_id))
         liveliness = session.liveliness()
         self._token = liveliness.declare_token(keys.alive_robot(robot_id))
         self._entities = [
             session.declare_subscriber(keys.cmd(robot_id), self._on_command),
+            session.declare_subscriber(keys.goal(robot_id), self._on_goal),
             session.declare_queryable(keys.clock(robot_id), self._on_clock_query),
             liveliness.declare_subscriber(
                 keys.alive_operators(robot_id), self._on_liveliness, history=True
@@ -142,6 +144,32 @@ class RobotNode:
                     self._cycle(now)
             except Exception as exc:
                 self._fail_safe(exc)
+
+    def _on_goal(self, sample: zenoh.Sample) -> None:
+        payload = payload_bytes(sample)
+        with self._lock:
+            if self._shut_down:
+                return
+            before = self._controller.route
+            try:
+                rejection = self._controller.on_goal(payload, self._clock())
+            except Exception as exc:  # never out of the receive path
+                log.error("goal message failed: %s", exc)
+                return
+            after = self._controller.route
+        if rejection is not None:
+            now = self._clock()
+            if now - self._goal_log_ns >= _LOG_PERIOD_NS:  # a flood must not flood the log
+                self._goal_log_ns = now
+                log.warning("rejected goal (%s): %s", rejection.reason.value, rejection.detail)
+        elif after is not before:
+            log.info(
+                "via points from %s: %d in %s%s",
+                after.op or "?",
+                len(after.points),
+                after.frame,
+                f", active {after.active[0]:.2f},{after.active[1]:.2f}" if after.active else "",
+            )
 
     def _on_liveliness(self, sample: zenoh.Sample) -> None:
         operator_id = keys.operator_id_from_alive_key(str(sample.key_expr))

@@ -123,6 +123,7 @@ class RealTimeSim:
         """What a real base reports: wheel odometry (the simulator's, noisy if configured)."""
         x, y, theta = self.sim.odometry
         v, w = self.sim.twist
+        mx, my, mth = self.sim.pose
         return Odometry(
             stamp_ns=now_ns,
             x_m=float(x),
@@ -131,6 +132,8 @@ class RealTimeSim:
             linear_mps=float(v),
             angular_radps=float(w),
             collided=bool(self.sim.collided),
+            # The simulator knows where it is: its true pose stands in for a localiser's map pose.
+            map_pose=(float(mx), float(my), float(mth)),
         )
 
 

@@ -1,0 +1,149 @@
+"""The filter family behind one interface (DESIGN 6, pinned names).
+
+Every filter is called the same way, ``run_filter(name, FilterInput, settings, memory)``, and
+answers with a ``FilterResult``: the command after the filter, what it changed and why, the
+intermediates the view and the tests need, and the memory it wants back next cycle (only
+``assist`` keeps any; the others are memoryless). The command pipeline (``pipeline``) applies
+the rules common to all of them afterwards: the no-dead-lock rule and profile limits of
+DESIGN 5.10, the footprint sweep, and (in the controller) the latency governor of DESIGN 9.
+
+Inputs, all in the robot frame {R} and SI units: the operator's command after eq. 4, the scan's
+obstacle points, the robot's current velocity, the active via point (or None) and the time
+(monotonic ns, passed in; never read here).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Final
+
+from egc_common.messages import FILTER_NAMES
+from egc_common.profiles import RobotProfile
+from egc_common.scan import ObstaclePoints
+
+from egc_robot.filters.egc import EgcCase, EgcParams, EgcResult, Region, Side, egc_filter
+
+FILTERS: Final = FILTER_NAMES  # ("none", "egc", "ek-egc", "assist", "dwa")
+# Filtered modes an operator cycles through at run time, in this order.
+SHARED_FILTERS: Final = tuple(name for name in FILTERS if name != "none")
+
+# EGC's branches in which the paper's equations stopped the robot for being close to something.
+_EGC_STOPPED_NEAR_OBSTACLE: Final = (
+    EgcCase.EXPANDED,
+    EgcCase.NO_INTERSECTION,
+    EgcCase.ZERO_WEIGHTS,
+)
+_SAME: Final = 1e-9
+
+
+@dataclass(frozen=True, slots=True)
+class RobotState:
+    """What the robot knows about its own motion: the velocity the base was last sent."""
+
+    v_mps: float = 0.0
+    w_radps: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class FilterInput:
+    """One cycle's inputs to any filter of the family (DESIGN 6), all in {R}."""
+
+    v_ref_mps: float
+    w_ref_radps: float
+    obstacles: ObstaclePoints
+    state: RobotState = field(default_factory=RobotState)
+    goal_xy_m: tuple[float, float] | None = None  # active via point in {R}
+    now_ns: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class FilterResult:
+    """A filter's answer: the command, what changed and why, and its intermediates."""
+
+    name: str
+    v_mps: float
+    w_radps: float
+    modified: bool
+    reason: str  # which branch or rule decided, in a word or two (for the view and tests)
+    w_si: float = 1.0
+    region: Region = Region.SAFE
+    side: Side | None = None
+    # True when the filter stopped a moving command because something is close: the pipeline's
+    # no-dead-lock rule (DESIGN 5.10) may then let a command that increases clearance through.
+    stopped_near_obstacle: bool = False
+    egc: EgcResult | None = None  # egc / ek-egc intermediates (ek-egc: in EK coordinates)
+    detail: object | None = None  # the filter's own result type (DWA, assist)
+    suggested_rad: float | None = None  # direction the filter suggests in {R} (assist)
+    memory: object | None = None  # handed back on the next cycle
+
+
+@dataclass(frozen=True, slots=True)
+class FilterSettings:
+    """Parameters of every filter, built once from the profile and the robot's config."""
+
+    profile: RobotProfile
+    egc: EgcParams
+    extra: dict[str, object] = field(default_factory=dict)  # per-filter params (dwa, assist)
+
+    @property
+    def ek_length_m(self) -> float:
+        """L = v_max / w_max of the profile (DESIGN 6, ek-egc)."""
+        return self.profile.v_max_mps / self.profile.w_max_radps
+
+
+FilterFn = Callable[[FilterInput, FilterSettings, object | None], FilterResult]
+
+
+def _changed(v: float, w: float, inp: FilterInput) -> bool:
+    return abs(v - inp.v_ref_mps) > _SAME or abs(w - inp.w_ref_radps) > _SAME
+
+
+def _from_egc(name: str, res: EgcResult) -> FilterResult:
+    return FilterResult(
+        name=name,
+        v_mps=res.v_mps,
+        w_radps=res.w_radps,
+        modified=res.modified,
+        reason=res.case.value,
+        w_si=res.w_si,
+        region=res.region,
+        side=res.side,
+        stopped_near_obstacle=res.case in _EGC_STOPPED_NEAR_OBSTACLE and res.w_si == 0.0,
+        egc=res,
+    )
+
+
+def _run_none(inp: FilterInput, settings: FilterSettings, memory: object | None) -> FilterResult:
+    return FilterResult("none", inp.v_ref_mps, inp.w_ref_radps, False, "direct")
+
+
+def _run_egc(inp: FilterInput, settings: FilterSettings, memory: object | None) -> FilterResult:
+    return _from_egc("egc", egc_filter(inp.v_ref_mps, inp.w_ref_radps, inp.obstacles, settings.egc))
+
+
+_REGISTRY: dict[str, FilterFn] = {"none": _run_none, "egc": _run_egc}
+
+
+def available_filters() -> tuple[str, ...]:
+    """The filters this build runs, in DESIGN 6's order."""
+    return tuple(name for name in FILTERS if name in _REGISTRY)
+
+
+def run_filter(
+    name: str, inp: FilterInput, settings: FilterSettings, memory: object | None = None
+) -> FilterResult:
+    """Run filter ``name`` of the family on one cycle's inputs."""
+    try:
+        fn = _REGISTRY[name]
+    except KeyError:
+        raise ValueError(f"unknown filter {name!r} (known: {', '.join(FILTERS)})") from None
+    return fn(inp, settings, memory)
+
+
+def invalid_input(name: str, inp: FilterInput) -> FilterResult | None:
+    """A stop for a command that is not a number (DESIGN 5.9), or None when it is fine."""
+    if math.isfinite(inp.v_ref_mps) and math.isfinite(inp.w_ref_radps):
+        return None
+    return FilterResult(name, 0.0, 0.0, True, "invalid_input", 0.0, Region.UNSAFE)
