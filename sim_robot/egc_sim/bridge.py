@@ -42,6 +42,7 @@ from egc_common.transport import (
 
 from egc_sim.grid_world import map_message
 from egc_sim.lidar import LidarConfig
+from egc_sim.ros2_base import add_ros2_arguments
 from egc_sim.simulator import Simulator
 from egc_sim.worlds import load_world
 
@@ -174,6 +175,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         default=0.5,
         help="the base stops after this long without a command (default: 0.5)",
     )
+    add_ros2_arguments(parser)
     add_zenoh_arguments(parser, default_connect=(DEFAULT_ENDPOINT,))
 
 
@@ -187,6 +189,12 @@ def run(args: argparse.Namespace) -> int:
     for name in ("scan_hz", "physics_hz", "base_timeout_s"):
         if not (math.isfinite(getattr(args, name)) and getattr(args, name) > 0):
             raise UsageError(f"--{name.replace('_', '-')} must be positive")
+    if args.ros2:  # a ROS 2 robot instead (egc_sim.ros2_base, DESIGN 11)
+        from egc_sim.ros2_base import require_rclpy, run_ros2_base
+
+        require_rclpy()
+        sim = open_simulator(args.map, profile, parse_pose(args.start), args.seed, args.beams)
+        return run_ros2_base(sim, args)
     sim = open_simulator(args.map, profile, parse_pose(args.start), args.seed, args.beams)
     session: Any = open_session(options_from_args(args))  # zenoh's stubs leave close() untyped
     stop = threading.Event()
