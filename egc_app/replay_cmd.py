@@ -11,7 +11,7 @@ turn rate derived from successive ``nav_msgs/Odometry`` poses (an odometry twist
 world frame). The pure part (pairing, REP 117, odometry, summary) is ``egc_robot.replay_core``;
 this module reads the log, shows progress on stderr, prints the summary JSON on stdout (and
 writes it to ``--summary``) and saves the Rerun recording (``--record``) on the log's own
-timeline (``log_time``, the recorder's receive time; ``stamp``, the scans' header stamps).
+timeline (``bag_time``, the recorder's receive time; ``stamp``, the scans' header stamps).
 
 A log that cannot be replayed (missing, not a bag, truncated, without the topics it needs, a
 topic of the wrong type) is one line on stderr naming the problem and exit code 2.

@@ -1,7 +1,7 @@
 """The Rerun recording of ``egc-teleop replay --record FILE.rrd`` (DESIGN 11).
 
 Opened with ``rerun FILE.rrd``, it shows, on the log's own timeline, where the filter would have
-stepped in. Timelines: ``log_time`` (the recorder's receive time of each scan, as a timestamp),
+stepped in. Timelines: ``bag_time`` (the recorder's receive time of each scan, as a timestamp),
 ``stamp`` (the scan's header stamp, when set) and ``scan`` (the scan's index). Entities:
 
 - ``robot/scan``: the scan's points in {R} (forward up on screen), ``robot/footprint`` the
@@ -37,7 +37,8 @@ from egc_operator.view_scene import (
 from egc_robot.pipeline import PipelineResult
 from egc_robot.replay_core import Replayer, ScanVerdict
 
-LOG_TIME = "log_time"
+# Not "log_time": Rerun fills that timeline itself with the wall clock of the logging call.
+BAG_TIME = "bag_time"
 STAMP = "stamp"
 SCAN_INDEX = "scan"
 ROBOT = "robot"
@@ -93,7 +94,7 @@ def _blueprint(title: str) -> rrb.Blueprint:
             ),
             column_shares=[3, 2],
         ),
-        rrb.TimePanel(timeline=LOG_TIME, state="expanded"),
+        rrb.TimePanel(timeline=BAG_TIME, state="expanded"),
         collapse_panels=True,
     )
 
@@ -161,7 +162,7 @@ class ReplayRecording:
         if rec is None:
             return
         rec.reset_time()
-        rec.set_time(LOG_TIME, timestamp=np.datetime64(verdict.log_ns, "ns"))
+        rec.set_time(BAG_TIME, timestamp=np.datetime64(verdict.log_ns, "ns"))
         if verdict.stamp_ns > 0:
             rec.set_time(STAMP, timestamp=np.datetime64(verdict.stamp_ns, "ns"))
         rec.set_time(SCAN_INDEX, sequence=self._index)

@@ -1,0 +1,232 @@
+"""``egc-teleop replay LOG`` end to end (DESIGN 11, issue 14 item 4): the real third-party ROS 1
+log ``../shared/bags/Mapping1.bag``, ROS 2 logs written here (MCAP and sqlite3, with a Twist
+topic and with odometry only), the summary's pinned keys, the .rrd read back, and bad logs."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pytest
+from rosbags.rosbag2 import StoragePlugin, Writer
+
+from egc_app.cli import main
+from tests.replay.logs import PERIOD_NS, START_NS, TS, corridor_log, scan_msg, wall_ranges
+from tests.view.rrd import read_recording
+
+MAPPING1 = Path(__file__).resolve().parents[2] / ".." / "shared" / "bags" / "Mapping1.bag"
+PINNED = ("scans", "commands", "changed", "max_cut_mps", "hold_s", "closest_m", "filter", "profile")
+
+
+def replay(capsys, *args: str) -> tuple[int, dict | None, str]:
+    code = main(["replay", *args])
+    out, err = capsys.readouterr()
+    return code, (json.loads(out) if code == 0 else None), err
+
+
+@pytest.fixture(scope="module")
+def mapping1_egc(tmp_path_factory):
+    rrd = tmp_path_factory.mktemp("mapping1") / "mapping1.rrd"
+    summary = rrd.with_suffix(".json")
+    code = main(["replay", str(MAPPING1), "--record", str(rrd), "--summary", str(summary)])
+    assert code == 0
+    return json.loads(summary.read_text()), rrd
+
+
+def test_mapping1_summary(mapping1_egc):
+    s, _ = mapping1_egc
+    assert all(k in s for k in PINNED)
+    assert s["filter"] == "egc" and s["profile"] == "pioneer3dx"
+    # 1727 scans on /base_scan; no cmd_vel, so the velocity comes from the ground-truth poses
+    assert s["scans"] == 1727 and s["scan_topic"] == "/base_scan"
+    assert (
+        s["command_topic"] == "/base_pose_ground_truth" and s["command_source"] == "odometry poses"
+    )
+    assert s["commands"] == 1726  # the first scan comes before any pose difference
+    assert 0 < s["changed"] <= s["commands"] and s["hold_s"] > 0
+    assert 0.9 < s["max_cut_mps"] <= 1.0 + 1e-6  # the robot drives up to 1.0 m/s (README)
+    assert s["closest_m"] == pytest.approx(0.1005, abs=1e-3)  # the nearest reading in the log
+    assert s["duration_s"] == pytest.approx(172.7, abs=0.2)  # 10 Hz by header stamp
+    assert 0 < s["hold_s"] < s["moving_s"] <= s["duration_s"]
+
+
+def test_mapping1_velocities_come_from_poses_not_the_world_frame_twist(mapping1_egc):
+    _, rrd = mapping1_egc
+    rec = read_recording(rrd)
+    v = np.array([x[0] for x in rec["/velocity/v/recorded"].column("Scalars:scalars")])
+    w = np.array([x[0] for x in rec["/velocity/w/recorded"].column("Scalars:scalars")])
+    # README: median forward speed 0.46 m/s, up to 1.0 m/s (the twist's linear.x is unrelated)
+    assert np.median(v) == pytest.approx(0.46, abs=0.01) and v.max() == pytest.approx(1.0, abs=0.01)
+    assert np.abs(w).max() < 1.0
+    # the log's own timeline: Stage's sim time, 60.2 s to 232.8 s
+    t = rec["/robot/scan"].rows.column("bag_time").cast(pa.int64()).to_pylist()
+    assert len(t) == 1727 and t[0] == 60_200_000_000 and t[-1] == 232_800_000_000
+
+
+def test_mapping1_under_none_changes_nothing(capsys):
+    # jackal: the log's speeds (<= 1.0 m/s, <= 0.49 rad/s) are within its limits
+    code, s, _ = replay(capsys, str(MAPPING1), "--filter", "none", "--profile", "jackal")
+    assert code == 0 and s["filter"] == "none" and s["profile"] == "jackal"
+    assert s["changed"] == 0 and s["hold_s"] == 0 and s["max_cut_mps"] == 0
+    assert s["scans"] == 1727 and s["closest_m"] == pytest.approx(0.1005, abs=1e-3)
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+@pytest.mark.parametrize("command", ["twist", "twist-stamped", "odometry"])
+def test_ros2_log_wall_ahead(tmp_path, capsys, storage, command):
+    log = corridor_log(tmp_path / "log", storage, command=command)
+    code, s, _ = replay(capsys, str(log))
+    assert code == 0 and all(k in s for k in PINNED)
+    with_cmd = 30 if command != "odometry" else 29  # odometry: the first pose gives no speed
+    assert s["scans"] == 30 and s["commands"] == with_cmd
+    assert s["changed"] > 0 and s["hold_s"] > 0 and s["max_cut_mps"] == pytest.approx(0.12)
+    assert s["closest_m"] == pytest.approx(0.3, abs=1e-6)  # the wall, last scan
+    assert s["command_topic"] == ("/odom" if command == "odometry" else "/cmd_vel")
+    code, s, _ = replay(capsys, str(log), "--filter", "none")
+    assert code == 0 and s["changed"] == 0 and s["hold_s"] == 0 and s["filter"] == "none"
+
+
+def test_ros2_storage_file_alone_and_far_wall_passes(tmp_path, capsys):
+    log = corridor_log(tmp_path / "far", "sqlite3", wall_m=[7.0] * 20)
+    (db3,) = log.glob("*.db3")
+    code, s, _ = replay(capsys, str(db3))
+    assert code == 0 and s["scans"] == 20 and s["changed"] == 0 and s["hold_s"] == 0
+    log = corridor_log(tmp_path / "near", "mcap")
+    (mcap,) = log.glob("*.mcap")
+    code, s, _ = replay(capsys, str(mcap), "--summary", str(tmp_path / "s.json"))
+    assert code == 0 and s["hold_s"] > 0
+    assert json.loads((tmp_path / "s.json").read_text()) == s
+
+
+def test_recording_shows_scans_circles_and_both_velocities_on_the_log_timeline(tmp_path, capsys):
+    log = corridor_log(tmp_path / "log", "mcap", command="odometry")
+    rrd = tmp_path / "r.rrd"
+    code, s, err = replay(capsys, str(log), "--record", str(rrd))
+    assert code == 0 and str(rrd) in err
+    rec = read_recording(rrd)
+    for entity in (
+        "/robot/scan",
+        "/robot/circles/igc",
+        "/robot/circles/egc",
+        "/robot/recorded",
+        "/robot/filtered",
+        "/velocity/v/recorded",
+        "/velocity/v/filtered",
+        "/velocity/w/recorded",
+        "/velocity/w/filtered",
+    ):
+        assert entity in rec, entity
+    scans = rec["/robot/scan"]
+    assert len(scans) == 30
+    t = scans.rows.column("bag_time").cast(pa.int64()).to_pylist()
+    assert t == [START_NS + i * PERIOD_NS for i in range(30)]
+    # one point per beam that hit the wall (+inf and NaN beams are not points)
+    hits = int(np.sum(np.isfinite(wall_ranges(1.0))))
+    assert len(scans.column("Points2D:positions")[0]) == hits
+    # recorded: 0.12 m/s from poses in a turned world frame; filtered: stops before the wall
+    rv = [x[0] for x in rec["/velocity/v/recorded"].column("Scalars:scalars")]
+    fv = [x[0] for x in rec["/velocity/v/filtered"].column("Scalars:scalars")]
+    assert len(rv) == len(fv) == 29 and rv == pytest.approx([0.12] * 29)
+    assert fv[0] == pytest.approx(0.12) and fv[-1] == 0.0
+    # the initial guide circle is centred where the recorded command leads (eq. 6)
+    igc = rec["/robot/circles/igc"].column("Ellipses2D:centers")
+    assert any(c for c in igc) and all(c[0][1] == pytest.approx(0.0, abs=1e-9) for c in igc if c)
+    lane = [x[0] for x in rec["/filter"].column("StateChange:state")]
+    assert lane[0] == "no command" and "hold" in lane
+    events = [x[0] for x in rec["/events"].column("TextLog:text")]
+    assert any("egc holds" in e for e in events)
+    hold_rows = sum(1 for v in fv if abs(v) <= 0.01)
+    assert s["hold_s"] == pytest.approx(hold_rows * 0.1)
+
+
+def bad(capsys, *args: str) -> str:
+    code = main(["replay", *args])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == "", (code, out, err)
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("egc-teleop replay: error: "), err
+    return lines[0]
+
+
+def test_bad_logs_one_clear_line(tmp_path, capsys):
+    truncated = tmp_path / "truncated.bag"
+    truncated.write_bytes(MAPPING1.read_bytes()[:300_000])
+    assert "cannot read this log" in bad(capsys, str(truncated))
+    text = tmp_path / "notes.bag"
+    text.write_text("not a bag\n")
+    assert "cannot read this log" in bad(capsys, str(text))
+    other = tmp_path / "notes.txt"
+    other.write_text("not a bag\n")
+    assert "'.txt'" in bad(capsys, str(other))
+    assert "no such file" in bad(capsys, str(tmp_path / "missing.bag"))
+    empty_dir = tmp_path / "empty"
+    empty_dir.mkdir()
+    assert "metadata" in bad(capsys, str(empty_dir))
+    log = corridor_log(tmp_path / "log", "mcap")
+    (mcap,) = log.glob("*.mcap")
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(mcap.read_bytes()[: mcap.stat().st_size // 2])
+    assert "cannot read this log" in bad(capsys, str(cut))
+
+
+def test_topics_missing_or_of_the_wrong_type(tmp_path, capsys):
+    log = corridor_log(tmp_path / "log", "sqlite3")
+    line = bad(capsys, str(log), "--scan-topic", "/front_scan")
+    assert "no topic '/front_scan'" in line and "/scan (sensor_msgs/msg/LaserScan)" in line
+    assert "is geometry_msgs/msg/Twist, not" in bad(capsys, str(log), "--scan-topic", "/cmd_vel")
+    assert "no topic '/joy'" in bad(capsys, str(log), "--cmd-topic", "/joy")
+    # scans only: nothing to take the commanded velocity from
+    only_scans = tmp_path / "only_scans"
+    with Writer(only_scans, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        c = w.add_connection("/scan", "sensor_msgs/msg/LaserScan", typestore=TS)
+        msg = TS.serialize_cdr(scan_msg(START_NS, wall_ranges(1.0)), "sensor_msgs/msg/LaserScan")
+        w.write(c, START_NS, msg)
+    assert "no geometry_msgs/Twist" in bad(capsys, str(only_scans))
+    # a scan topic without a single message
+    no_scans = tmp_path / "no_scans"
+    with Writer(no_scans, version=9, storage_plugin=StoragePlugin.SQLITE3) as w:
+        w.add_connection("/scan", "sensor_msgs/msg/LaserScan", typestore=TS)
+        c = w.add_connection("/cmd_vel", "geometry_msgs/msg/Twist", typestore=TS)
+        twist = TS.types["geometry_msgs/msg/Twist"]
+        v3 = TS.types["geometry_msgs/msg/Vector3"]
+        w.write(c, START_NS, TS.serialize_cdr(twist(v3(0.1, 0, 0), v3(0, 0, 0)), twist.__msgtype__))
+    assert "has no scans" in bad(capsys, str(no_scans))
+
+
+def test_bad_arguments(tmp_path, capsys):
+    log = corridor_log(tmp_path / "log", "mcap")
+    with pytest.raises(SystemExit) as exc:
+        main(["replay", str(log), "--filter", "magic"])
+    assert exc.value.code == 2 and "--filter" in capsys.readouterr().err
+    assert "unknown robot profile" in bad(capsys, str(log), "--profile", "roomba")
+    assert "folder does not exist" in bad(capsys, str(log), "--record", str(tmp_path / "no/x.rrd"))
+
+
+def test_a_real_process_prints_no_traceback(tmp_path):
+    bag = tmp_path / "half.bag"
+    bag.write_bytes(MAPPING1.read_bytes()[: MAPPING1.stat().st_size // 2])
+    proc = subprocess.run(
+        [sys.executable, "-m", "egc_app.cli", "replay", str(bag)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
+    assert str(bag) in proc.stderr
+
+
+def test_filter_choices_follow_the_pipeline():
+    from egc_robot.pipeline import FILTERS
+
+    from egc_app.cli import CliArgumentParser
+    from egc_app.replay_cmd import configure
+
+    parser = CliArgumentParser(prog="egc-teleop replay")
+    configure(parser)
+    for name in FILTERS:
+        assert parser.parse_args(["x.bag", "--filter", name]).filter == name
