@@ -1,0 +1,656 @@
+"""The rule-based assistant (``assist``, DESIGN 6) after ``rule-based-assist.txt``, as a pure step.
+
+``assist_step(memory, x_o, y_o, obstacles, goal_xy_m, now_ns, params, profile)`` takes the
+operator's normalised stick (DESIGN 4: x_o forward, y_o left, [-1, 1]), the scan points in {R},
+the active via point in {R} (or None) and the monotonic time, and returns an ``AssistResult``:
+the command (v, w), the name of the rule that fired, the suggested heading, the 3x3 activation
+grid, the stick confidence, and the new ``AssistMemory`` to pass in next cycle. Nothing here
+reads a clock or keeps hidden state; dt comes from the previous ``now_ns`` held in the memory.
+The command pipeline applies the profile limits and the footprint sweep (DESIGN 5.10) after it.
+
+How each part maps to the paper
+-------------------------------
+- **Obstacle histogram** (sec. II.B, "Histogramic In-Motion Mapping"): three sectors (LEFT,
+  FRONT, RIGHT) x three distance bands (CLOSE, INTERMEDIATE, FARAWAY). The paper's two
+  ultrasonic cones and their overlap become, for a scan: FRONT = the corridor the footprint
+  sweeps driving straight ahead (x > 0, |y| <= ``corridor_half_width_m``), LEFT / RIGHT = the
+  rest of the half-plane ahead (x > 0) on either side. A point's band is its distance from the
+  origin of {R}: CLOSE up to ``close_m``, INTERMEDIATE up to ``intermediate_m``, FARAWAY up to
+  ``faraway_m``; farther points are ignored. Each cycle a cell holding at least one point gains
+  ``hit_increment`` (6) up to ``hit_max`` (16), every other cell loses ``miss_decrement`` (2)
+  down to 0; a cell is *active* when its count is above ``activation_threshold`` (so a single
+  stray reading never activates one). As in the paper these are per-cycle counts. A sector's
+  level is its nearest active band (LeftO, FrontO, RightO of Fig. 5).
+  Band edges from the profile (``AssistParams.from_profile``): CLOSE = r_max (the outer circle of
+  the safety index, d_robot + d_safe), INTERMEDIATE = r_max + L, FARAWAY = r_max + 2 L, with L the
+  footprint length; the FRONT corridor's half width is 0.75 W (the footprint plus a margin).
+- **Joystick in polar form** (sec. II.C, eq. 1): J = min(sqrt(x_o^2 + y_o^2), 1), angle
+  phi = atan2(y_o, x_o). **Confidence histogram** (JoystickArray): ``confidence_bins`` cells over
+  the stick angle; the occupied cell builds at 1 / ``confidence_build_s`` per second (full in
+  about 0.5 s), the others decay at 1 / ``confidence_decay_s`` per second (empty in about 150 ms);
+  a centred stick (J below ``stick_deadzone``) occupies none. Rates are per second, so the
+  behaviour does not depend on the control rate.
+- **Direction to the via point** (sec. IV, Fig. 5's ``Target`` input): beta = atan2(y_g, x_g) of
+  the via point in {R}, and its distance.
+- **Revised rule set** (sec. IV, Fig. 5, rules 1-7 of cases 1-3): the paper's rules give a change
+  of steering angle from (Joystick, LeftO, FrontO, RightO, TargetAngle). Its tables are partial
+  (the comparison symbols were lost in extraction), so we keep their structure as general rules
+  over a desired heading theta in {R}:
+  * a side obstacle at INTERMEDIATE forbids turning towards it (cases 1 and 2: with the target on
+    the obstacle's side, "change 0" or a small turn away): theta <= 0 for LEFT, theta >= 0 for
+    RIGHT (``side_intermediate_rad`` = 0); at CLOSE the heading must turn away by at least
+    ``side_close_rad`` (rules ``avoid-left`` / ``avoid-right``);
+  * both sides CLOSE and the front clear (case 3, rules 5-7: a gap, steer gently towards the
+    target, 15-25 deg): theta clamped to +-``gap_max_rad``, speed ``gap_speed`` (rule ``gap``);
+  * FRONT active (the initial rule set of Fig. 4, sec. V "turned away"): at INTERMEDIATE the
+    heading turns by at least ``front_turn_rad`` towards the more open side and slows to
+    ``front_intermediate_speed``; at CLOSE it turns in place (rule ``avoid-front``).
+  The robot then turns with w = clamp(``heading_gain_per_s`` * theta, +-w_max) and drives with
+  v = m v_max s max(cos theta, 0): m is the stick's magnitude J with a via point (sec. II.C: J
+  "showed how fast an operator wanted the robot to go") and its forward deflection x_o without
+  one, s the speed factor of the rule.
+- **Heading sources** (sec. V): with a via point and the stick roughly in line with it (within
+  ``align_tolerance_rad``, both angles clipped to +-90 deg, so "turn towards it" counts as in
+  line), the rules "sent it towards the target destination" (rule ``goal``); with a via point
+  and the stick elsewhere, "an average between the angle to the target destination and the angle
+  requested by the joystick" (rule ``blend``); without a via point the heading is the one whose
+  turn rate is the stick's eq. 4 turn rate (theta = w_ref / gain), so with nothing active the
+  stick passes unchanged (rule ``free``): joystick plus avoidance.
+- **Wall following** (sec. V: "an obstacle in front while moving toward a target destination ...
+  rotate to align with and then move parallel to the wall"). Entered when heading for the via
+  point (rule ``goal``) with FRONT active at CLOSE or INTERMEDIATE and the corridor towards the
+  via point blocked within ``block_m``. The side is the one on which a free corridor opens
+  nearest to the via point's direction (a tangent-bug choice; the side just used is kept for
+  ``rejoin_s`` so the robot does not swap sides around one obstacle). The paper gives no
+  formula; ours is a tangent follower: with m the nearest scan point on the wall's side (or
+  ahead) within ``wall_range_m``, at angle alpha and distance d, theta = alpha -+ pi/2 (parallel
+  to the wall), corrected by ``wall_gain_rad_per_m`` (``wall_distance_m`` - d) away from it; no
+  such point (a corner passed) -> turn towards the wall side by ``wall_lost_turn_rad``. Rule
+  ``wall-follow-right`` keeps the wall on the robot's right, ``wall-follow-left`` on its left.
+  Left when the corridor towards the via point is clear for min(distance, ``leave_clear_m``) and
+  the robot is at least ``progress_m`` closer to it than where it started following (Bug2's
+  leave condition, so it never leaves into the obstacle it is going round).
+- **Operator's override** (sec. V: "if the joystick remained fixed (roughly) in a particular
+  position then that input was integrated over time and the wishes of the tele-operator overrode
+  that behaviour"; avoidance "initially overrode other behaviours"): the memory integrates, like
+  the confidence histogram (same build and decay rates), the time the stick has been held in one
+  cell *while the rules change the command* and the stick is not in line with the via point.
+  Once that reaches ``override_confidence`` the stick's own eq. 4 command goes out (rule
+  ``override``). The pipeline's footprint sweep still keeps the robot off obstacles.
+
+Rules (names reported in ``AssistResult.rule``), in the order they are tried
+-----------------------------------------------------------------------------
+``invalid`` (NaN / infinite stick or via point: stop), ``unknown`` (no scan point and the sensor
+does not declare no-return as free, DESIGN 5.9 NO_POINTS_UNKNOWN: nothing seen is not free: stop),
+``idle`` (stick centred: stop), ``reverse`` (x_o < 0: the stick's eq. 4 command; the rules look
+ahead only, the sweep guards the reverse), ``override``, ``wall-follow-left`` /
+``wall-follow-right``, ``avoid-front``, ``gap``, ``avoid-left`` / ``avoid-right``, and with
+nothing active ``goal``, ``blend`` or ``free``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from egc_common.profiles import RobotProfile
+from egc_common.scan import ObstaclePoints, obstacle_points
+
+FloatArray = npt.NDArray[np.float64]
+
+# Sectors and bands of the 3x3 histogram: grid[sector][band].
+LEFT, FRONT, RIGHT = 0, 1, 2
+CLOSE, INTERMEDIATE, FARAWAY = 0, 1, 2
+SECTORS = ("left", "front", "right")
+BANDS = ("close", "intermediate", "faraway")
+
+RULES = (
+    "invalid",
+    "unknown",
+    "idle",
+    "reverse",
+    "override",
+    "wall-follow-left",
+    "wall-follow-right",
+    "avoid-front",
+    "gap",
+    "avoid-left",
+    "avoid-right",
+    "goal",
+    "blend",
+    "free",
+)
+
+_SAME = 1e-9
+_HALF_PI = 0.5 * math.pi
+Grid = tuple[tuple[int, int, int], tuple[int, int, int], tuple[int, int, int]]
+BoolGrid = tuple[tuple[bool, bool, bool], tuple[bool, bool, bool], tuple[bool, bool, bool]]
+_ZERO_GRID: Grid = ((0, 0, 0), (0, 0, 0), (0, 0, 0))
+
+
+@dataclass(frozen=True, slots=True)
+class AssistParams:
+    """Every setting of the assistant, with its unit. Defaults are the Pioneer 3-DX's
+    (``from_profile(PIONEER3DX)``); ``from_mapping`` reads the robot TOML's ``[assist]``."""
+
+    # Histogram bands (m, from the origin of {R}) and the FRONT corridor's half width (m).
+    close_m: float = 0.595
+    intermediate_m: float = 1.05
+    faraway_m: float = 1.505
+    corridor_half_width_m: float = 0.28575
+    # Histogram counts (per control cycle, paper sec. II.B).
+    hit_increment: int = 6
+    hit_max: int = 16
+    miss_decrement: int = 2
+    activation_threshold: int = 6
+    # Joystick: centred below this magnitude (1), confidence cells, build/decay times (s).
+    stick_deadzone: float = 0.05
+    confidence_bins: int = 12
+    confidence_build_s: float = 0.5
+    confidence_decay_s: float = 0.15
+    override_confidence: float = 0.9  # (1) steady-against-the-rules level for the override
+    align_tolerance_rad: float = math.radians(45.0)
+    # Steering: w = gain * heading (1/s); the rules' angles (rad) and speed factors (1).
+    heading_gain_per_s: float = 1.5
+    side_close_rad: float = math.radians(20.0)
+    side_intermediate_rad: float = 0.0
+    gap_max_rad: float = math.radians(15.0)
+    gap_speed: float = 0.6
+    front_turn_rad: float = math.radians(45.0)
+    front_intermediate_speed: float = 0.5
+    # Wall following (m, rad, rad/m, s).
+    wall_distance_m: float = 0.525
+    wall_range_m: float = 1.05
+    wall_gain_rad_per_m: float = 2.0
+    wall_correction_max_rad: float = math.radians(60.0)
+    wall_lost_turn_rad: float = math.radians(60.0)
+    block_m: float = 1.05
+    leave_clear_m: float = 1.505
+    progress_m: float = 0.05
+    rejoin_s: float = 5.0
+    # A via point closer than this (m) gives no direction: joystick plus avoidance.
+    goal_min_m: float = 0.05
+    # dt larger than this (s) counts as this (a resumed link does not jump the confidence).
+    max_dt_s: float = 0.25
+    # The sensor declares "no return within range" as free (DESIGN 5.9).
+    no_return_is_free: bool = False
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.type in ("bool", bool):
+                if not isinstance(value, bool):
+                    raise ValueError(f"assist.{f.name} must be true or false, got {value!r}")
+                continue
+            if f.type in ("int", int):
+                if isinstance(value, bool) or not isinstance(value, int):
+                    raise ValueError(f"assist.{f.name} must be an integer, got {value!r}")
+            elif isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ValueError(f"assist.{f.name} must be a number, got {value!r}")
+            if not math.isfinite(value) or value < 0:
+                raise ValueError(f"assist.{f.name} must be finite and >= 0, got {value!r}")
+        if not 0.0 < self.close_m < self.intermediate_m < self.faraway_m:
+            raise ValueError("assist needs 0 < close_m < intermediate_m < faraway_m")
+        positive = (
+            "corridor_half_width_m",
+            "hit_increment",
+            "hit_max",
+            "confidence_bins",
+            "confidence_build_s",
+            "confidence_decay_s",
+            "heading_gain_per_s",
+            "wall_distance_m",
+            "wall_range_m",
+            "block_m",
+            "leave_clear_m",
+            "max_dt_s",
+        )
+        for name in positive:
+            if getattr(self, name) <= 0:
+                raise ValueError(f"assist.{name} must be positive")
+        if self.activation_threshold >= self.hit_max:
+            raise ValueError("assist.activation_threshold must be below hit_max")
+        if not 0.0 < self.override_confidence <= 1.0:
+            raise ValueError("assist.override_confidence must be in (0, 1]")
+        if self.stick_deadzone >= 1.0:
+            raise ValueError("assist.stick_deadzone must be below 1")
+        for name in ("gap_speed", "front_intermediate_speed"):
+            if getattr(self, name) > 1.0:
+                raise ValueError(f"assist.{name} must be in [0, 1]")
+        for name in (
+            "align_tolerance_rad",
+            "side_close_rad",
+            "side_intermediate_rad",
+            "gap_max_rad",
+            "front_turn_rad",
+            "wall_correction_max_rad",
+            "wall_lost_turn_rad",
+        ):
+            if getattr(self, name) > math.pi:
+                raise ValueError(f"assist.{name} must be in [0, pi]")
+
+    @staticmethod
+    def from_profile(profile: RobotProfile, **overrides: Any) -> AssistParams:
+        """Bands and distances derived from the profile (module docstring), other defaults."""
+        r_max, length = profile.r_max_m, profile.length_m
+        derived: dict[str, Any] = {
+            "close_m": r_max,
+            "intermediate_m": r_max + length,
+            "faraway_m": r_max + 2.0 * length,
+            "corridor_half_width_m": 0.75 * profile.width_m,
+            "wall_distance_m": 0.5 * (profile.r_min_m + r_max),
+            "wall_range_m": r_max + length,
+            "block_m": r_max + length,
+            "leave_clear_m": r_max + 2.0 * length,
+        }
+        derived.update(overrides)
+        return AssistParams(**derived)
+
+    @staticmethod
+    def from_mapping(
+        mapping: Mapping[str, Any], profile: RobotProfile | None = None
+    ) -> AssistParams:
+        """The robot TOML's ``[assist]`` table over the profile's (or the default) params.
+
+        Unknown keys, wrong types and out-of-range values raise ValueError naming the key.
+        """
+        if not isinstance(mapping, Mapping):
+            raise ValueError("[assist] must be a table")
+        known = {f.name: f.type for f in fields(AssistParams)}
+        unknown = sorted(set(mapping) - set(known))
+        if unknown:
+            raise ValueError(
+                f"[assist] has unknown keys: {', '.join(map(str, unknown))} "
+                f"(known: {', '.join(sorted(known))})"
+            )
+        values: dict[str, Any] = {}
+        for key, value in mapping.items():
+            kind = known[key]
+            if kind in ("float", float) and isinstance(value, int) and not isinstance(value, bool):
+                value = float(value)
+            values[key] = value
+        base = AssistParams() if profile is None else AssistParams.from_profile(profile)
+        return replace(base, **values)
+
+
+@dataclass(frozen=True, slots=True)
+class AssistMemory:
+    """Everything the assistant carries from one cycle to the next (all explicit).
+
+    ``counts``: the 3x3 obstacle histogram [sector][band]; ``confidence``: the joystick
+    confidence histogram (one value in [0, 1] per angle cell; empty until the first step);
+    ``stick_cell``: the cell the stick occupied last cycle (None: centred); ``contest``: how long
+    (as a fraction of ``confidence_build_s``) the stick has been held in that cell against the
+    rules; ``prev_stick``: last (x_o, y_o); ``last_ns``: time of the last step; ``wall_side``:
+    "left" / "right" while wall following (the side the wall is on), ``wall_entry_m``: the via
+    point's distance when following began; ``last_wall_side`` / ``wall_left_ns``: the side used
+    last and when following ended.
+    """
+
+    counts: Grid = _ZERO_GRID
+    confidence: tuple[float, ...] = ()
+    stick_cell: int | None = None
+    contest: float = 0.0
+    prev_stick: tuple[float, float] = (0.0, 0.0)
+    last_ns: int | None = None
+    wall_side: str | None = None
+    wall_entry_m: float = math.inf
+    last_wall_side: str | None = None
+    wall_left_ns: int | None = None
+
+    @staticmethod
+    def initial() -> AssistMemory:
+        return AssistMemory()
+
+
+@dataclass(frozen=True, slots=True)
+class AssistResult:
+    """One cycle of the assistant: the command before the pipeline's limits and sweep."""
+
+    v_mps: float
+    w_radps: float
+    memory: AssistMemory
+    rule: str
+    heading_rad: float | None  # suggested heading in {R}; None when stopping
+    active: BoolGrid  # [sector][band], sectors (left, front, right), bands (close, inter, far)
+    confidence: float  # the occupied joystick cell's confidence, 0 when centred
+    modified: bool  # (v, w) differs from the stick's eq. 4 command
+    v_ref_mps: float = 0.0
+    w_ref_radps: float = 0.0
+    levels: tuple[int | None, int | None, int | None] = (None, None, None)  # nearest active band
+    goal_bearing_rad: float | None = None
+
+
+# -- pieces -----------------------------------------------------------------------------------
+
+
+def cell_hits(obstacles: ObstaclePoints, params: AssistParams) -> BoolGrid:
+    """Which of the 9 cells hold at least one point this cycle (module docstring)."""
+    x, y, r2 = obstacles.x, obstacles.y, obstacles.r2
+    ahead = x > 0.0
+    half = params.corridor_half_width_m
+    sector_masks = (ahead & (y > half), ahead & (np.abs(y) <= half), ahead & (y < -half))
+    edges = (params.close_m, params.intermediate_m, params.faraway_m)
+    band_masks = []
+    lower = -1.0
+    for edge in edges:
+        band_masks.append((r2 > lower) & (r2 <= edge * edge))
+        lower = edge * edge
+    rows = []
+    for s in sector_masks:
+        rows.append(tuple(bool(np.any(s & b)) for b in band_masks))
+    return (rows[0], rows[1], rows[2])  # type: ignore[return-value]
+
+
+def update_counts(counts: Grid, hits: BoolGrid, params: AssistParams) -> Grid:
+    """+hit_increment up to hit_max on a hit, -miss_decrement down to 0 otherwise (per cycle)."""
+    out = []
+    for row_c, row_h in zip(counts, hits, strict=True):
+        out.append(
+            tuple(
+                min(c + params.hit_increment, params.hit_max)
+                if h
+                else max(c - params.miss_decrement, 0)
+                for c, h in zip(row_c, row_h, strict=True)
+            )
+        )
+    return (out[0], out[1], out[2])  # type: ignore[return-value]
+
+
+def activation(counts: Grid, params: AssistParams) -> BoolGrid:
+    rows = [tuple(c > params.activation_threshold for c in row) for row in counts]
+    return (rows[0], rows[1], rows[2])  # type: ignore[return-value]
+
+
+def levels_of(active: BoolGrid) -> tuple[int | None, int | None, int | None]:
+    """Nearest active band per sector (LeftO, FrontO, RightO), None when none is active."""
+    out: list[int | None] = []
+    for row in active:
+        out.append(next((band for band, on in enumerate(row) if on), None))
+    return (out[0], out[1], out[2])
+
+
+def stick_cell(phi_rad: float, bins: int) -> int:
+    """The confidence cell of a stick angle; cell 0 is centred on straight forward."""
+    width = 2.0 * math.pi / bins
+    return round(phi_rad / width) % bins
+
+
+def update_confidence(
+    confidence: tuple[float, ...], cell: int | None, dt_s: float, params: AssistParams
+) -> tuple[float, ...]:
+    """Occupied cell +dt / build_s, others -dt / decay_s, within [0, 1] (sec. II.C)."""
+    if len(confidence) != params.confidence_bins:
+        confidence = (0.0,) * params.confidence_bins
+    up = dt_s / params.confidence_build_s
+    down = dt_s / params.confidence_decay_s
+    return tuple(
+        min(c + up, 1.0) if i == cell else max(c - down, 0.0) for i, c in enumerate(confidence)
+    )
+
+
+def corridor_clear(
+    obstacles: ObstaclePoints, heading_rad: float, length_m: float, half_width_m: float
+) -> bool:
+    """No point in the strip of ``half_width_m`` either side of the ray at ``heading_rad``,
+    from the origin out to ``length_m`` ahead."""
+    if len(obstacles) == 0:
+        return True
+    c, s = math.cos(heading_rad), math.sin(heading_rad)
+    u = obstacles.x * c + obstacles.y * s
+    v = -obstacles.x * s + obstacles.y * c
+    return not bool(np.any((u > 0.0) & (u <= length_m) & (np.abs(v) <= half_width_m)))
+
+
+def _wrap(a: float) -> float:
+    return math.atan2(math.sin(a), math.cos(a))
+
+
+def _clip(a: float, lo: float, hi: float) -> float:
+    return max(lo, min(hi, a))
+
+
+def _circular_mean(a: float, b: float) -> float:
+    return math.atan2(math.sin(a) + math.sin(b), math.cos(a) + math.cos(b))
+
+
+def _choose_wall_side(
+    obstacles: ObstaclePoints, beta: float, params: AssistParams, memory: AssistMemory, now_ns: int
+) -> str:
+    """Side the wall will be on: the robot turns the way a clear corridor opens nearest to the
+    via point's direction (5 deg steps); the side used within ``rejoin_s`` is kept."""
+    if (
+        memory.last_wall_side is not None
+        and memory.wall_left_ns is not None
+        and (now_ns - memory.wall_left_ns) * 1e-9 <= params.rejoin_s
+    ):
+        return memory.last_wall_side
+    step = math.radians(5.0)
+    for k in range(1, 37):
+        left_open = corridor_clear(
+            obstacles, beta + k * step, params.block_m, params.corridor_half_width_m
+        )
+        right_open = corridor_clear(
+            obstacles, beta - k * step, params.block_m, params.corridor_half_width_m
+        )
+        if left_open and not right_open:
+            return "right"  # turning left keeps the wall on the right
+        if right_open and not left_open:
+            return "left"
+        if left_open and right_open:
+            break
+    return "right" if beta >= 0.0 else "left"
+
+
+def _wall_heading(
+    obstacles: ObstaclePoints, side: str, params: AssistParams, profile: RobotProfile
+) -> tuple[float, bool]:
+    """Tangent follower (module docstring): heading and whether the wall was found."""
+    s = 1.0 if side == "left" else -1.0
+    x, y, r2 = obstacles.x, obstacles.y, obstacles.r2
+    mask = (
+        (r2 <= params.wall_range_m * params.wall_range_m)
+        & (s * y >= -params.corridor_half_width_m)
+        & (x >= -0.5 * profile.length_m)
+    )
+    if not bool(np.any(mask)):
+        return s * params.wall_lost_turn_rad, False
+    idx = np.flatnonzero(mask)
+    i = int(idx[np.argmin(r2[idx])])
+    d = math.sqrt(float(r2[i]))
+    alpha = math.atan2(float(y[i]), float(x[i]))
+    tangent = alpha - s * _HALF_PI
+    correction = _clip(
+        params.wall_gain_rad_per_m * (params.wall_distance_m - d),
+        -params.wall_correction_max_rad,
+        params.wall_correction_max_rad,
+    )
+    return _wrap(tangent - s * correction), True
+
+
+def _avoid(
+    theta: float, levels: tuple[int | None, int | None, int | None], params: AssistParams
+) -> tuple[float, float, str | None]:
+    """The obstacle rules over a desired heading: (heading, speed factor, rule or None)."""
+    left, front, right = levels
+    if front is not None and front <= INTERMEDIATE:
+        # More open side: the farther nearest band (None = nothing active) wins; tie -> theta.
+        lo = 3 if left is None else left
+        ro = 3 if right is None else right
+        sign = 1.0 if lo > ro else -1.0 if ro > lo else (1.0 if theta >= 0.0 else -1.0)
+        if front == CLOSE:
+            return sign * _HALF_PI, 0.0, "avoid-front"
+        turned = sign * max(sign * theta, params.front_turn_rad)
+        return turned, params.front_intermediate_speed, "avoid-front"
+    upper, lower = math.inf, -math.inf
+    if left == CLOSE:
+        upper = -params.side_close_rad
+    elif left == INTERMEDIATE:
+        upper = params.side_intermediate_rad
+    if right == CLOSE:
+        lower = params.side_close_rad
+    elif right == INTERMEDIATE:
+        lower = -params.side_intermediate_rad
+    if lower > upper:  # both sides close (case 3): a gap
+        return _clip(theta, -params.gap_max_rad, params.gap_max_rad), params.gap_speed, "gap"
+    if theta > upper:
+        return upper, 1.0, "avoid-left"
+    if theta < lower:
+        return lower, 1.0, "avoid-right"
+    return theta, 1.0, None
+
+
+# -- the step ---------------------------------------------------------------------------------
+
+
+def assist_step(
+    memory: AssistMemory,
+    x_o: float,
+    y_o: float,
+    obstacles: ObstaclePoints | npt.ArrayLike,
+    goal_xy_m: tuple[float, float] | None,
+    now_ns: int,
+    params: AssistParams,
+    profile: RobotProfile,
+) -> AssistResult:
+    """One cycle of the assistant (module docstring)."""
+    obs = obstacle_points(obstacles)
+    if memory.last_ns is None or now_ns <= memory.last_ns:
+        dt = 0.0
+    else:
+        dt = min((now_ns - memory.last_ns) * 1e-9, params.max_dt_s)
+
+    counts = update_counts(memory.counts, cell_hits(obs, params), params)
+    active = activation(counts, params)
+    levels = levels_of(active)
+
+    stick_ok = math.isfinite(x_o) and math.isfinite(y_o)
+    goal_ok = goal_xy_m is None or (math.isfinite(goal_xy_m[0]) and math.isfinite(goal_xy_m[1]))
+    xs = max(-1.0, min(1.0, x_o)) if stick_ok else 0.0
+    ys = max(-1.0, min(1.0, y_o)) if stick_ok else 0.0
+    magnitude = min(math.hypot(xs, ys), 1.0)
+    phi = math.atan2(ys, xs)
+    centred = magnitude < params.stick_deadzone
+    cell = None if centred else stick_cell(phi, params.confidence_bins)
+    confidence = update_confidence(memory.confidence, cell, dt, params)
+    conf = 0.0 if cell is None else confidence[cell]
+    v_ref, w_ref = profile.v_max_mps * xs, profile.w_max_radps * ys
+
+    def result(
+        v: float,
+        w: float,
+        rule: str,
+        heading: float | None,
+        contest: float = 0.0,
+        wall: tuple[str | None, float] = (None, math.inf),
+        bearing: float | None = None,
+    ) -> AssistResult:
+        last_side, left_ns = memory.last_wall_side, memory.wall_left_ns
+        if memory.wall_side is not None and wall[0] is None:  # following just ended
+            last_side, left_ns = memory.wall_side, now_ns
+        elif wall[0] is not None:
+            last_side = wall[0]
+        new_memory = AssistMemory(
+            counts,
+            confidence,
+            cell,
+            contest,
+            (xs, ys),
+            now_ns,
+            wall[0],
+            wall[1],
+            last_side,
+            left_ns,
+        )
+        modified = abs(v - v_ref) > _SAME or abs(w - w_ref) > _SAME
+        return AssistResult(
+            v, w, new_memory, rule, heading, active, conf, modified, v_ref, w_ref, levels, bearing
+        )
+
+    if not (stick_ok and goal_ok):
+        return result(0.0, 0.0, "invalid", None)
+    if len(obs) == 0 and not params.no_return_is_free:
+        return result(0.0, 0.0, "unknown", None)
+    if centred:
+        # A pause keeps the wall following.
+        return result(0.0, 0.0, "idle", None, wall=(memory.wall_side, memory.wall_entry_m))
+    if xs < 0.0:
+        return result(v_ref, w_ref, "reverse", phi)
+
+    gain = params.heading_gain_per_s
+    bearing: float | None = None
+    distance = math.inf
+    if goal_xy_m is not None:
+        distance = math.hypot(goal_xy_m[0], goal_xy_m[1])
+        if distance >= params.goal_min_m:
+            bearing = math.atan2(goal_xy_m[1], goal_xy_m[0])
+    aligned = (
+        bearing is not None
+        and abs(_clip(phi, -_HALF_PI, _HALF_PI) - _clip(bearing, -_HALF_PI, _HALF_PI))
+        <= params.align_tolerance_rad
+    )
+
+    # The rules' proposal.
+    wall: tuple[str | None, float] = (None, math.inf)
+    speed_scale = 1.0
+    if bearing is None:
+        theta_d, source, drive = w_ref / gain, "free", xs
+    elif aligned:
+        theta_d, source, drive = bearing, "goal", magnitude
+    else:
+        theta_d, source, drive = _circular_mean(phi, bearing), "blend", magnitude
+
+    rule: str
+    theta: float
+    if source == "goal" and bearing is not None:
+        side = memory.wall_side
+        front = levels[FRONT]
+        if side is None:
+            blocked = not corridor_clear(
+                obs, bearing, min(distance, params.block_m), params.corridor_half_width_m
+            )
+            if front is not None and front <= INTERMEDIATE and blocked and abs(bearing) < _HALF_PI:
+                side = _choose_wall_side(obs, bearing, params, memory, now_ns)
+                wall = (side, distance)
+        else:
+            clear = corridor_clear(
+                obs, bearing, min(distance, params.leave_clear_m), params.corridor_half_width_m
+            )
+            if clear and distance <= memory.wall_entry_m - params.progress_m:
+                side = None
+            else:
+                wall = (side, memory.wall_entry_m)
+        if side is not None:
+            theta, found = _wall_heading(obs, side, params, profile)
+            rule = f"wall-follow-{side}"
+            if not found:
+                speed_scale = params.front_intermediate_speed
+        else:
+            theta, speed_scale, avoided = _avoid(theta_d, levels, params)
+            rule = avoided or source
+    else:
+        theta, speed_scale, avoided = _avoid(theta_d, levels, params)
+        rule = avoided or source
+
+    if rule == "free":
+        v, w = v_ref, w_ref
+    else:
+        w = _clip(gain * theta, -profile.w_max_radps, profile.w_max_radps)
+        v = drive * profile.v_max_mps * speed_scale * max(math.cos(theta), 0.0)
+
+    # The operator's override: the stick held in one cell against the rules (module docstring).
+    changes = abs(v - v_ref) > _SAME or abs(w - w_ref) > _SAME
+    same_cell = cell is not None and cell == memory.stick_cell
+    if changes and same_cell and not aligned:
+        contest = min(memory.contest + dt / params.confidence_build_s, 1.0)
+    elif same_cell and not aligned:
+        contest = max(memory.contest - dt / params.confidence_decay_s, 0.0)
+    else:
+        contest = 0.0
+    if contest >= params.override_confidence and conf >= params.override_confidence:
+        return result(v_ref, w_ref, "override", phi, contest, (None, math.inf), bearing)
+    return result(v, w, rule, theta, contest, wall, bearing)
