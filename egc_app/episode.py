@@ -53,7 +53,7 @@ import multiprocessing
 import os
 import sys
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -64,6 +64,7 @@ from egc_common.profiles import PROFILES, get_profile
 from egc_common.scan import Scan
 from egc_robot.pipeline import FILTERS, Limiter, PipelineConfig, PipelineResult, step_command
 from egc_robot.safety import decelerate
+from egc_robot.via_points import DEFAULT_TOLERANCE_M, ViaPoints, advance, to_robot_frame
 from egc_sim.episodes import ControlOutput, EpisodeResult, TraceRow, run_episode
 from egc_sim.grid_world import World
 from egc_sim.observation import SimSensor
@@ -103,23 +104,59 @@ class EpisodeSettings:
     seed: int = 0
     dt_s: float = 0.05
     stall_time_s: float | None = None
+    via: str = "goal"  # via points for the filter: goal | route | none (VIA_CHOICES)
+
+
+VIA_CHOICES = ("goal", "route", "none")
+NS_PER_S = 1_000_000_000
 
 
 class PipelineController:
     """The robot's command pipeline as an episode controller (module docstring)."""
 
-    def __init__(self, config: PipelineConfig) -> None:
+    def __init__(
+        self,
+        config: PipelineConfig,
+        pose: Callable[[], tuple[float, float, float]] | None = None,
+        via_points: Sequence[tuple[float, float]] = (),
+        via_tolerance_m: float = DEFAULT_TOLERANCE_M,
+    ) -> None:
         self.config = config
         self.previous = (0.0, 0.0)
         self.last_stick: Stick | None = None
         self.last_result: PipelineResult | None = None  # None while holding
+        self.route = ViaPoints("map", tuple(via_points))
+        self._pose = pose  # the robot's map pose (the simulator stands in for a localiser)
+        self._via_tolerance_m = via_tolerance_m
+        self._now_ns = 0
+        self._memory: object | None = None
+
+    def _goal_in_robot_frame(self) -> tuple[float, float] | None:
+        if self._pose is None:
+            return None
+        pose = self._pose()
+        self.route = advance(self.route, pose, self._via_tolerance_m)
+        active = self.route.active
+        return None if active is None else to_robot_frame(active, pose)
 
     def __call__(self, stick: Stick, scan: Scan, dt_s: float) -> ControlOutput:
         self.last_stick, self.last_result = stick, None
+        self._now_ns += round(dt_s * NS_PER_S)
+        goal_r = self._goal_in_robot_frame()
         if stick.deadman and not stick.estop:
             r = self.last_result = step_command(
-                self.config, stick.x_o, stick.y_o, stick.mode, scan.points(), self.previous, dt_s
+                self.config,
+                stick.x_o,
+                stick.y_o,
+                stick.mode,
+                scan.points(),
+                self.previous,
+                dt_s,
+                goal_xy_m=goal_r,
+                now_ns=self._now_ns,
+                memory=self._memory,
             )
+            self._memory = r.memory
             out = ControlOutput(
                 r.v_cmd_mps,
                 r.w_cmd_radps,
@@ -130,6 +167,7 @@ class PipelineController:
                 None if r.side is None else r.side.value,
             )
         else:
+            self._memory = None
             v, w = decelerate(self.previous, dt_s, self.config.profile)
             limiter = Limiter.ESTOP if stick.estop else Limiter.HOLD
             out = ControlOutput(v, w, 0.0, 0.0, False, limiter.value)
@@ -159,7 +197,7 @@ def run_settings(
     if goal is None:
         raise UsageError(f"map {settings.map!r} suggests no goal: give --goal X,Y")
     tolerance = settings.goal_tolerance_m or world.goal_tolerance_m or DEFAULT_GOAL_TOLERANCE_M
-    mode = "shared" if settings.filter == "egc" else "direct"
+    mode = "direct" if settings.filter == "none" else "shared"
     try:
         sim = Simulator(world, profile, start, seed=settings.seed)
         operator = make_operator(
@@ -176,7 +214,11 @@ def run_settings(
         raise UsageError(str(exc)) from None
     # The simulated lidar declares "no return" as free: within its range it truly is.
     config = PipelineConfig(profile, filter=settings.filter, no_return_is_free=True)
-    controller = PipelineController(config)
+    try:
+        via = episode_via_points(settings.via, world, start, goal, 0.5 * profile.width_m)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    controller = PipelineController(config, lambda: sim.pose, via, min(tolerance, 0.5))
     recorder = (
         None if record_path is None else EpisodeRecorder(record_path, world, goal, controller)
     )
@@ -210,8 +252,38 @@ def run_settings(
         "filter": settings.filter,
         "profile": settings.profile,
         "seed": settings.seed,
+        "via": settings.via,
+        "via_points": len(via),
     }
     return result, summary
+
+
+def episode_via_points(
+    via: str,
+    world: World,
+    start: tuple[float, float, float],
+    goal: tuple[float, float],
+    half_width_m: float,
+) -> list[tuple[float, float]]:
+    """The via points an episode gives its filter (issue 11): none, the goal, or the corners of
+    a route planned on the world's map (what an operator who knows the building would click)."""
+    if via == "none":
+        return []
+    if via == "goal":
+        return [goal]
+    if via == "route":
+        from egc_sim.route import plan_route, via_points_on_route
+
+        route = plan_route(
+            world.occupancy,
+            world.resolution_m,
+            world.origin,
+            (start[0], start[1]),
+            goal,
+            half_width_m + 0.1,
+        )
+        return via_points_on_route(route)
+    raise ValueError(f"via must be one of {', '.join(VIA_CHOICES)}, got {via!r}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -248,7 +320,17 @@ def configure(parser: argparse.ArgumentParser) -> None:
         default="goal",
         help="goal | forward | sighted | route | a joystick CSV file (default goal)",
     )
-    parser.add_argument("--filter", default="egc", help="none (direct mode) | egc (default)")
+    parser.add_argument(
+        "--filter",
+        default="egc",
+        help=f"{' | '.join(FILTERS)} (default egc; none is direct mode)",
+    )
+    parser.add_argument(
+        "--via",
+        default="goal",
+        help="via points for the filter: goal (one, at the goal; default) | route (corners of "
+        "a route planned on the map) | none",
+    )
     parser.add_argument(
         "--profile", default="pioneer3dx", help=f"robot profile: {', '.join(sorted(PROFILES))}"
     )
@@ -279,6 +361,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def _settings_from_args(args: argparse.Namespace) -> EpisodeSettings:
     if args.filter not in FILTERS:
         raise UsageError(f"--filter must be one of {', '.join(FILTERS)}, got {args.filter!r}")
+    if args.via not in VIA_CHOICES:
+        raise UsageError(f"--via must be one of {', '.join(VIA_CHOICES)}, got {args.via!r}")
     if args.profile not in PROFILES:
         raise UsageError(
             f"--profile must be one of {', '.join(sorted(PROFILES))}, got {args.profile!r}"
@@ -306,6 +390,7 @@ def _settings_from_args(args: argparse.Namespace) -> EpisodeSettings:
         seed=args.seed,
         dt_s=args.dt,
         stall_time_s=args.stall_time,
+        via=args.via,
     )
 
 
@@ -434,11 +519,18 @@ def _apply_suite_item(item: dict[str, Any], base: EpisodeSettings) -> EpisodeSet
     if "goal" in item:
         gx, gy = numbers("goal", 2)
         s = replace(s, goal=(gx, gy))
-    for key, field in (("operator", "operator"), ("filter", "filter"), ("profile", "profile")):
+    for key, field in (
+        ("operator", "operator"),
+        ("filter", "filter"),
+        ("profile", "profile"),
+        ("via", "via"),
+    ):
         if key in item:
             s = replace(s, **{field: str(item[key])})
     if s.filter not in FILTERS:
         raise ValueError(f"filter must be one of {', '.join(FILTERS)}")
+    if s.via not in VIA_CHOICES:
+        raise ValueError(f"via must be one of {', '.join(VIA_CHOICES)}")
     for key, field in (
         ("max_time", "max_time_s"),
         ("goal_tolerance", "goal_tolerance_m"),

@@ -29,6 +29,7 @@ heading error to it gives y_o = clamp(gain * error / pi), x_o = max(cos(error), 
 from __future__ import annotations
 
 import hashlib
+import itertools
 import math
 from dataclasses import dataclass
 from functools import lru_cache
@@ -297,3 +298,44 @@ class RouteOperator:
             True,
             self.mode,
         )
+
+
+def via_points_on_route(
+    route: FloatArray, corner_tolerance_m: float = 0.3, max_spacing_m: float = 3.0
+) -> list[tuple[float, float]]:
+    """Via points an operator would click along ``route``: its corners, at most
+    ``max_spacing_m`` apart, ending at the goal (the start itself is left out).
+
+    Corners come from the Ramer-Douglas-Peucker simplification of the polyline: every point of
+    the route lies within ``corner_tolerance_m`` of the segments between them.
+    """
+    r = np.asarray(route, dtype=np.float64)
+    if len(r) < 2:
+        return [(float(p[0]), float(p[1])) for p in r]
+    keep = np.zeros(len(r), dtype=bool)
+    keep[0] = keep[-1] = True
+    stack = [(0, len(r) - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j <= i + 1:
+            continue
+        a, b = r[i], r[j]
+        ab = b - a
+        length = float(np.hypot(*ab))
+        seg = r[i + 1 : j] - a
+        if length == 0.0:
+            dist = np.hypot(seg[:, 0], seg[:, 1])
+        else:
+            dist = np.abs(ab[0] * seg[:, 1] - ab[1] * seg[:, 0]) / length
+        k = int(np.argmax(dist))
+        if dist[k] > corner_tolerance_m:
+            keep[i + 1 + k] = True
+            stack.extend([(i, i + 1 + k), (i + 1 + k, j)])
+    corners = r[keep]
+    points: list[tuple[float, float]] = []
+    for a, b in itertools.pairwise(corners):
+        n = max(1, math.ceil(float(np.hypot(*(b - a))) / max_spacing_m))
+        for k in range(1, n + 1):
+            p = a + (b - a) * (k / n)
+            points.append((float(p[0]), float(p[1])))
+    return points
