@@ -11,6 +11,11 @@ separate processes talking Zenoh on loopback (DESIGN 1; issue 4, the README's ma
   ``egc-teleop link`` process sits between them and the operator connects through it, so the
   demo shows how the product drives on a cellular, Wi-Fi or satellite link; ``--transport udp``
   runs the Zenoh link over UDP instead of TCP.
+- with ``--ros2``, a real ROS 2 graph sits between the robot process and the simulator:
+  ``egc-teleop sim --ros2`` is the ROS 2 robot (``/scan``, ``/odom``, ``/cmd_vel``) and the robot
+  process runs ``--driver ros2`` (DESIGN 11). Discovery stays on this machine
+  (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` unless set), so the demo's ``/cmd_vel`` never
+  reaches a real robot on the network; ``ROS_DOMAIN_ID`` is yours.
 
 The demo ends when the script ends (or after ``--duration``), or on SIGINT/SIGTERM, which it
 forwards. The children are asked to stop (SIGTERM), killed if they do not, and die with the demo
@@ -23,6 +28,7 @@ from __future__ import annotations
 import argparse
 import ctypes
 import json
+import os
 import signal
 import socket
 import subprocess
@@ -63,6 +69,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="run the robot without link-aware driving, to compare",
     )
     parser.add_argument("--json", metavar="FILE", help="also write the summary as JSON")
+    parser.add_argument(
+        "--ros2",
+        action="store_true",
+        help="ROS 2 in the loop: 'egc-teleop sim --ros2' as the robot's base and lidar, the "
+        "robot process on --driver ros2 (needs the ros2 extra)",
+    )
 
 
 def _die_with_parent() -> None:
@@ -74,11 +86,12 @@ def _die_with_parent() -> None:
         pass
 
 
-def _start(args: list[str]) -> subprocess.Popen[bytes]:
+def _start(args: list[str], env: dict[str, str] | None = None) -> subprocess.Popen[bytes]:
     return subprocess.Popen(
         [sys.executable, "-m", "egc_app.cli", *args],
         stdin=subprocess.DEVNULL,
         preexec_fn=_die_with_parent,
+        env=env,
     )
 
 
@@ -164,7 +177,8 @@ def run(args: argparse.Namespace) -> int:
         operator_endpoint = f"{proto}/127.0.0.1:{link_port}"
     workdir = Path(tempfile.mkdtemp(prefix="egc-demo-"))
     summary_path = workdir / "robot-summary.json"
-    robot_cmd = ["robot", "--driver", "sim", "--map", args.world, "--profile", args.profile]
+    driver = "ros2" if args.ros2 else "sim"
+    robot_cmd = ["robot", "--driver", driver, "--map", args.world, "--profile", args.profile]
     robot_cmd += ["--listen", endpoint, "--summary", str(summary_path)]
     if args.no_link_aware:
         robot_cmd.append("--no-link-aware")
@@ -180,7 +194,16 @@ def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    robot = _start(robot_cmd)
+    ros_env: dict[str, str] | None = None
+    base: subprocess.Popen[bytes] | None = None
+    if args.ros2:
+        from egc_sim.ros2_base import require_rclpy
+
+        require_rclpy()
+        ros_env = dict(os.environ)
+        ros_env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        base = _start(["sim", "--ros2", "--map", args.world, "--profile", args.profile], ros_env)
+    robot = _start(robot_cmd, ros_env)
     relay: subprocess.Popen[bytes] | None = None
     operator: subprocess.Popen[bytes] | None = None
     try:
@@ -196,12 +219,18 @@ def run(args: argparse.Namespace) -> int:
                 break
             if relay is not None and relay.poll() is not None:
                 break
+            if base is not None and base.poll() is not None:
+                break
     finally:
         operator_rc = None if operator is None else _stop(operator)
         robot_rc = _stop(robot)
         relay_rc = None if relay is None else _stop(relay)
+        base_rc = None if base is None else _stop(base)
     if robot_rc != 0 or operator_rc not in (0, -signal.SIGTERM):
         print(f"demo: robot exited {robot_rc}, operator {operator_rc}", file=sys.stderr)
+        return 1
+    if base_rc not in (None, 0):
+        print(f"demo: the ROS 2 simulator exited {base_rc}", file=sys.stderr)
         return 1
     if relay_rc not in (None, 0):
         print(f"demo: the link relay exited {relay_rc}", file=sys.stderr)
