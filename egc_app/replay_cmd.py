@@ -23,6 +23,7 @@ import argparse
 import contextlib
 import json
 import math
+import os
 import struct
 import sys
 from collections.abc import Iterator
@@ -117,9 +118,12 @@ def run(args: argparse.Namespace) -> int:
     with _problems_named(path):
         summary = replay(path, replayer, args.scan_topic, args.cmd_topic, args.record)
     text = json.dumps(summary, indent=2)
-    print(text)
     if args.summary:
         Path(args.summary).write_text(text + "\n")
+    try:
+        print(text, flush=True)
+    except BrokenPipeError:  # the reader left (``| head``): no traceback, no second error at exit
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     if args.record:
         print(
             f"recording saved: {args.record} (open it with: rerun {args.record})", file=sys.stderr
