@@ -24,10 +24,11 @@ profile and ``DwaParams`` in; a frozen ``DwaResult`` out. One call:
    Contact is exact, not sampled: in the moving frame every point orbits the instantaneous
    centre of rotation, and the first contact angle is the first crossing of that circle with the
    rectangle's edges (closed form, vectorised over candidates x points).
-   Margin: a point farther than ``margin_m`` from the footprint must stay outside the rectangle
-   grown by ``margin_m``; a point already closer must not get closer (the rectangle grown by its
-   present clearance): the rule of DESIGN 5.10, which lets a robot next to a wall turn or back
-   away. A point inside the footprint (contact now) leaves nothing but stopping.
+   Margin, the rule of the pipeline's sweep (DESIGN 5.10): "contact" is with the rectangle grown
+   by min(``margin_m``, the footprint's clearance now), so far from obstacles the margin is
+   kept, and closer than the margin motion may keep the clearance (drive along a wall, back
+   away) but not lower it. A point inside the footprint (contact now) leaves nothing but
+   stopping.
 3. **Score** of each admissible candidate, every term normalised to [0, 1]:
    ``alpha * heading + beta * clearance + gamma * speed``.
    - heading, with a via point: 1 - |angle of the goal seen from the pose predicted after the
@@ -48,8 +49,9 @@ Cases, each never less safe than stopping (as EGC's DESIGN 5.9 rules):
 - ``NO_POINTS_UNKNOWN``: no valid scan point and no-return not declared free -> stop
   (``egc.EgcCase.NO_POINTS_UNKNOWN``'s rule). ``NO_POINTS_FREE``: declared free -> every
   candidate is admissible with full clearance.
-- A candidate with |w| <= 1e-5 |v| (radius >= 100 km) is treated as straight, with the rectangle
-  grown by the arc's largest lateral deviation over the look-ahead (well under a millimetre).
+- A candidate whose arc deviates from a straight line by less than 0.5 um within the reach
+  (radius >= 2 reach^2 / 1 um, thousands of km) is driven as straight, the rectangle grown by
+  that deviation; points closer than 1 um to the footprint count as touching it.
 
 Cost: candidates x points in reach (within half-diagonal + margin + look-ahead of the origin);
 ``bench filter`` reports it next to EGC's.
@@ -78,8 +80,6 @@ _SAME = 1e-9
 # Points within this distance of the footprint count as touching it (m); grown rectangles stay
 # this far inside a point's present clearance, so no contact angle rounds across zero.
 _TOUCH_M = 1e-6
-# |w| <= _STRAIGHT |v| is driven as a straight line (radius >= 100 km).
-_STRAIGHT = 1e-5
 _MAX_SAMPLES = 201
 
 
@@ -226,12 +226,16 @@ def stopping_times(
 
 
 def contact_angles(
-    radius_m: FloatArray, x_m: FloatArray, y_m: FloatArray, half_l: FloatArray, half_w: FloatArray
+    radius_m: FloatArray,
+    x_m: FloatArray,
+    y_m: FloatArray,
+    half_l: float | FloatArray,
+    half_w: float | FloatArray,
 ) -> FloatArray:
     """First contact angle (rad, in (0, 2 pi], inf for none) of each candidate turning left.
 
     Canonical form: forward, left turn of radius R >= 0 (R = 0: in place), points (x, y) in {R}
-    strictly outside their rectangles |x| <= half_l, |y| <= half_w (per point). Seen from the
+    strictly outside the rectangle |x| <= half_l, |y| <= half_w (scalars or per point). Seen from the
     robot, a point orbits the centre (0, R) clockwise; the answer is the smallest clockwise
     angle to a crossing of that orbit with a rectangle edge. Shapes: radius (K, 1); the rest
     (1, N) or (K, N). Returns (K,).
@@ -381,24 +385,25 @@ def _free_and_admissible(
         if bool((now <= 2.0 * _TOUCH_M).any()):  # in contact now: only stopping
             free[~standing] = 0.0
             return free, admissible
-        grow = np.minimum(now - _TOUCH_M, params.margin_m)
+        grow = min(float(now.min()), params.margin_m) - _TOUCH_M
     else:
-        grow = np.empty(0)
+        grow = params.margin_m
     a, b = half_l + grow, half_w + grow
 
     # Canonical form: forward (mirror x for reverse), then left turns (mirror y for right).
     sx = np.where(v < 0.0, -1.0, 1.0)
     sy = np.where(sx * w < 0.0, -1.0, 1.0)
     speed, turn = np.abs(v), np.abs(w)
-    straight = ~standing & (turn <= _STRAIGHT * speed)
+    # Curvature below TOUCH / reach^2 deviates from a straight line by at most TOUCH / 2 within
+    # the reach: driven as straight, with the rectangle grown by that deviation.
+    dev = 0.5 * _TOUCH_M
+    straight = ~standing & (turn * reach * reach <= _TOUCH_M * speed)
     turning = ~standing & ~straight
 
     if straight.any():
-        # Grown by the largest lateral deviation of a >= 100 km radius over the reach.
-        dev = reach * reach * _STRAIGHT * 0.5
         xs = sx[straight, None] * x[None, :]
-        hits = (np.abs(y)[None, :] <= (b + dev)[None, :]) & (xs > 0.0)
-        gap = np.where(hits, xs - (a - dev)[None, :], np.inf)
+        hits = (np.abs(y) <= b + dev)[None, :] & (xs > 0.0)
+        gap = np.where(hits, xs - (a + dev), np.inf)
         s_free = gap.min(axis=1) if x.size else np.full(int(straight.sum()), np.inf)
         s_free = np.maximum(s_free, 0.0)
         free[straight] = s_free
@@ -408,7 +413,7 @@ def _free_and_admissible(
         radius = (speed[turning] / turn[turning])[:, None]
         xt = sx[turning, None] * x[None, :]
         yt = sy[turning, None] * y[None, :]
-        theta = contact_angles(radius, xt, yt, a[None, :], b[None, :])
+        theta = contact_angles(radius, xt, yt, a, b)
         arm = np.where(radius[:, 0] > 0.0, radius[:, 0], profile.half_diagonal_m)
         free[turning] = theta * arm
         admissible[turning] = turn[turning] * t_stop[turning] <= theta
