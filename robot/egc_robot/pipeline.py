@@ -20,6 +20,8 @@ from egc_common.joystick import JoystickMapping, deflection_to_velocity
 from egc_common.profiles import RobotProfile
 from egc_common.scan import ObstaclePoints, obstacle_points
 
+from egc_robot.filters.assist import AssistParams
+from egc_robot.filters.dwa import DwaParams
 from egc_robot.filters.egc import EgcParams, EgcResult, Region, Side
 from egc_robot.filters.family import (
     FilterInput,
@@ -68,7 +70,8 @@ class PipelineConfig:
     horizon_s: float | None = None
     no_return_is_free: bool = False
     sweep: SweepParams = field(default_factory=SweepParams)
-    extra_params: tuple[tuple[str, object], ...] = ()  # per-filter params (dwa, assist)
+    dwa: DwaParams | None = None  # None: from the profile
+    assist: AssistParams | None = None
     egc_params: EgcParams = field(init=False, repr=False, compare=False)  # derived, once
     settings: FilterSettings = field(init=False, repr=False, compare=False)
 
@@ -84,7 +87,7 @@ class PipelineConfig:
         if self.no_return_is_free:
             params = EgcParams(params.r_min_m, params.r_max_m, params.horizon_s, True)
         object.__setattr__(self, "egc_params", params)
-        object.__setattr__(self, "settings", FilterSettings(p, params, dict(self.extra_params)))
+        object.__setattr__(self, "settings", FilterSettings(p, params, self.dwa, self.assist))
 
 
 @dataclass(frozen=True, slots=True)

@@ -23,7 +23,10 @@ from egc_common.messages import FILTER_NAMES
 from egc_common.profiles import RobotProfile
 from egc_common.scan import ObstaclePoints
 
+from egc_robot.filters.assist import AssistMemory, AssistParams, assist_step
+from egc_robot.filters.dwa import DwaCase, DwaParams, dwa_filter
 from egc_robot.filters.egc import EgcCase, EgcParams, EgcResult, Region, Side, egc_filter
+from egc_robot.filters.ek_egc import ek_egc_filter
 
 FILTERS: Final = FILTER_NAMES  # ("none", "egc", "ek-egc", "assist", "dwa")
 # Filtered modes an operator cycles through at run time, in this order.
@@ -81,11 +84,28 @@ class FilterResult:
 
 @dataclass(frozen=True, slots=True)
 class FilterSettings:
-    """Parameters of every filter, built once from the profile and the robot's config."""
+    """Parameters of every filter, built once from the profile and the robot's config.
+
+    ``dwa`` and ``assist`` default to their ``from_profile`` parameters (with the driver's
+    "no return is free" declaration of ``egc``); the robot TOML's ``[dwa]`` and ``[assist]``
+    tables override them.
+    """
 
     profile: RobotProfile
     egc: EgcParams
-    extra: dict[str, object] = field(default_factory=dict)  # per-filter params (dwa, assist)
+    dwa: DwaParams | None = None
+    assist: AssistParams | None = None
+
+    def __post_init__(self) -> None:
+        free = self.egc.no_return_is_free
+        if self.dwa is None:
+            object.__setattr__(
+                self, "dwa", DwaParams.from_profile(self.profile, no_return_is_free=free)
+            )
+        if self.assist is None:
+            object.__setattr__(
+                self, "assist", AssistParams.from_profile(self.profile, no_return_is_free=free)
+            )
 
     @property
     def ek_length_m(self) -> float:
@@ -123,7 +143,76 @@ def _run_egc(inp: FilterInput, settings: FilterSettings, memory: object | None) 
     return _from_egc("egc", egc_filter(inp.v_ref_mps, inp.w_ref_radps, inp.obstacles, settings.egc))
 
 
-_REGISTRY: dict[str, FilterFn] = {"none": _run_none, "egc": _run_egc}
+def _run_ek_egc(inp: FilterInput, settings: FilterSettings, memory: object | None) -> FilterResult:
+    res = ek_egc_filter(
+        inp.v_ref_mps, inp.w_ref_radps, inp.obstacles, settings.egc, settings.ek_length_m
+    )
+    return _from_egc("ek-egc", res)
+
+
+def _run_dwa(inp: FilterInput, settings: FilterSettings, memory: object | None) -> FilterResult:
+    assert settings.dwa is not None
+    res = dwa_filter(
+        inp.v_ref_mps,
+        inp.w_ref_radps,
+        inp.obstacles,
+        inp.state.v_mps,
+        inp.state.w_radps,
+        inp.goal_xy_m,
+        settings.profile,
+        settings.dwa,
+    )
+    seen = res.case in (DwaCase.CHOSEN, DwaCase.NO_ADMISSIBLE)
+    moving = abs(inp.v_ref_mps) > _SAME or abs(inp.w_ref_radps) > _SAME
+    return FilterResult(
+        name="dwa",
+        v_mps=res.v_mps,
+        w_radps=res.w_radps,
+        modified=res.modified,
+        reason=res.case.value,
+        w_si=0.0 if res.stopped else 1.0,
+        region=Region.UNSAFE if res.stopped else Region.SAFE,
+        stopped_near_obstacle=res.stopped and seen and moving,
+        detail=res,
+    )
+
+
+# Assist's rules that stop for lack of information, not because something is close.
+_ASSIST_BLIND = ("invalid", "unknown", "idle")
+
+
+def _run_assist(inp: FilterInput, settings: FilterSettings, memory: object | None) -> FilterResult:
+    assert settings.assist is not None
+    p = settings.profile
+    mem = memory if isinstance(memory, AssistMemory) else AssistMemory.initial()
+    # The stick, back from eq. 4 (the pipeline hands every filter the same velocity reference).
+    x_o = inp.v_ref_mps / p.v_max_mps
+    y_o = inp.w_ref_radps / p.w_max_radps
+    res = assist_step(mem, x_o, y_o, inp.obstacles, inp.goal_xy_m, inp.now_ns, settings.assist, p)
+    stopped = abs(res.v_mps) <= _SAME and abs(res.w_radps) <= _SAME
+    moving = abs(inp.v_ref_mps) > _SAME or abs(inp.w_ref_radps) > _SAME
+    return FilterResult(
+        name="assist",
+        v_mps=res.v_mps,
+        w_radps=res.w_radps,
+        modified=res.modified,
+        reason=res.rule,
+        w_si=0.0 if stopped and moving else 1.0,
+        region=Region.UNSAFE if stopped and moving else Region.SAFE,
+        stopped_near_obstacle=stopped and moving and res.rule not in _ASSIST_BLIND,
+        detail=res,
+        memory=res.memory,
+        suggested_rad=res.heading_rad,
+    )
+
+
+_REGISTRY: dict[str, FilterFn] = {
+    "none": _run_none,
+    "egc": _run_egc,
+    "ek-egc": _run_ek_egc,
+    "assist": _run_assist,
+    "dwa": _run_dwa,
+}
 
 
 def available_filters() -> tuple[str, ...]:
