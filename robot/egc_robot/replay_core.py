@@ -22,7 +22,6 @@ any other scan without a valid reading is unknown, which the filters treat as a 
 from __future__ import annotations
 
 import bisect
-import inspect
 import itertools
 import math
 import statistics
@@ -258,7 +257,7 @@ class Replayer:
 
     Built once per replay (``Replayer.for_filter``). Stateless filters give the same answer
     for a scan whatever came before; a filter with memory (``assist``) gets its memory back
-    through ``step``'s return value.
+    through ``step``'s return value, and the scan's receive time as its clock.
     """
 
     config: PipelineConfig  # an empty scan is unknown: stop
@@ -301,11 +300,7 @@ class Replayer:
             result.limiter.value,
             points.closest_m,
         )
-        return verdict, result, obstacles, getattr(result, "memory", None)
-
-
-def _accepted_keywords() -> frozenset[str]:
-    return frozenset(inspect.signature(pipeline.filter_velocity).parameters)
+        return verdict, result, obstacles, result.memory
 
 
 def _filter_velocity(
@@ -316,21 +311,24 @@ def _filter_velocity(
     now_ns: int,
     memory: object | None,
 ) -> PipelineResult:
-    """``pipeline.filter_velocity`` in shared mode, stateless (no acceleration limits: each scan
-    stands alone), with the robot state, time and filter memory when the pipeline takes them.
-    The robot is taken to be moving as recorded."""
-    keywords: dict[str, Any] = {}
-    accepted = _accepted_keywords()
-    if "state" in accepted:
-        state_type = getattr(pipeline, "RobotState", None)
-        if state_type is not None:
-            keywords["state"] = state_type(v_mps, w_radps)
-    if "now_ns" in accepted:
-        keywords["now_ns"] = now_ns
-    if "memory" in accepted:
-        keywords["memory"] = memory
+    """``pipeline.filter_velocity`` in shared mode for one scan.
+
+    The robot is taken to be moving as recorded: the pipeline's robot state (which it takes
+    from the previous command) is the recorded command itself, and the acceleration limits are
+    off (an infinite period: each scan stands alone, and a filter that would stop the robot
+    shows as a stop, not as the first step of a ramp). No via point: logs have none.
+    """
     return pipeline.filter_velocity(
-        config, v_mps, w_radps, "shared", obstacles, None, 0.0, **keywords
+        config,
+        v_mps,
+        w_radps,
+        "shared",
+        obstacles,
+        (v_mps, w_radps),
+        math.inf,
+        goal_xy_m=None,
+        now_ns=now_ns,
+        memory=memory,
     )
 
 

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pytest
+from egc_robot.pipeline import FILTERS
 from rosbags.rosbag2 import StoragePlugin, Writer
 
 from egc_app.cli import main
@@ -230,3 +231,15 @@ def test_filter_choices_follow_the_pipeline():
     configure(parser)
     for name in FILTERS:
         assert parser.parse_args(["x.bag", "--filter", name]).filter == name
+
+
+@pytest.mark.parametrize("name", FILTERS)
+def test_every_filter_of_the_family_replays(tmp_path, capsys, name):
+    log = corridor_log(tmp_path / "log", "mcap")
+    code, s, _ = replay(capsys, str(log), "--filter", name)
+    assert code == 0 and s["filter"] == name and s["scans"] == 30 and s["commands"] == 30
+    assert set(s["limiters"]) <= {"none", name, "sweep", "limits"}
+    if name == "none":
+        assert s["changed"] == 0 and s["hold_s"] == 0
+    elif name != "dwa":  # dwa lets 0.12 m/s through: the robot could still stop before the wall
+        assert s["changed"] > 0

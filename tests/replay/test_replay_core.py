@@ -191,3 +191,21 @@ def test_the_robots_pipeline_decides(filter_name):
     # without a command the scan is only measured
     none, res, _, _ = replayer.step(s, scan_points(s), None)
     assert res is None and not none.has_command and none.closest_m == pytest.approx(0.6)
+
+
+@pytest.mark.parametrize("d", [0.5, 0.62, 0.7, 0.9, 1.5])
+@pytest.mark.parametrize("w", [-0.4, 0.0, 0.3])
+def test_each_scan_stands_alone_no_acceleration_ramp(d, w):
+    """The robot state is the recorded command, yet no acceleration limit applies: egc gives
+    what the stateless pipeline call gives, a stop included."""
+    from egc_robot.pipeline import filter_velocity
+
+    replayer = Replayer.for_filter("egc", PIONEER3DX)
+    s = wall(d)
+    points = scan_points(s)
+    v, *_ = replayer.step(s, points, VelocitySample(0, 0.12, w))
+    ref = filter_velocity(replayer.config, 0.12, w, "shared", points.xy_m, None, 0.0)
+    assert (v.v_cmd_mps, v.w_cmd_radps) == pytest.approx(
+        (ref.v_cmd_mps, ref.w_cmd_radps), abs=1e-12
+    )
+    assert v.limiter == ref.limiter.value
