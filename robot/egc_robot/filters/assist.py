@@ -44,7 +44,9 @@ How each part maps to the paper
     target, 15-25 deg): theta clamped to +-``gap_max_rad``, speed ``gap_speed`` (rule ``gap``);
   * FRONT active (the initial rule set of Fig. 4, sec. V "turned away"): at INTERMEDIATE the
     heading turns by at least ``front_turn_rad`` towards the more open side and slows to
-    ``front_intermediate_speed``; at CLOSE it turns in place (rule ``avoid-front``).
+    ``front_intermediate_speed``; at CLOSE it turns in place (rule ``avoid-front``), and keeps
+    turning the same way while it does (the memory's ``front_turn``: in a corner the more open
+    side swaps as the robot turns, and re-choosing every cycle rocks it in place for ever).
   The robot then turns with w = clamp(``heading_gain_per_s`` * theta, +-w_max) and drives with
   v = m v_max s max(cos theta, 0): m is the stick's magnitude J with a via point (sec. II.C: J
   "showed how fast an operator wanted the robot to go") and its forward deflection x_o without
@@ -288,7 +290,8 @@ class AssistMemory:
     rules; ``prev_stick``: last (x_o, y_o); ``last_ns``: time of the last step; ``wall_side``:
     "left" / "right" while wall following (the side the wall is on), ``wall_entry_m``: the via
     point's distance when following began; ``last_wall_side`` / ``wall_left_ns``: the side used
-    last and when following ended.
+    last and when following ended; ``front_turn``: the way (+1 left, -1 right) ``avoid-front``
+    is turning, kept while it keeps firing (0: it did not fire last cycle).
     """
 
     counts: Grid = _ZERO_GRID
@@ -301,6 +304,7 @@ class AssistMemory:
     wall_entry_m: float = math.inf
     last_wall_side: str | None = None
     wall_left_ns: int | None = None
+    front_turn: float = 0.0
 
     @staticmethod
     def initial() -> AssistMemory:
@@ -473,9 +477,16 @@ def _wall_heading(
 
 
 def _avoid(
-    theta: float, levels: tuple[int | None, int | None, int | None], params: AssistParams
+    theta: float,
+    levels: tuple[int | None, int | None, int | None],
+    params: AssistParams,
+    front_turn: float = 0.0,
 ) -> tuple[float, float, str | None]:
-    """The obstacle rules over a desired heading: (heading, speed factor, rule or None)."""
+    """The obstacle rules over a desired heading: (heading, speed factor, rule or None).
+
+    ``front_turn`` is the way ``avoid-front`` turned last cycle: it keeps turning that way
+    (otherwise a robot in a corner swaps sides as it turns and never gets out).
+    """
     left, front, right = levels
     if front is not None and front <= INTERMEDIATE:
         # More open side: the farther nearest band (None = nothing active) wins; tie -> theta.
@@ -483,6 +494,8 @@ def _avoid(
         ro = 3 if right is None else right
         sign = 1.0 if lo > ro else -1.0 if ro > lo else (1.0 if theta >= 0.0 else -1.0)
         if front == CLOSE:
+            if front_turn != 0.0:
+                sign = 1.0 if front_turn > 0.0 else -1.0
             return sign * _HALF_PI, 0.0, "avoid-front"
         turned = sign * max(sign * theta, params.front_turn_rad)
         return turned, params.front_intermediate_speed, "avoid-front"
@@ -549,6 +562,8 @@ def assist_step(
         wall: tuple[str | None, float] = (None, math.inf),
         bearing: float | None = None,
     ) -> AssistResult:
+        turning = rule == "avoid-front" and heading is not None and v == 0.0
+        turn = math.copysign(1.0, heading) if turning and heading is not None else 0.0
         last_side, left_ns = memory.last_wall_side, memory.wall_left_ns
         if memory.wall_side is not None and wall[0] is None:  # following just ended
             last_side, left_ns = memory.wall_side, now_ns
@@ -565,6 +580,7 @@ def assist_step(
             wall[1],
             last_side,
             left_ns,
+            turn,
         )
         modified = abs(v - v_ref) > _SAME or abs(w - w_ref) > _SAME
         return AssistResult(
@@ -630,10 +646,10 @@ def assist_step(
             if not found:
                 speed_scale = params.front_intermediate_speed
         else:
-            theta, speed_scale, avoided = _avoid(theta_d, levels, params)
+            theta, speed_scale, avoided = _avoid(theta_d, levels, params, memory.front_turn)
             rule = avoided or source
     else:
-        theta, speed_scale, avoided = _avoid(theta_d, levels, params)
+        theta, speed_scale, avoided = _avoid(theta_d, levels, params, memory.front_turn)
         rule = avoided or source
 
     if rule == "free":
