@@ -10,7 +10,9 @@ The pieces are the real ones, wired as the processes wire them, with the link mo
   stick at 50 Hz (at a seeded phase to the robot's cycle, as two unsynchronised loops are); each stick becomes an ``OperatorCommand`` stamped with the robot's clock (a
   synchronised operator), with ``view_age_ms`` = the age of the newest telemetry that has
   arrived, encoded, sent through the **uplink** ``LinkModel`` (``ordered`` for tcp) and handed
-  to ``controller.on_command`` at its arrival time.
+  to ``controller.on_command`` at its arrival time. Its via point (the goal, ``map`` frame,
+  issue 11) goes the same way once a second as a ``GoalMessage`` to ``controller.on_goal``;
+  the filters that steer to a via point (``assist``, ``dwa``) use it, the others ignore it.
 - the view: every cycle's telemetry goes through the **downlink** ``LinkModel``; what arrives
   is what the operator model sees (``sighted`` and ``route`` observe it through their reaction
   time; ``goal`` and ``forward`` steer from its pose).
@@ -49,7 +51,13 @@ import time
 from typing import Any, Final
 
 import numpy as np
-from egc_common.messages import MAX_VIEW_AGE_MS, Odometry, OperatorCommand, RejectReason
+from egc_common.messages import (
+    MAX_VIEW_AGE_MS,
+    GoalMessage,
+    Odometry,
+    OperatorCommand,
+    RejectReason,
+)
 from egc_common.profiles import get_profile
 from egc_robot.controller import ControllerConfig, RobotController
 from egc_robot.pipeline import Limiter, PipelineConfig
@@ -79,7 +87,7 @@ _INTERVENTIONS: Final = (Limiter.EGC, Limiter.SWEEP)
 _TELEMETRY_BASE_BYTES: Final = 600
 
 # Event kinds, in the order they are handled at the same instant.
-_DOWN, _OPERATOR, _UP, _ROBOT = 0, 1, 2, 3
+_DOWN, _OPERATOR, _UP, _GOAL, _ROBOT = 0, 1, 2, 3, 4
 
 
 class OperatorSide:
@@ -202,6 +210,8 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
     outcome = "timeout"
     dt_s = ROBOT_PERIOD_NS / NS_PER_S
     sent = 0
+    goal_seq = 0
+    next_goal_ns = 0
 
     while events:
         t_ns, kind, _, data = heapq.heappop(events)
@@ -215,7 +225,16 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
             arrival = up.transit(t_s, len(payload))
             if arrival is not None:
                 push(max(round(arrival * NS_PER_S), t_ns), _UP, payload)
+            if t_ns >= next_goal_ns:  # the operator's via point, repeated at 1 Hz as it does
+                goal_seq += 1
+                goal_msg = GoalMessage(goal_seq, 0, OPERATOR_ID, "map", (goal,)).encode()
+                goal_arrival = up.transit(t_s, len(goal_msg))
+                if goal_arrival is not None:
+                    push(max(round(goal_arrival * NS_PER_S), t_ns), _GOAL, goal_msg)
+                next_goal_ns = t_ns + NS_PER_S
             push(t_ns + OPERATOR_PERIOD_NS, _OPERATOR, None)
+        elif kind == _GOAL:
+            controller.on_goal(data, CLOCK0_NS + t_ns)
         elif kind == _UP:
             if not alive:
                 controller.on_operator_alive(OPERATOR_ID, True)
@@ -250,7 +269,9 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
             controller.on_scan(sim.scan(stamp_ns=now_ns), now_ns)
             ox, oy, oth = sim.odometry
             v, w = sim.twist
-            controller.on_odometry(Odometry(now_ns, ox, oy, oth, v, w, sim.collided))
+            controller.on_odometry(
+                Odometry(now_ns, ox, oy, oth, v, w, sim.collided, map_pose=sim.pose)
+            )
             out = controller.step(now_ns)
             base = (out.base.linear_mps, out.base.angular_radps)
             tel = out.telemetry
