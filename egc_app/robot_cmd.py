@@ -53,6 +53,8 @@ from egc_common.transport import (
 )
 from egc_robot.controller import ControllerConfig, RobotController
 from egc_robot.drivers import Driver, SensorUpdate
+from egc_robot.filters.assist import AssistParams
+from egc_robot.filters.dwa import DwaParams
 from egc_robot.pipeline import FILTERS, PipelineConfig
 from egc_robot.ros2_core import CMD_TYPES, ROS2_KEYS, Ros2Settings, ros2_settings
 from egc_robot.run_stats import RunStats
@@ -201,6 +203,12 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
         pipe = config_mod.section(cfg, "pipeline", SECTIONS["pipeline"])
         profile = get_profile(args.profile)
         horizon = pipe.get("horizon_s")
+        free = bool(pipe.get("no_return_is_free", getattr(args, "driver", None) == "ros2"))
+        filter_tables = {"no_return_is_free": free}
+        dwa_table = cfg.get("dwa", {})
+        assist_table = cfg.get("assist", {})
+        if not isinstance(dwa_table, dict) or not isinstance(assist_table, dict):
+            raise UsageError("[dwa] and [assist] must be tables")
         pipeline = PipelineConfig(
             profile=profile,
             mapping=JoystickMapping(
@@ -208,9 +216,9 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
             ),
             filter=args.filter,
             horizon_s=None if horizon is None else _number(pipe, "horizon_s", 0.0),
-            no_return_is_free=bool(
-                pipe.get("no_return_is_free", getattr(args, "driver", None) == "ros2")
-            ),
+            no_return_is_free=free,
+            dwa=DwaParams.from_mapping(filter_tables | dwa_table, profile),
+            assist=AssistParams.from_mapping(filter_tables | assist_table, profile),
         )
         rate_hz = args.rate_hz if args.rate_hz is not None else _number(robot, "rate_hz", 20.0)
         if not 1.0 <= rate_hz <= 1000.0:
