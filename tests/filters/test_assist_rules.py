@@ -1,0 +1,527 @@
+"""The rule-based assistant (``assist``, DESIGN 6; rule-based-assist paper): one test per rule,
+the histograms with explicit times, wall following in and out, and a closed loop in the
+simulator (assist, then the profile limits and the footprint sweep, as the pipeline will)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from egc_common.profiles import JACKAL, PIONEER3DX
+from egc_common.scan import obstacle_points
+from egc_robot.filters.assist import (
+    CLOSE,
+    FARAWAY,
+    FRONT,
+    INTERMEDIATE,
+    LEFT,
+    RIGHT,
+    RULES,
+    AssistMemory,
+    AssistParams,
+    AssistResult,
+    assist_step,
+    stick_cell,
+)
+from egc_robot.safety import SweepParams, limit_acceleration, limit_velocity, sweep_scale
+from egc_sim.operators import GoalOperator
+from egc_sim.simulator import Simulator
+
+from tests.sim.helpers import boxed_room, grid_world
+
+P = PIONEER3DX
+PARAMS = AssistParams.from_profile(P)
+MS = 1_000_000  # ns per ms
+DT_MS = 50
+
+
+def line(x0: float, y0: float, x1: float, y1: float, n: int = 60) -> np.ndarray:
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    return np.array([x0, y0]) + t * np.array([x1 - x0, y1 - y0])
+
+
+# A far point behind the robot: the scan is not empty, and it lands in no cell.
+FAR_BEHIND = np.array([[-5.0, 0.0]])
+
+
+def run(
+    x_o: float,
+    y_o: float,
+    points: np.ndarray,
+    goal: tuple[float, float] | None = None,
+    cycles: int = 3,
+    memory: AssistMemory | None = None,
+    t0_ms: int = 0,
+    dt_ms: int = DT_MS,
+    params: AssistParams = PARAMS,
+) -> AssistResult:
+    """``cycles`` steps with the same inputs; the last result."""
+    mem = memory or AssistMemory.initial()
+    obstacles = obstacle_points(points)
+    result = None
+    for k in range(cycles):
+        result = assist_step(mem, x_o, y_o, obstacles, goal, (t0_ms + k * dt_ms) * MS, params, P)
+        mem = result.memory
+    assert result is not None
+    return result
+
+
+# -- parameters ---------------------------------------------------------------------------------
+
+
+def test_params_derived_from_the_profile():
+    p = AssistParams.from_profile(P)
+    assert p.close_m == pytest.approx(P.r_max_m)  # 0.595
+    assert p.intermediate_m == pytest.approx(P.r_max_m + P.length_m)
+    assert p.faraway_m == pytest.approx(P.r_max_m + 2 * P.length_m)
+    assert p == AssistParams()  # the defaults are the Pioneer's
+    j = AssistParams.from_profile(JACKAL)
+    assert j.close_m == pytest.approx(JACKAL.r_max_m)
+    assert j.corridor_half_width_m == pytest.approx(0.75 * JACKAL.width_m)
+
+
+def test_params_from_mapping_validates():
+    p = AssistParams.from_mapping({"activation_threshold": 8, "heading_gain_per_s": 2}, P)
+    assert p.activation_threshold == 8 and p.heading_gain_per_s == 2.0
+    with pytest.raises(ValueError, match="unknown keys: colse_m"):
+        AssistParams.from_mapping({"colse_m": 0.5})
+    with pytest.raises(ValueError, match="activation_threshold must be an integer"):
+        AssistParams.from_mapping({"activation_threshold": 6.5})
+    with pytest.raises(ValueError, match="close_m < intermediate_m"):
+        AssistParams.from_mapping({"close_m": 2.0})
+    with pytest.raises(ValueError, match="must be finite"):
+        AssistParams.from_mapping({"gap_speed": math.nan})
+    with pytest.raises(ValueError, match="true or false"):
+        AssistParams.from_mapping({"no_return_is_free": 1})
+    with pytest.raises(ValueError, match="must be a number"):
+        AssistParams.from_mapping({"wall_distance_m": "far"})
+
+
+# -- the obstacle histogram (paper sec. II.B) ---------------------------------------------------
+
+
+def test_points_fall_into_sector_and_band_cells():
+    pts = np.array(
+        [
+            [0.5, 0.0],  # front close (0.5 m)
+            [0.6, 0.6],  # left intermediate (0.85 m)
+            [1.0, -0.9],  # right faraway (1.35 m)
+            [2.0, 0.0],  # beyond faraway: no cell
+            [-0.3, 0.5],  # behind: no cell (the rules look ahead, as the paper's sensors)
+        ]
+    )
+    r = run(0.0, 0.0, pts, cycles=1)
+    counts = r.memory.counts
+    assert counts[FRONT][CLOSE] == 6
+    assert counts[LEFT][INTERMEDIATE] == 6
+    assert counts[RIGHT][FARAWAY] == 6
+    assert sum(map(sum, counts)) == 18
+
+
+def test_histogram_increments_by_6_up_to_16_and_decrements_by_2_down_to_0():
+    pts = np.array([[0.5, 0.0]])
+    mem = AssistMemory.initial()
+    seen = []
+    for k in range(4):
+        mem = assist_step(mem, 0.0, 0.0, pts, None, k * DT_MS * MS, PARAMS, P).memory
+        seen.append(mem.counts[FRONT][CLOSE])
+    assert seen == [6, 12, 16, 16]  # saturates at 16
+    for k in range(4, 13):
+        mem = assist_step(mem, 0.0, 0.0, FAR_BEHIND, None, k * DT_MS * MS, PARAMS, P).memory
+        seen.append(mem.counts[FRONT][CLOSE])
+    assert seen[4:] == [14, 12, 10, 8, 6, 4, 2, 0, 0]  # floors at 0
+    assert all(c == 0 for i, row in enumerate(mem.counts) for j, c in enumerate(row))
+
+
+def test_activation_threshold():
+    pts = np.array([[0.5, 0.0]])
+    one = run(0.0, 0.0, pts, cycles=1)
+    assert one.memory.counts[FRONT][CLOSE] == 6 and not one.active[FRONT][CLOSE]  # 6 is not > 6
+    two = run(0.0, 0.0, pts, cycles=2)
+    assert two.active[FRONT][CLOSE] and two.levels == (None, CLOSE, None)
+    strict = replace(PARAMS, activation_threshold=12)
+    assert not run(0.0, 0.0, pts, cycles=2, params=strict).active[FRONT][CLOSE]  # 12
+    assert run(0.0, 0.0, pts, cycles=3, params=strict).active[FRONT][CLOSE]  # 16
+
+
+def test_a_single_stray_reading_never_activates_a_cell():
+    mem = AssistMemory.initial()
+    counts = []
+    for k in range(5):
+        pts = np.array([[0.5, 0.0]]) if k == 0 else FAR_BEHIND
+        r = assist_step(mem, 1.0, 0.0, pts, None, k * DT_MS * MS, PARAMS, P)
+        mem = r.memory
+        counts.append(mem.counts[FRONT][CLOSE])
+        assert not any(map(any, r.active))
+    assert counts == [6, 4, 2, 0, 0]
+
+
+# -- the joystick confidence histogram (paper sec. II.C) ----------------------------------------
+
+
+def confidence_after(ms: int, dt_ms: int, stick=(1.0, 0.0)) -> float:
+    pts = np.array([[5.0, 5.0]])
+    mem = AssistMemory.initial()
+    r = None
+    for t in range(0, ms + 1, dt_ms):
+        r = assist_step(mem, stick[0], stick[1], pts, None, t * MS, PARAMS, P)
+        mem = r.memory
+    assert r is not None
+    return r.confidence
+
+
+@pytest.mark.parametrize("dt_ms", [10, 50, 100])
+def test_confidence_builds_in_about_half_a_second_at_any_control_rate(dt_ms):
+    assert confidence_after(0, dt_ms) == 0.0  # the first cycle has no dt
+    assert confidence_after(200, dt_ms) == pytest.approx(0.4)
+    assert confidence_after(400, dt_ms) == pytest.approx(0.8)
+    assert confidence_after(500, dt_ms) == pytest.approx(1.0)
+    assert confidence_after(2000, dt_ms) == 1.0  # saturates
+
+
+def test_confidence_decays_in_about_150_ms_when_the_stick_moves():
+    pts = np.array([[5.0, 5.0]])
+    mem = AssistMemory.initial()
+    for t in range(0, 601, 10):  # steady forward for 0.6 s at 100 Hz
+        mem = assist_step(mem, 1.0, 0.0, pts, None, t * MS, PARAMS, P).memory
+    forward = stick_cell(0.0, PARAMS.confidence_bins)
+    assert mem.confidence[forward] == 1.0
+    levels = {}
+    for t in range(610, 801, 10):  # the stick swings to the left
+        r = assist_step(mem, 0.0, 1.0, pts, None, t * MS, PARAMS, P)
+        mem = r.memory
+        levels[t - 600] = mem.confidence[forward]
+    assert levels[50] == pytest.approx(1.0 - 50 / 150)
+    assert levels[100] == pytest.approx(1.0 - 100 / 150)
+    assert levels[150] == pytest.approx(0.0, abs=1e-9)
+    assert r.confidence == pytest.approx(0.4)  # the new cell builds at its own pace
+    # A centred stick occupies no cell: everything decays, confidence 0.
+    r = assist_step(mem, 0.0, 0.0, pts, None, 1000 * MS, PARAMS, P)
+    assert r.confidence == 0.0
+
+
+def test_time_comes_from_now_ns_only():
+    pts = np.array([[0.5, 0.3]])
+    a = run(0.6, 0.2, pts, cycles=4)
+    b = run(0.6, 0.2, pts, cycles=4)
+    assert a == b  # a pure function of its inputs
+    # A clock that goes backwards counts as no time; a long gap counts as max_dt_s at most.
+    back = assist_step(a.memory, 0.6, 0.2, pts, None, 0, PARAMS, P)
+    assert back.confidence == a.confidence
+    gap = assist_step(a.memory, 0.6, 0.2, pts, None, 10**12, PARAMS, P)
+    assert gap.confidence == pytest.approx(
+        min(a.confidence + PARAMS.max_dt_s / PARAMS.confidence_build_s, 1.0)
+    )
+
+
+# -- one test per rule --------------------------------------------------------------------------
+
+
+def test_every_rule_has_a_test():
+    names = {n for n in globals() if n.startswith("test_rule_")}
+    assert names == {"test_rule_" + r.replace("-", "_") for r in RULES}
+
+
+def test_rule_invalid():
+    pts = np.array([[3.0, 0.0]])
+    for x_o, y_o, goal in ((math.nan, 0.0, None), (1.0, math.inf, None), (1.0, 0.0, (math.nan, 1))):
+        r = run(x_o, y_o, pts, goal)
+        assert (r.rule, r.v_mps, r.w_radps, r.heading_rad) == ("invalid", 0.0, 0.0, None)
+
+
+def test_rule_unknown():
+    """No point at all and the sensor does not declare no-return free: nothing seen is not
+    free (DESIGN 5.9, egc.py's NO_POINTS_UNKNOWN): stop, with or without a via point."""
+    empty = np.empty((0, 2))
+    for goal in (None, (2.0, 0.0)):
+        r = run(1.0, 0.0, empty, goal)
+        assert (r.rule, r.v_mps, r.w_radps) == ("unknown", 0.0, 0.0)
+    free = replace(PARAMS, no_return_is_free=True)
+    r = run(1.0, 0.0, empty, params=free)
+    assert r.rule == "free" and r.v_mps == pytest.approx(P.v_max_mps)
+
+
+def test_rule_idle():
+    r = run(0.02, 0.01, np.array([[3.0, 0.0]]), goal=(2.0, 0.0))
+    assert (r.rule, r.v_mps, r.w_radps) == ("idle", 0.0, 0.0)
+
+
+def test_rule_reverse():
+    r = run(-0.5, 0.2, np.array([[-1.0, 0.0]]), goal=(2.0, 0.0))
+    assert r.rule == "reverse"
+    assert (r.v_mps, r.w_radps) == pytest.approx((-0.5 * P.v_max_mps, 0.2 * P.w_max_radps))
+
+
+def test_rule_free():
+    """No via point and nothing active: the stick's eq. 4 command, unchanged."""
+    r = run(0.8, 0.3, np.array([[5.0, 0.0], [0.0, 3.0]]))
+    assert r.rule == "free" and not r.modified
+    assert (r.v_mps, r.w_radps) == pytest.approx((0.8 * P.v_max_mps, 0.3 * P.w_max_radps))
+
+
+def test_rule_goal():
+    """Stick in line with the via point, nothing in the way: steer at the via point."""
+    goal = (3.0, 1.0)
+    beta = math.atan2(1.0, 3.0)
+    r = run(1.0, 0.2, np.array([[-3.0, 0.0]]), goal)
+    assert r.rule == "goal" and r.heading_rad == pytest.approx(beta)
+    assert r.goal_bearing_rad == pytest.approx(beta)
+    assert r.w_radps == pytest.approx(min(PARAMS.heading_gain_per_s * beta, P.w_max_radps))
+    assert r.v_mps == pytest.approx(1.0 * P.v_max_mps * math.cos(beta))  # J = min(|stick|, 1)
+
+
+def test_rule_blend():
+    """Via point to the left, stick forward-right (not in line): the average of the two."""
+    r = run(0.7, -0.7, np.array([[-3.0, 0.0]]), goal=(0.0, 2.0))
+    assert r.rule == "blend"
+    assert r.heading_rad == pytest.approx(math.radians((90 - 45) / 2))
+    assert r.w_radps > 0.0
+
+
+def test_rule_avoid_front():
+    wall = line(0.5, -1.0, 0.5, 1.0)  # a wall 0.5 m ahead: FRONT CLOSE
+    wall = np.vstack([wall, line(0.3, -0.5, 0.6, -0.5)])  # and something on the right
+    r = run(1.0, 0.0, wall)
+    assert r.rule == "avoid-front" and r.levels[FRONT] == CLOSE
+    assert r.v_mps == 0.0 and r.w_radps > 0.0  # turns in place, towards the open left
+    # FRONT at INTERMEDIATE: slows and turns by at least front_turn_rad.
+    far = run(1.0, 0.0, line(0.9, -0.2, 0.9, 0.2, 10))
+    assert far.rule == "avoid-front" and far.levels == (None, INTERMEDIATE, None)
+    assert abs(far.heading_rad) == pytest.approx(PARAMS.front_turn_rad)
+    assert 0.0 < far.v_mps < P.v_max_mps * PARAMS.front_intermediate_speed
+
+
+def test_avoid_front_keeps_its_turn_while_turning_in_place():
+    """In a corner the open side swaps as the robot turns; it keeps turning the same way."""
+    left_close = np.vstack([line(0.5, -0.2, 0.5, 0.2, 10), line(0.3, 0.45, 0.5, 0.45, 10)])
+    first = run(1.0, 0.0, left_close)
+    assert first.rule == "avoid-front" and first.w_radps < 0.0  # right is more open
+    right_close = np.vstack([line(0.5, -0.2, 0.5, 0.2, 10), line(0.3, -0.45, 0.5, -0.45, 10)])
+    again = run(1.0, 0.0, right_close, memory=first.memory, t0_ms=1000, cycles=3)
+    assert again.rule == "avoid-front" and again.w_radps < 0.0  # still right
+
+
+def test_rule_gap():
+    """Both sides CLOSE, front clear (paper case 3): through the gap, heading clamped."""
+    pts = np.vstack([line(0.1, 0.45, 0.5, 0.45, 10), line(0.1, -0.45, 0.5, -0.45, 10)])
+    r = run(1.0, 0.0, pts, goal=(3.0, 1.5))
+    assert r.rule == "gap" and r.levels == (CLOSE, None, CLOSE)
+    assert r.heading_rad == pytest.approx(PARAMS.gap_max_rad)
+    assert r.v_mps == pytest.approx(
+        math.hypot(1.0, 0.0) * P.v_max_mps * PARAMS.gap_speed * math.cos(PARAMS.gap_max_rad)
+    )
+
+
+def test_rule_avoid_left():
+    # Left at INTERMEDIATE: the stick's left turn is held at straight ahead (case 1, change 0).
+    inter = np.array([[0.7, 0.6]] * 3)
+    r = run(0.8, 0.5, inter)
+    assert r.rule == "avoid-left" and r.levels == (INTERMEDIATE, None, None)
+    assert r.w_radps == 0.0 and r.heading_rad == 0.0 and r.modified
+    # Left CLOSE: turn away by at least side_close_rad.
+    close = np.array([[0.3, 0.45]] * 3)
+    r = run(0.8, 0.0, close)
+    assert r.rule == "avoid-left" and r.levels[LEFT] == CLOSE
+    assert r.heading_rad == pytest.approx(-PARAMS.side_close_rad) and r.w_radps < 0.0
+    # Turning away already: nothing to change.
+    assert run(0.8, -0.5, inter).rule == "free"
+
+
+def test_rule_avoid_right():
+    inter = np.array([[0.7, -0.6]] * 3)
+    r = run(0.8, -0.5, inter)
+    assert r.rule == "avoid-right" and r.levels == (None, None, INTERMEDIATE)
+    assert r.w_radps == 0.0
+    close = np.array([[0.3, -0.45]] * 3)
+    r = run(0.8, 0.0, close, goal=(3.0, -1.0))  # with a via point on the obstacle's side
+    assert r.rule == "avoid-right"
+    assert r.heading_rad == pytest.approx(PARAMS.side_close_rad) and r.w_radps > 0.0
+
+
+def test_no_via_point_is_joystick_plus_avoidance():
+    free = run(0.6, -0.4, np.array([[4.0, 0.0]]))
+    assert free.rule == "free" and not free.modified
+    near = run(0.6, 0.4, np.array([[0.3, 0.45]] * 3))
+    assert near.rule == "avoid-left" and near.modified and near.goal_bearing_rad is None
+    assert near.v_mps > 0.0  # speed from the stick's forward deflection
+
+
+# -- wall following -------------------------------------------------------------------------------
+
+# A wall across the way to a via point 3 m ahead; its left end is nearer the via point's line.
+WALL_OPEN_LEFT = line(0.9, -1.5, 0.9, 0.2)
+WALL_OPEN_RIGHT = line(0.9, -0.2, 0.9, 1.5)
+
+
+def test_rule_wall_follow_right():
+    r = run(1.0, 0.0, WALL_OPEN_LEFT, goal=(3.0, 0.0))
+    assert r.rule == "wall-follow-right"  # goes round by the left: the wall on its right
+    assert r.memory.wall_side == "right" and r.memory.wall_entry_m == pytest.approx(3.0)
+    assert r.heading_rad > math.radians(45) and r.w_radps > 0.0
+
+
+def test_rule_wall_follow_left():
+    r = run(1.0, 0.0, WALL_OPEN_RIGHT, goal=(3.0, 0.0))
+    assert r.rule == "wall-follow-left"
+    assert r.heading_rad < -math.radians(45) and r.w_radps < 0.0
+
+
+def test_wall_following_is_entered_only_on_the_way_to_the_via_point():
+    # No via point: plain avoidance.
+    assert run(1.0, 0.0, WALL_OPEN_LEFT).rule == "avoid-front"
+    # Via point off to the side with its way clear: no wall following.
+    assert not run(1.0, 0.0, WALL_OPEN_LEFT, goal=(0.0, 3.0)).rule.startswith("wall")
+
+
+def test_wall_following_parallel_to_a_wall_on_the_right():
+    """Following with the wall at the follow distance on the right: drive straight along it."""
+    following = run(1.0, 0.0, WALL_OPEN_LEFT, goal=(3.0, 0.0)).memory
+    wall = line(-0.5, -PARAMS.wall_distance_m, 0.6, -PARAMS.wall_distance_m, 80)
+    r = run(1.0, 0.0, wall, goal=(3.0, -0.3), memory=following, t0_ms=1000, cycles=1)
+    assert r.rule == "wall-follow-right"
+    assert r.heading_rad == pytest.approx(0.0, abs=0.05)
+    assert r.v_mps > 0.9 * P.v_max_mps
+
+
+def test_wall_following_leaves_when_the_way_is_clear_and_closer():
+    following = run(1.0, 0.0, WALL_OPEN_LEFT, goal=(3.0, 0.0)).memory  # entered 3.0 m away
+    beside = line(-0.5, -0.6, 0.4, -0.6, 20)  # the obstacle now on the right, way ahead clear
+    # Farther from the via point than where following began: keep following (Bug2 rule).
+    stay = run(1.0, 0.0, beside, goal=(3.5, 0.0), memory=following, t0_ms=1000, cycles=6)
+    assert stay.rule == "wall-follow-right"
+    # Closer and the way clear: leave, steer at the via point (once the histogram has let go of
+    # the wall that was ahead: 16 - 5 x 2 = 6, no longer above the threshold).
+    leave = run(1.0, 0.0, beside, goal=(2.0, 0.1), memory=following, t0_ms=1000, cycles=1)
+    assert leave.memory.wall_side is None and leave.rule == "avoid-front"
+    leave = run(1.0, 0.0, beside, goal=(2.0, 0.1), memory=following, t0_ms=1000, cycles=6)
+    assert leave.rule == "goal" and leave.memory.wall_side is None
+    assert leave.memory.last_wall_side == "right"
+    # Blocked again soon after: the same side again (no swapping round one obstacle).
+    again = run(1.0, 0.0, WALL_OPEN_RIGHT, goal=(3.0, 0.0), memory=leave.memory, t0_ms=2000)
+    assert again.rule == "wall-follow-right"
+
+
+# -- the operator's override ----------------------------------------------------------------------
+
+
+def test_rule_override():
+    """Stick held steady straight at a wall, no via point: the avoidance acts first, and after
+    about 0.5 s of the stick held against it, the operator's command goes out."""
+    wall = line(0.5, -1.0, 0.5, 1.0)
+    mem = AssistMemory.initial()
+    rules = {}
+    for t in range(0, 1001, DT_MS):
+        r = assist_step(mem, 1.0, 0.0, wall, None, t * MS, PARAMS, P)
+        mem = r.memory
+        rules[t] = r
+    assert rules[100].rule == "avoid-front" and rules[100].v_mps == 0.0
+    assert rules[400].rule == "avoid-front"
+    first = min(t for t, r in rules.items() if r.rule == "override")
+    assert 450 <= first <= 600
+    assert all(r.rule == "override" for t, r in rules.items() if t >= first)
+    last = rules[1000]
+    assert (last.v_mps, last.w_radps) == pytest.approx((P.v_max_mps, 0.0))
+    assert last.confidence == 1.0 and not last.modified
+
+
+def test_a_moving_stick_never_overrides():
+    wall = line(0.5, -1.0, 0.5, 1.0)
+    mem = AssistMemory.initial()
+    for t in range(0, 3001, DT_MS):
+        y_o = 0.0 if (t // 200) % 2 == 0 else 0.6  # moves between two cells every 0.2 s
+        r = assist_step(mem, 1.0, y_o, wall, None, t * MS, PARAMS, P)
+        mem = r.memory
+        assert r.rule != "override"
+
+
+def test_a_stick_in_line_with_the_via_point_is_not_an_override():
+    """The blind operator holds the stick at the via point; the rules keep steering."""
+    mem = AssistMemory.initial()
+    for t in range(0, 3001, DT_MS):
+        r = assist_step(mem, 1.0, 0.0, WALL_OPEN_LEFT, (3.0, 0.0), t * MS, PARAMS, P)
+        mem = r.memory
+        assert r.rule == "wall-follow-right" or t < 100
+    assert r.confidence == 1.0
+
+
+def test_override_against_the_via_point():
+    """Stick held steady to the left, away from a via point ahead: after ~0.5 s the stick wins."""
+    pts = np.array([[-3.0, 0.0]])
+    early = run(0.3, 0.9, pts, goal=(3.0, 0.0), cycles=4)
+    assert early.rule == "blend"
+    late = run(0.3, 0.9, pts, goal=(3.0, 0.0), cycles=16)
+    assert late.rule == "override"
+    assert (late.v_mps, late.w_radps) == pytest.approx((0.3 * P.v_max_mps, 0.9 * P.w_max_radps))
+
+
+# -- properties -----------------------------------------------------------------------------------
+
+
+def test_output_within_the_profile_limits():
+    rng = np.random.default_rng(7)
+    for profile in (PIONEER3DX, JACKAL):
+        params = AssistParams.from_profile(profile)
+        mem = AssistMemory.initial()
+        for k in range(400):
+            pts = rng.uniform(-3.0, 3.0, size=(rng.integers(1, 30), 2))
+            goal = None if k % 3 == 0 else tuple(rng.uniform(-5.0, 5.0, size=2))
+            x_o, y_o = rng.uniform(-1.2, 1.2, size=2)
+            r = assist_step(mem, x_o, y_o, pts, goal, k * DT_MS * MS, params, profile)
+            mem = r.memory
+            assert r.rule in RULES
+            assert abs(r.v_mps) <= profile.v_max_mps + 1e-12
+            assert abs(r.w_radps) <= profile.w_max_radps + 1e-12
+            assert math.isfinite(r.v_mps) and math.isfinite(r.w_radps)
+
+
+# -- closed loop in the simulator -----------------------------------------------------------------
+
+
+def drive(sim: Simulator, goal_world, params: AssistParams, max_time_s: float, tolerance_m: float):
+    """Goal operator -> assist (via point = the goal, in {R} from odometry) -> profile limits ->
+    footprint sweep -> simulator, at 20 Hz. Returns (reached, rules in order)."""
+    operator = GoalOperator(goal_world)
+    mem = AssistMemory.initial()
+    previous = (0.0, 0.0)
+    sweep = SweepParams()
+    rules: list[str] = []
+    dt = 0.05
+    for _ in range(round(max_time_s / dt)):
+        if math.dist(sim.pose[:2], goal_world) <= tolerance_m:
+            return True, rules
+        stick = operator.command(sim.time_s, sim.pose)
+        scan = sim.scan()
+        x, y, yaw = sim.odometry
+        dx, dy = goal_world[0] - x, goal_world[1] - y
+        goal = (math.cos(yaw) * dx + math.sin(yaw) * dy, -math.sin(yaw) * dx + math.cos(yaw) * dy)
+        p = replace(params, no_return_is_free=scan.no_return_is_free)
+        r = assist_step(
+            mem, stick.x_o, stick.y_o, scan.obstacles(), goal, round(sim.time_s * 1e9), p, P
+        )
+        mem = r.memory
+        rules.append(r.rule)
+        v, w = limit_velocity(r.v_mps, r.w_radps, P)
+        v, w = limit_acceleration(v, w, previous, dt, P)
+        s = sweep_scale(v, w, scan.obstacles(), P, sweep)
+        previous = (s * v, s * w)
+        sim.step(*previous, dt)
+        assert not sim.collided, f"contact at {sim.pose}"
+    return False, rules
+
+
+def test_closed_loop_goal_behind_a_single_obstacle_is_reached():
+    occ = boxed_room(6.0, 4.0)
+    occ[30:50, 50:70] = True  # a 1.0 m x 1.0 m block at x 2.5-3.5, y 1.5-2.5
+    world = grid_world(occ)
+    start, goal = (1.0, 2.0, 0.0), (5.0, 2.1)
+    sim = Simulator(world, P, start)
+    reached, rules = drive(sim, goal, PARAMS, 120.0, 0.3)
+    assert reached and not sim.collided
+    assert sim.min_clearance_m > 0.0
+    follow = [i for i, r in enumerate(rules) if r.startswith("wall-follow")]
+    assert follow, "the block ahead on the way to the via point starts wall following"
+    assert "goal" in rules[follow[-1] :], "and the robot leaves it once the way is clear"
+    # The straight line costs 4 m at 0.14 m/s (29 s); round the block well within 2x that.
+    assert sim.time_s < 60.0
