@@ -1,9 +1,13 @@
 """``egc-teleop filter`` (pinned): the EGC filter as a JSON-lines tool on stdin/stdout.
 
+``--filter egc`` (default) runs EGC, ``--filter ek-egc`` EGC in the ego-kinematic space (DESIGN
+6): the same keys, with the circles (``igc``, ``agc``, ``egc``, ``rc``) in EK coordinates (for
+v < 0, the mirrored EK space the circles were computed in); ``--filter none`` is direct mode.
+
 Each input line is ``{"v": float, "w": float, "points": [[x, y], ...]}`` (points in {R}, metres).
-Each output line carries the paper's equations alone (DESIGN 5.1-5.8) in ``v``/``w`` with their
-intermediates, and, under ``final``, what the robot would send to the base after the rules of
-DESIGN 5.9-5.10 and the profile's velocity limits (acceleration limits need a previous command
+Each output line carries the paper's equations alone (DESIGN 5.1-5.8; DESIGN 6 for ek-egc) in
+``v``/``w`` with their intermediates, and, under ``final``, what the robot would send to the base
+after the rules of DESIGN 5.9-5.10 and the profile's velocity limits (acceleration limits need a previous command
 and are not applied: each line stands alone). In the undefined cases of DESIGN 5.9, ``v``/``w``
 carry that case's documented rule, named by ``case``. A malformed line (a blank one included)
 gives ``{"error": "..."}`` and processing continues: there is one output line per input line.
@@ -24,11 +28,16 @@ from egc_robot.filters.egc import EgcResult
 from egc_robot.pipeline import PipelineConfig, filter_velocity
 
 MAX_LINE_CHARS = 50_000_000
+# The filters whose equations this tool prints (the EgcResult keys); ek-egc's are in EK space.
+CLI_FILTERS = ("egc", "ek-egc", "none")
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--filter", default="egc", choices=["egc", "none"], help="filter to apply (default: egc)"
+        "--filter",
+        default="egc",
+        choices=CLI_FILTERS,
+        help="filter to apply (default: egc; ek-egc reports its circles in EK coordinates)",
     )
     parser.add_argument(
         "--profile",
@@ -138,7 +147,7 @@ def process(stream_in: TextIO, stream_out: TextIO, config: PipelineConfig) -> in
             if not line:
                 raise LineError("empty line")  # still answered: one output line per input line
             v, w, points = parse_line(line)
-            mode = "shared" if config.filter == "egc" else "direct"
+            mode = "direct" if config.filter == "none" else "shared"
             out = filter_velocity(config, v, w, mode, points, None, 0.0)
             doc = result_json(out.filtered, v, w)
             doc["final"] = {
