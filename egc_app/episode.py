@@ -62,7 +62,14 @@ from egc_common.errors import UsageError
 from egc_common.messages import Telemetry
 from egc_common.profiles import PROFILES, get_profile
 from egc_common.scan import Scan
-from egc_robot.pipeline import FILTERS, Limiter, PipelineConfig, PipelineResult, step_command
+from egc_robot.pipeline import (
+    FILTERS,
+    INTERVENING,
+    Limiter,
+    PipelineConfig,
+    PipelineResult,
+    step_command,
+)
 from egc_robot.safety import decelerate
 from egc_robot.via_points import DEFAULT_TOLERANCE_M, ViaPoints, advance, to_robot_frame
 from egc_sim.episodes import ControlOutput, EpisodeResult, TraceRow, run_episode
@@ -73,7 +80,7 @@ from egc_sim.simulator import Simulator
 from egc_sim.worlds import WorldError, load_world
 
 DEFAULT_GOAL_TOLERANCE_M = 0.3
-INTERVENTIONS = (Limiter.EGC, Limiter.SWEEP)
+INTERVENTIONS = INTERVENING
 SUITE_KEYS = {
     "map",
     "start",

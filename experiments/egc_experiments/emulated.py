@@ -72,6 +72,7 @@ from typing import IO, Any, Final
 import numpy as np
 from egc_common.profiles import get_profile
 from egc_common.transport import free_port
+from egc_robot.pipeline import INTERVENING_NAMES
 from egc_sim.collision import FootprintChecker
 from egc_sim.worlds import load_world
 
@@ -88,7 +89,6 @@ CYCLE_S: Final = 0.05  # the simulated mode's control period
 LINK_PORT: Final = 7447
 WATCH_PORT: Final = 7448
 START_TIMEOUT_S: Final = 30.0
-_INTERVENING: Final = ("egc", "sweep")
 
 
 class EmulationError(RuntimeError):
@@ -308,7 +308,7 @@ def summarise(
             hold_s += dt
             hold_events += not in_hold
         in_hold = holding
-        if ln.get("lim") in _INTERVENING:
+        if ln.get("lim") in INTERVENING_NAMES:
             intervening_s += dt
         if ln.get("lim") == "latency":
             latency_s += dt

@@ -34,7 +34,7 @@ Metrics (``RESULT_KEYS`` and more; times in simulated seconds):
   every command arrives too old) while the operator wanted to move (its model's stick
   deflected, before any centring);
 - ``interventions``: cycles in which the filter or the footprint sweep changed the command
-  (the pipeline's limiter ``egc`` or ``sweep``); ``latency_limited_s``: time in which the
+  (the pipeline's limiter names the filter, or ``sweep``); ``latency_limited_s``: time in which the
   latency governor capped the speed (telemetry limiter ``latency``);
 - ``cmd_age_p50_ms`` / ``cmd_age_p99_ms``: arrival minus stamp of the accepted commands;
   ``stale_rejected``: commands the robot dropped as too old;
@@ -60,7 +60,7 @@ from egc_common.messages import (
 )
 from egc_common.profiles import get_profile
 from egc_robot.controller import ControllerConfig, RobotController
-from egc_robot.pipeline import Limiter, PipelineConfig
+from egc_robot.pipeline import INTERVENING, Limiter, PipelineConfig
 from egc_sim.grid_world import Pose
 from egc_sim.observation import Observation, ViewBuffer
 from egc_sim.operators import Operator, Stick, make_operator
@@ -83,7 +83,6 @@ STALL_DISTANCE_M: Final = 0.1
 MOVE_TOLERANCE: Final = 0.05  # a stick deflected more than this "wants to move"
 # HOLD reasons the robot leaves by itself (DESIGN 8); any other needs a centred stick.
 _SELF_CLEARING: Final = ("command timeout", "stale commands", "sensor stale")
-_INTERVENTIONS: Final = (Limiter.EGC, Limiter.SWEEP)
 _TELEMETRY_BASE_BYTES: Final = 600
 
 # Event kinds, in the order they are handled at the same instant.
@@ -282,7 +281,7 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
             hold_cycles += holding
             hold_events += holding and not in_hold
             in_hold = holding
-            if out.result is not None and out.result.limiter in _INTERVENTIONS:
+            if out.result is not None and out.result.limiter in INTERVENING:
                 interventions += 1
             latency_cycles += tel.limiter == Limiter.LATENCY.value
             size = _TELEMETRY_BASE_BYTES + 8 * len(tel.scan_xy)

@@ -62,6 +62,11 @@ class Limiter(enum.Enum):
     ESTOP = "estop"
 
 
+# Limiters that mean "the shared-autonomy layer changed the operator's command" (an intervention).
+INTERVENING = (Limiter.EGC, Limiter.EK_EGC, Limiter.ASSIST, Limiter.DWA, Limiter.SWEEP)
+INTERVENING_NAMES = tuple(limiter.value for limiter in INTERVENING)
+
+
 @dataclass(frozen=True, slots=True)
 class PipelineConfig:
     profile: RobotProfile

@@ -22,7 +22,8 @@ from typing import Any
 import numpy as np
 from egc_common.messages import Odometry, Telemetry
 
-_INTERVENING = ("egc", "sweep")
+from egc_robot.pipeline import INTERVENING_NAMES
+
 _MAX_LATENCIES = 1_000_000
 
 
@@ -64,7 +65,7 @@ class RunStats:
                 self._loop_delay_ms.append(telemetry.loop_delay_ms)
             if telemetry.view_age_ms is not None:
                 self._view_age_ms.append(telemetry.view_age_ms)
-        limiting = telemetry.limiter in _INTERVENING
+        limiting = telemetry.limiter in INTERVENING_NAMES
         if limiting:
             self.interventions += 1
             if not self._limiting:

@@ -96,7 +96,7 @@ def test_stall_time_ends_a_deadlocked_episode(capsys):
         (["--map", "no/such/map.yaml"], "cannot load map"),
         (["--map", "hallway", "--start", "1,2"], "--start X,Y,YAW"),
         (["--map", "hallway", "--goal", "a,b"], "--goal X,Y"),
-        (["--map", "hallway", "--filter", "dwa"], "--filter"),
+        (["--map", "hallway", "--filter", "teleport"], "--filter"),
         (["--map", "hallway", "--profile", "roomba"], "--profile"),
         (["--map", "hallway", "--max-time", "-1"], "--max-time"),
         (["--map", "hallway", "--goal-tolerance", "0"], "--goal-tolerance"),
