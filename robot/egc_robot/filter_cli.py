@@ -10,7 +10,8 @@ Each output line carries the paper's equations alone (DESIGN 5.1-5.8; DESIGN 6 f
 after the rules of DESIGN 5.9-5.10 and the profile's velocity limits (acceleration limits need
 a previous command and are not applied: each line stands alone). In the undefined cases of
 DESIGN 5.9, ``v``/``w`` carry that case's documented rule, named by ``case``. A malformed line
-(a blank one included) gives ``{"error": "..."}`` and processing continues: there is one output line per input line.
+(a blank one included) gives ``{"error": "..."}`` and processing continues: there is one output
+line per input line.
 """
 
 from __future__ import annotations
