@@ -572,7 +572,8 @@ class RobotController:
         result: PipelineResult | None,
         snap: _TelemetrySnapshot,
     ) -> Telemetry:
-        filtered = result.filtered if result is not None else None
+        # Guide circles for the view only from egc: ek-egc's live in the EK space, not in {R}.
+        filtered = result.filtered if result is not None and result.filter_name == "egc" else None
         if cmd is None:
             cmd_age_ms = None
         else:
