@@ -426,7 +426,7 @@ class EpisodeRecorder:
     def __call__(self, row: TraceRow, scan: Scan) -> None:
         r = self.controller.last_result
         stick = self.controller.last_stick
-        filtered = None if r is None else r.filtered
+        filtered = None if r is None or r.filter_name != "egc" else r.filtered
         self.view.on_telemetry(
             Telemetry(
                 seq=self.cycle,
