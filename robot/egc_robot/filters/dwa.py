@@ -81,6 +81,7 @@ _SAME = 1e-9
 # this far inside a point's present clearance, so no contact angle rounds across zero.
 _TOUCH_M = 1e-6
 _MAX_SAMPLES = 201
+_BLOCK = 8192  # candidate x point pairs per vectorised block
 
 
 class DwaCase(enum.Enum):
@@ -249,25 +250,19 @@ def contact_angles(
         angle = np.mod(phi0 - psi, _TWO_PI)
         np.minimum(best, np.where(ok, angle, np.inf), out=best)
 
-    # Front and back edges x = +-half_l: orbit points (+-half_l, R +- q).
+    # Only entering crossings can come first (the point starts outside). The orbit's velocity is
+    # (y - R, -x): it enters the front edge below R, the back edge above R, the left side ahead
+    # of the axle and the right side behind it; one crossing per edge.
     q2 = (x_m - half_l) * (x_m + half_l) + dy0 * dy0
     q = np.sqrt(np.maximum(q2, 0.0))
-    meets = q2 >= 0.0
     beta = np.arctan2(q, half_l)
-    upper = meets & (np.abs(r + q) <= half_w)
-    lower = meets & (np.abs(r - q) <= half_w)
-    take(beta, upper)  # front, y = R + q
-    take(math.pi - beta, upper)  # back, y = R + q
-    take(-beta, lower)  # front, y = R - q
-    take(beta - math.pi, lower)  # back, y = R - q
-    # Side edges y = +-half_w: orbit points (+-p, +-half_w), p^2 = rho^2 - (h - R)^2.
-    for h in (half_w, -half_w):
+    take(-beta, (q2 >= 0.0) & (np.abs(r - q) <= half_w))  # front x = half_l, y = R - q
+    take(math.pi - beta, (q2 >= 0.0) & (r + q <= half_w))  # back x = -half_l, y = R + q
+    for h, psi_of in ((half_w, lambda g: g), (-half_w, lambda g: math.pi - g)):
+        # Side y = h, at x = +p (left) or x = -p (right), p^2 = rho^2 - (h - R)^2.
         p2 = x_m * x_m + (y_m - h) * (y_m + h - 2.0 * r)
         p = np.sqrt(np.maximum(p2, 0.0))
-        ok = (p2 >= 0.0) & (p <= half_l)
-        g = np.arctan2(h - r, p)
-        take(g, ok)
-        take(math.pi - g, ok)
+        take(psi_of(np.arctan2(h - r, p)), (p2 >= 0.0) & (p <= half_l))
     if best.size == 0:
         return np.full(len(r), np.inf)
     result: FloatArray = best.min(axis=1)
@@ -380,14 +375,14 @@ def _free_and_admissible(
     reach = profile.half_diagonal_m + params.margin_m + lookahead
     near = pts.r2 <= reach * reach
     x, y = pts.x[near], pts.y[near]
-    if x.size:
-        now = signed_distance_to_rectangle(x, y, half_l, half_w)
-        if bool((now <= 2.0 * _TOUCH_M).any()):  # in contact now: only stopping
-            free[~standing] = 0.0
-            return free, admissible
-        grow = min(float(now.min()), params.margin_m) - _TOUCH_M
-    else:
-        grow = params.margin_m
+    if x.size == 0:  # nothing within reach: every candidate is free up to the look-ahead
+        admissible[:] = True
+        return free, admissible
+    now = signed_distance_to_rectangle(x, y, half_l, half_w)
+    if bool((now <= 2.0 * _TOUCH_M).any()):  # in contact now: only stopping
+        free[~standing] = 0.0
+        return free, admissible
+    grow = min(float(now.min()), params.margin_m) - _TOUCH_M
     a, b = half_l + grow, half_w + grow
 
     # Canonical form: forward (mirror x for reverse), then left turns (mirror y for right).
@@ -404,8 +399,7 @@ def _free_and_admissible(
         xs = sx[straight, None] * x[None, :]
         hits = (np.abs(y) <= b + dev)[None, :] & (xs > 0.0)
         gap = np.where(hits, xs - (a + dev), np.inf)
-        s_free = gap.min(axis=1) if x.size else np.full(int(straight.sum()), np.inf)
-        s_free = np.maximum(s_free, 0.0)
+        s_free = np.maximum(gap.min(axis=1), 0.0)
         free[straight] = s_free
         admissible[straight] = speed[straight] * t_stop[straight] <= s_free
 
@@ -413,7 +407,13 @@ def _free_and_admissible(
         radius = (speed[turning] / turn[turning])[:, None]
         xt = sx[turning, None] * x[None, :]
         yt = sy[turning, None] * y[None, :]
-        theta = contact_angles(radius, xt, yt, a, b)
+        rows = max(1, _BLOCK // x.size)  # blocks of candidates that stay in cache
+        theta = np.concatenate(
+            [
+                contact_angles(radius[i : i + rows], xt[i : i + rows], yt[i : i + rows], a, b)
+                for i in range(0, len(radius), rows)
+            ]
+        )
         arm = np.where(radius[:, 0] > 0.0, radius[:, 0], profile.half_diagonal_m)
         free[turning] = theta * arm
         admissible[turning] = turn[turning] * t_stop[turning] <= theta
