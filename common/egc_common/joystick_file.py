@@ -3,8 +3,11 @@
 A CSV file with a header row. Required columns: ``t_s`` (seconds from the start, non-decreasing),
 ``x`` (forward deflection) and ``y`` (left deflection), both in [-1, 1]. Optional columns, with
 their defaults: ``deadman`` (0/1, default 1), ``mode`` (``direct`` | ``shared``, default
-``shared``), ``estop`` (0/1, default 0), ``reset`` (0/1, default 0). Blank lines and lines
-starting with ``#`` are ignored. Between rows the last row holds (zero-order hold); after the
+``shared``), ``estop`` (0/1, default 0), ``reset`` (0/1, default 0), ``filter`` (the
+operator's pick of shared-mode filter, one of ``egc``, ``ek-egc``, ``assist``, ``dwa``; empty or
+absent: no pick, the robot runs its default), ``via_next`` and ``via_clear`` (0/1, default 0:
+"button held"; the operator acts on the press, skipping the active via point or clearing them
+all). Blank lines and lines starting with ``#`` are ignored. Between rows the last row holds (zero-order hold); after the
 last row the stick is centred with the deadman released.
 
     t_s,x,y,deadman,mode,estop
@@ -22,8 +25,20 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from egc_common.messages import FILTER_NAMES
+
 REQUIRED = ("t_s", "x", "y")
-OPTIONAL = {"deadman": "1", "mode": "shared", "estop": "0", "reset": "0"}
+OPTIONAL = {
+    "deadman": "1",
+    "mode": "shared",
+    "estop": "0",
+    "reset": "0",
+    "filter": "",
+    "via_next": "0",
+    "via_clear": "0",
+}
+# The filters an operator may pick for shared mode ("none" is direct mode: the mode column).
+SHARED_FILTERS = tuple(name for name in FILTER_NAMES if name != "none")
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
 
@@ -41,6 +56,11 @@ class JoystickSample:
     mode: str = "shared"
     estop: bool = False
     reset: bool = False
+    # The operator's pick of shared-mode filter (DESIGN 6); None: the robot's default.
+    filter: str | None = None
+    # Via-point buttons, true while held (the operator node acts on the press edge).
+    via_next: bool = False
+    via_clear: bool = False
 
 
 RELEASED = JoystickSample(0.0, 0.0, 0.0, deadman=False)
@@ -91,6 +111,13 @@ def parse_joystick_csv(text: str, name: str = "<joystick file>") -> tuple[Joysti
         mode = str(values["mode"]).strip()
         if mode not in ("direct", "shared"):
             raise JoystickFileError(f"{where}: mode must be direct or shared, got {mode!r}")
+        picked = str(values["filter"]).strip()
+        if picked and picked not in SHARED_FILTERS:
+            hint = " (direct mode is the mode column)" if picked == "none" else ""
+            raise JoystickFileError(
+                f"{where}: filter must be one of {', '.join(SHARED_FILTERS)} or empty, "
+                f"got {picked!r}{hint}"
+            )
         samples.append(
             JoystickSample(
                 t_s=t,
@@ -100,6 +127,9 @@ def parse_joystick_csv(text: str, name: str = "<joystick file>") -> tuple[Joysti
                 mode=mode,
                 estop=_flag(str(values["estop"]), f"{where} estop"),
                 reset=_flag(str(values["reset"]), f"{where} reset"),
+                filter=picked or None,
+                via_next=_flag(str(values["via_next"]), f"{where} via_next"),
+                via_clear=_flag(str(values["via_clear"]), f"{where} via_clear"),
             )
         )
     if not samples:

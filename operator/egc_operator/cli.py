@@ -5,11 +5,22 @@ Exactly one source: ``--joystick /dev/input/eventN`` (evdev gamepad), ``--joysti
 in ``egc_operator/scripts/``; ``--script list`` lists them). A file or script ends with the
 deadman released and the process exits 0 (``--loop`` repeats it instead).
 
+Shared mode's filter: ``--filter NAME`` (one of ``egc``, ``ek-egc``, ``assist``, ``dwa``) is
+sent with every command unless the source picks one (the gamepad's filter button, a file's
+``filter`` column); without it the robot runs its own default. Direct mode (no filter) is
+``--mode direct`` or the mode button, not ``--filter none``.
+
+Via points (DESIGN 7, ``egc_operator.via_route``): ``--goal X,Y`` (repeatable, in order;
+``--goal -2,3`` works) or ``--route FILE`` (one ``x,y`` or ``x y`` per line), in
+``--goal-frame odom|map`` (default odom); the gamepad's buttons skip the active one or clear
+them all.
+
 Configuration: ``--config FILE`` (TOML) and ``--set key=value``, tables
 
     [operator]  rate_hz, deadzone, gamepad ("xbox" | "ps" | "generic")
     [joystick]  forward_axis, forward_invert, turn_axis, turn_invert, deadman, mode_toggle,
-                estop, reset   (evdev code names such as "BTN_TL", or numbers)
+                estop, reset, filter_cycle, via_next, via_clear
+                (evdev code names such as "BTN_TL", or numbers)
 """
 
 from __future__ import annotations
@@ -30,6 +41,7 @@ from egc_common import keys
 from egc_common.clock_id import monotonic_clock_id
 from egc_common.errors import UsageError
 from egc_common.joystick_file import JoystickFileError
+from egc_common.messages import FILTER_NAMES, GOAL_FRAMES
 from egc_common.transport import (
     DEFAULT_ENDPOINT,
     add_zenoh_arguments,
@@ -48,6 +60,7 @@ from egc_operator.command_source import (
 from egc_operator.joystick_evdev import PRESETS, ButtonMap, EvdevJoystick, open_device
 from egc_operator.operator_node import OperatorNode, View
 from egc_operator.status_line import StatusLine
+from egc_operator.via_route import Route, RouteError, route_from_options
 
 log = logging.getLogger("egc.operator")
 
@@ -85,6 +98,31 @@ def configure(parser: argparse.ArgumentParser) -> None:
         choices=("direct", "shared"),
         default="shared",
         help="initial mode of a gamepad; its mode button toggles it (default: shared)",
+    )
+    parser.add_argument(
+        "--filter",
+        choices=FILTER_NAMES,
+        default=None,
+        metavar="NAME",
+        help="shared mode's filter, sent with every command unless the gamepad's filter button "
+        "or a file's filter column picks one: egc, ek-egc, assist, dwa (default: the robot's)",
+    )
+    via = parser.add_argument_group("via points (sent to the robot, which goes to each in turn)")
+    via.add_argument(
+        "--goal",
+        action="append",
+        default=[],
+        metavar="X,Y",
+        help="a via point in metres (repeatable, in order; e.g. --goal -2,3 --goal 4,1)",
+    )
+    via.add_argument(
+        "--route", metavar="FILE", help="via points from a file, one 'x,y' or 'x y' per line"
+    )
+    via.add_argument(
+        "--goal-frame",
+        choices=GOAL_FRAMES,
+        default="odom",
+        help="frame of the via points: odom (the base's odometry) or map (default: odom)",
     )
     parser.add_argument("--config", metavar="FILE", help="operator TOML configuration")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
@@ -165,9 +203,19 @@ def _open_source(args: argparse.Namespace, cfg: dict[str, Any]) -> CommandSource
             deadzone=deadzone,
             mode=args.mode,
             reopen=lambda: open_device(path, mapping),
+            filter=args.filter,
         )
     except (JoystickFileError, ValueError) as exc:
         raise UsageError(str(exc)) from None
+
+
+def _route(args: argparse.Namespace) -> Route | None:
+    """The via points of --goal / --route in --goal-frame; None when there are none."""
+    try:
+        route = route_from_options(args.goal, args.route, args.goal_frame)
+    except RouteError as exc:
+        raise UsageError(str(exc)) from None
+    return route if route.points else None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -187,6 +235,12 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--rate-hz must be within [1, 1000]")
     if args.duration is not None and not args.duration > 0:
         raise UsageError("--duration must be positive")
+    if args.filter == "none":
+        raise UsageError(
+            "--filter none: 'none' is direct mode, chosen with --mode direct or the gamepad's "
+            "mode button (a joystick file's mode column); --filter picks shared mode's filter"
+        )
+    route = _route(args)
     source = _open_source(args, cfg)
     session = open_session(options_from_args(args))
     stop = threading.Event()
@@ -208,8 +262,12 @@ def run(args: argparse.Namespace) -> int:
         clock_id=monotonic_clock_id() if offset_ns == 0 else None,
         view=view,
         status=None if args.no_status else StatusLine(sys.stdout),
+        route=route,
+        filter_default=args.filter,
     )
     log.info("operator %r driving robot %r at %.0f Hz", operator_id, robot_id, rate_hz)
+    if route is not None:
+        log.info("via points: %d in %s", len(route.points), route.frame)
     try:
         node.run(stop)
     finally:

@@ -17,12 +17,23 @@
   mode toggle   BTN_SELECT      View (Back) / Share (Create): direct <-> shared
   e-stop        BTN_EAST        B / Circle
   reset         BTN_START       Menu (Start) / Options
+  filter cycle  BTN_NORTH       Y / Triangle: next filter of shared mode (egc, ek-egc, assist,
+                                dwa, then egc again); in direct mode it switches to shared
+  via next      BTN_TR          RB / R1: skip the active via point
+  via clear     BTN_WEST        X / Square: clear all via points
   ============  ==============  =========================================================
 
   The ``generic`` preset is for USB joysticks with BTN_TRIGGER-style buttons (trigger is the
-  deadman, thumb the e-stop).
+  deadman, thumb the e-stop, thumb 2 cycles the filter, top skips a via point, top 2 clears
+  them, base 3 and base 4 toggle the mode and reset). Some drivers report the Xbox X and Y
+  buttons the other way round (``evtest`` shows the codes): swap ``filter_cycle`` and
+  ``via_clear`` in the ``[joystick]`` table then.
 - E-stop and reset are sent for at least ``latch_s`` after a press, so a tap survives a lost
   packet (the robot latches the e-stop itself, DESIGN 8).
+- The filter pick is sent with every command (``JoystickSample.filter``; None until the first
+  press unless a default is given: the robot's own default runs). ``via_next`` and
+  ``via_clear`` read true while the button is held, and at least once after a press however
+  short, so a tap between two samples is not lost; the operator node acts on the press edge.
 - A device that disappears (unplugged: ``OSError``) reads as a centred stick with the deadman
   released, and the source tries to reopen it once a second.
 
@@ -38,7 +49,7 @@ from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
 from egc_common.joystick import apply_deadzone, normalise_axis
-from egc_common.joystick_file import JoystickSample
+from egc_common.joystick_file import SHARED_FILTERS, JoystickSample
 
 log = logging.getLogger("egc.operator.joystick")
 
@@ -57,6 +68,8 @@ CODES: dict[str, int] = {
     "BTN_THUMB": 0x121,
     "BTN_THUMB2": 0x122,
     "BTN_TOP": 0x123,
+    "BTN_TOP2": 0x124,
+    "BTN_PINKIE": 0x125,
     "BTN_BASE3": 0x128,
     "BTN_BASE4": 0x129,
     "BTN_SOUTH": 0x130,
@@ -101,6 +114,9 @@ class ButtonMap:
     mode_toggle: int = CODES["BTN_SELECT"]
     estop: int = CODES["BTN_EAST"]
     reset: int = CODES["BTN_START"]
+    filter_cycle: int = CODES["BTN_NORTH"]
+    via_next: int = CODES["BTN_TR"]
+    via_clear: int = CODES["BTN_WEST"]
 
     @staticmethod
     def from_table(table: Mapping[str, Any], base: ButtonMap | None = None) -> ButtonMap:
@@ -126,6 +142,9 @@ PRESETS: dict[str, ButtonMap] = {
         estop=CODES["BTN_THUMB"],
         mode_toggle=CODES["BTN_BASE3"],
         reset=CODES["BTN_BASE4"],
+        filter_cycle=CODES["BTN_THUMB2"],
+        via_next=CODES["BTN_TOP"],
+        via_clear=CODES["BTN_TOP2"],
     ),
 }
 
@@ -165,8 +184,14 @@ class EvdevJoystick:
         mode: str = "shared",
         latch_s: float = 0.5,
         reopen: Callable[[], Device] | None = None,
+        filter: str | None = None,
     ) -> None:
+        if filter is not None and filter not in SHARED_FILTERS:
+            raise ValueError(f"filter must be one of {', '.join(SHARED_FILTERS)}, got {filter!r}")
         self._mapping = mapping
+        self._filter = filter
+        self._via_next_pending = False
+        self._via_clear_pending = False
         self._deadzone = deadzone
         self._latch_s = latch_s
         self._reopen = reopen
@@ -205,9 +230,15 @@ class EvdevJoystick:
                 self._retry_at = t_s + 1.0
         m = self._mapping
         if self._device is None:
-            return JoystickSample(t_s, 0.0, 0.0, deadman=False, mode=self._mode)
+            self._via_next_pending = self._via_clear_pending = False
+            return JoystickSample(
+                t_s, 0.0, 0.0, deadman=False, mode=self._mode, filter=self._filter
+            )
         x = self._cal[m.forward_axis].normalise(self._raw[m.forward_axis])
         y = self._cal[m.turn_axis].normalise(self._raw[m.turn_axis])
+        via_next = self._via_next_pending or m.via_next in self._pressed
+        via_clear = self._via_clear_pending or m.via_clear in self._pressed
+        self._via_next_pending = self._via_clear_pending = False
         return JoystickSample(
             t_s,
             -x if m.forward_invert else x,
@@ -216,6 +247,9 @@ class EvdevJoystick:
             mode=self._mode,
             estop=t_s <= self._estop_until or m.estop in self._pressed,
             reset=t_s <= self._reset_until or m.reset in self._pressed,
+            filter=self._filter,
+            via_next=via_next,
+            via_clear=via_clear,
         )
 
     def _drain(self, t_s: float) -> None:
@@ -238,6 +272,24 @@ class EvdevJoystick:
                     self._estop_until = t_s + self._latch_s
                 elif event.code == m.reset:
                     self._reset_until = t_s + self._latch_s
+                elif event.code == m.filter_cycle:
+                    self._cycle_filter()
+                elif event.code == m.via_next:
+                    self._via_next_pending = True
+                elif event.code == m.via_clear:
+                    self._via_clear_pending = True
+
+    def _cycle_filter(self) -> None:
+        """The next filter of shared mode; from direct mode, shared mode with the current pick."""
+        if self._mode == "direct":
+            self._mode = "shared"
+            self._filter = self._filter or SHARED_FILTERS[0]
+        elif self._filter is None:
+            self._filter = SHARED_FILTERS[0]
+        else:
+            i = SHARED_FILTERS.index(self._filter)
+            self._filter = SHARED_FILTERS[(i + 1) % len(SHARED_FILTERS)]
+        log.info("mode: %s, filter %s", self._mode, self._filter)
 
     def _try_reopen(self, t_s: float) -> None:
         if self._reopen is None or t_s < self._retry_at:

@@ -12,6 +12,14 @@
   newest telemetry received (and handed to the view), once the clock is synchronised.
 - Keeps a bounded history of the commands it sent (robot-clock stamps) and hands it to the view
   after every command, for the predictive display (DESIGN 9, ``egc_operator.prediction``).
+- Sends ``filter`` with every command (DESIGN 6): the source's pick (a gamepad button, a file's
+  column), else the ``--filter`` default, else none (the robot runs its own default).
+- Via points (DESIGN 7 ``egc/<robot>/goal``, ``egc_operator.via_route``): the route goes out on
+  a reliable publisher (goals are rare and must not be lost), once the robot is seen and then
+  every second (the robot keeps its progress on a repeat; a robot that starts later or control
+  taken later still gets it), and at once after the source's ``via_next`` / ``via_clear``
+  press (the sample's rising edge). Its own thread sends it, so a congested link that blocks a
+  reliable put never holds back the commands.
 
 ``local_clock`` is the operator's monotonic clock; the hidden ``--clock-offset-s`` flag shifts it
 to test clock sync against a machine whose clock differs by an hour.
@@ -47,6 +55,7 @@ from egc_operator.clock_sync import ClockSync
 from egc_operator.command_source import CommandSource
 from egc_operator.prediction import CommandHistory, SentCommand
 from egc_operator.status_line import Status, StatusLine, status_of
+from egc_operator.via_route import Route, RoutePlanner
 
 log = logging.getLogger("egc.operator")
 
@@ -57,6 +66,18 @@ _CLOCK_TIMEOUT_S = 3.0  # above the round trip of a satellite link (2 x 500 ms +
 _START_WAIT_NS = 10 * NS_PER_S  # a script starts when the robot is seen, or after this
 _MAP_TIMEOUT_S = 1.0
 _MAP_ATTEMPTS = 10  # a robot that serves no map is asked this often, then left alone
+_GOAL_POLL_S = 0.05  # the goal thread looks at the route this often (and at once on a press)
+
+
+def goal_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
+    """Via points: rare and must not be lost, so reliable and blocking under congestion (unlike
+    the best-effort command and data publishers); the goal thread is the only one it blocks."""
+    return session.declare_publisher(
+        key,
+        priority=zenoh.Priority.INTERACTIVE_LOW,
+        congestion_control=zenoh.CongestionControl.BLOCK,
+        reliability=zenoh.Reliability.RELIABLE,
+    )
 
 
 class View(Protocol):
@@ -75,6 +96,7 @@ class View(Protocol):
         origin_xy_m: tuple[float, float],
         goal_xy_m: tuple[float, float] | None = None,
     ) -> None: ...
+    def on_route(self, points: tuple[tuple[float, float], ...], frame: str) -> None: ...
 
 
 def view_age_ms(
@@ -103,6 +125,8 @@ class OperatorNode:
         clock_id: str | None = None,
         view: View | None = None,
         status: StatusLine | None = None,
+        route: Route | None = None,
+        filter_default: str | None = None,
     ) -> None:
         self._session = session
         self._robot = robot_id
@@ -121,7 +145,13 @@ class OperatorNode:
         self._robot_alive = False
         self._map_attempts_left = 0 if view is None else _MAP_ATTEMPTS
         self.published = 0
+        self._filter_default = filter_default
+        self._planner = RoutePlanner(route)
+        self._actions: list[str] = []  # "next" / "clear" presses for the goal thread (locked)
+        self._goal_wake = threading.Event()
+        self.goals_published = 0
         self._publisher = command_publisher(session, keys.cmd(robot_id))
+        self._goal_publisher = goal_publisher(session, keys.goal(robot_id))
         liveliness = session.liveliness()
         self._token = liveliness.declare_token(keys.alive_operator(robot_id, operator_id))
         self._entities: list[Any] = [
@@ -237,6 +267,11 @@ class OperatorNode:
             target=self._clock_sync, args=(stop,), name="clock-sync", daemon=True
         )
         sync_thread.start()
+        goal_thread = threading.Thread(
+            target=self._goal_loop, args=(stop,), name="via-points", daemon=True
+        )
+        goal_thread.start()
+        pressed = {"next": False, "clear": False}
         opened = self._clock()
         start: int | None = None  # a script's time 0: when the robot is first seen
         deadline = opened
@@ -259,6 +294,12 @@ class OperatorNode:
                 sample = RELEASED
                 if now - ended_at >= _RELEASE_AFTER_END_NS:
                     break
+            for action, held in (("next", sample.via_next), ("clear", sample.via_clear)):
+                if held and not pressed[action]:  # the press edge
+                    with self._lock:
+                        self._actions.append(action)
+                    self._goal_wake.set()
+                pressed[action] = held
             seq += 1
             with self._lock:
                 stamp = self._sync.robot_now(now)
@@ -277,6 +318,7 @@ class OperatorNode:
                 reset=sample.reset,
                 op=self._op,
                 view_age_ms=age,
+                filter=sample.filter if sample.filter is not None else self._filter_default,
             )
             self._publisher.put(command.encode())
             self.published += 1
@@ -295,7 +337,61 @@ class OperatorNode:
             if deadline <= now:
                 deadline = now + self._period_ns
         stop.set()
+        self._goal_wake.set()
         sync_thread.join(timeout=2 * _CLOCK_TIMEOUT_S)
+        goal_thread.join(timeout=2 * _CLOCK_TIMEOUT_S)
+
+    # -- via points thread ------------------------------------------------------------------------
+
+    def _goal_loop(self, stop: threading.Event) -> None:
+        """Apply next/clear presses and publish the route when due (see the module docstring)."""
+        if self._view is not None and self._planner.engaged:
+            route = self._planner.route
+            self._view.on_route(route.points, route.frame)
+        while not stop.is_set():
+            self._goal_wake.wait(_GOAL_POLL_S)
+            self._goal_wake.clear()
+            if stop.is_set():
+                return
+            try:
+                self._goal_step()
+            except Exception as exc:  # a closing session must not kill the thread noisily
+                if stop.is_set():
+                    return
+                log.warning("via points not sent: %s", exc)
+
+    def _goal_step(self) -> None:
+        with self._lock:
+            actions, self._actions = self._actions, []
+            t, present = self._telemetry, self._robot_alive
+            stamp = self._sync.robot_now(self._clock())
+        planner = self._planner
+        for action in actions:
+            before = planner.route
+            if action == "clear":
+                planner.clear()
+                log.info("via points cleared")
+            elif t is None or not planner.next(t.goal, t.goal_frame, t.goals_left):
+                log.info("next via point: no active via point of this route to skip")
+                continue
+            else:
+                log.info("via point skipped: %d left", len(planner.route.points))
+            if self._view is not None and planner.route != before:
+                self._view.on_route(planner.route.points, planner.route.frame)
+            if self._view is not None:
+                self._view.on_text("INFO", f"via points: {action}")
+        now = self._clock()
+        if planner.due(now, present):
+            message = planner.message(self._op, stamp, now)
+            self._goal_publisher.put(message.encode())
+            self.goals_published += 1
+            if message.seq == 1 or actions:
+                log.info(
+                    "via points sent: %d in %s (seq %d)",
+                    len(message.points),
+                    message.frame,
+                    message.seq,
+                )
 
     def _status_of(self, command: OperatorCommand) -> Status:
         with self._lock:
@@ -310,6 +406,7 @@ class OperatorNode:
             entity.undeclare()
         self._token.undeclare()
         self._publisher.undeclare()
+        self._goal_publisher.undeclare()
         if self._status is not None:
             self._status.close()
         if self._view is not None:

@@ -4,7 +4,8 @@ The line starts with the situation in an operator's words (``situation``): why t
 and what to do about it, or why it is slowed, e.g. ``HOLD: link gap (no command for 0.4 s) -
 keep the stick, it resumes`` or ``SLOWED: link delay 1.3 s -> speed capped at 0.10 m/s``. Then
 the link figures (``link_figures``: clock-sync round trip, the robot's command age p50/p90, the
-largest gap between commands, the loss), then w_SI, rejections, mode, deadman and control.
+largest gap between commands, the loss), then w_SI, rejections, mode with the filter that runs
+(``shared (ek-egc)``, from telemetry ``filter``), the via points, deadman and control.
 Every telemetry figure may be unknown (None: an older robot, or none measured yet); unknown
 figures are left out.
 
@@ -20,11 +21,13 @@ import shutil
 from dataclasses import dataclass
 from typing import TextIO
 
-from egc_common.messages import OperatorCommand, StateMessage, Telemetry
+from egc_common.messages import FILTER_NAMES, OperatorCommand, StateMessage, Telemetry
 
 # DESIGN 8 defaults, as the operator cannot read the robot's configuration.
 RESUME_WINDOW_S = 2.0
 MAX_COMMAND_AGE_MS = {"direct": 300, "shared": 1000}
+# Telemetry limiter values that name the filter of DESIGN 6 that changed the command.
+FILTER_LIMITERS = frozenset(name for name in FILTER_NAMES if name != "none")
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,6 +52,9 @@ class Status:
     cmd_gap_max_ms: float | None = None
     link_loss: float | None = None  # fraction, 0-1
     view_age_ms: float | None = None  # what this operator reports with its commands
+    # Via points (DESIGN 7): the robot's active one and how many follow; None: none active.
+    goal: tuple[float, float] | None = None
+    goals_left: int = 0
 
 
 def _seconds(ms: float) -> str:
@@ -92,8 +98,8 @@ def _driving(s: Status, reason: str) -> str:
         delay = "" if s.loop_delay_ms is None else f" {_seconds(s.loop_delay_ms)}"
         cap = "" if s.v_lim_latency is None else f" at {s.v_lim_latency:.2f} m/s"
         return f"SLOWED: link delay{delay} -> speed capped{cap}"
-    if limiter == "egc":
-        return f"SLOWED: obstacle (filter {s.filter or 'egc'})"
+    if limiter in FILTER_LIMITERS:
+        return f"SLOWED: obstacle (filter {limiter})"
     if limiter == "sweep":
         return "SLOWED: obstacle next to the footprint (sweep check)"
     if "resum" in reason.lower():
@@ -141,8 +147,14 @@ def format_status(s: Status) -> str:
     rejected = "rejected --" if s.rejected is None else f"rejected {s.rejected}"
     control = {None: "", True: " | in control", False: " | NOT in control"}[s.in_control]
     deadman = "deadman ON" if s.deadman else "deadman off"
+    mode = s.mode if s.filter in (None, "none") else f"{s.mode} ({s.filter})"
+    via = ""
+    if s.goal is not None:
+        more = f" +{s.goals_left}" if s.goals_left else ""
+        via = f" | via {s.goal[0]:.1f},{s.goal[1]:.1f}{more}"
     return (
-        f"{situation(s)} | {link_figures(s)} | {w_si} | {rejected} | {s.mode} | {deadman}{control}"
+        f"{situation(s)} | {link_figures(s)} | {w_si} | {rejected} | {mode}{via} | "
+        f"{deadman}{control}"
     )
 
 
@@ -176,6 +188,8 @@ class StatusLine:
             status.limiter == "latency",  # sustained; egc/none may alternate every cycle
             status.in_control,
             status.synchronised,
+            status.filter,  # the operator picked another one (sustained, unlike the limiter)
+            status.goal,  # the robot moved on to another via point
         )
         if key != self._last_key or now_s - self._last_plain_s >= self._plain_period_s:
             self._stream.write(text + "\n")
@@ -220,4 +234,6 @@ def status_of(
         cmd_gap_max_ms=None if t is None else t.cmd_gap_max_ms,
         link_loss=None if t is None else t.link_loss,
         view_age_ms=command.view_age_ms,
+        goal=None if t is None else t.goal,
+        goals_left=0 if t is None else t.goals_left,
     )

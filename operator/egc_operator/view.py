@@ -14,6 +14,10 @@ and the path to it, labelled as a prediction, and the link figures in plain numb
 logged at the robot time of the telemetry it starts from, so a saved recording replays the ghost
 next to the measured pose the operator saw with it.
 
+The operator process also hands over its via points (``on_route``): the world frame shows
+them with the robot's echo of the active one (telemetry ``goal``, ``goals_left``), and the
+robot frame the direction the filter suggests (``suggested_rad``), see ``view_scene.via_scene``.
+
 Every method is thread-safe (Zenoh delivers on its own threads) and never raises on a message:
 a view must not take the operator process down.
 """
@@ -59,6 +63,7 @@ from egc_operator.view_scene import (
     SCAN_INK,
     SENT_RED,
     TRAJECTORY_TEAL,
+    VIA_ORANGE,
     WORLD_TO_SCREEN,
     footprint_half_size,
     ghost_scene,
@@ -68,7 +73,9 @@ from egc_operator.view_scene import (
     profile_named,
     robot_frame_scene,
     status_changes,
+    suggested_vector,
     time_series,
+    via_scene,
 )
 from egc_operator.viewer_target import ViewerTarget, attach, choose_target
 
@@ -236,6 +243,10 @@ class OperatorView:
         self._downlink_ms: deque[float] = deque(maxlen=DOWNLINK_SAMPLES)
         self._predicted_ns: int | None = None  # robot time of the last ghost drawn
         self._ghost_drawn = False
+        self._route: tuple[tuple[float, float], ...] = ()  # the operator's via points
+        self._route_frame: str | None = None
+        self._via_key: object = None  # what the via points were last drawn from
+        self._suggested_drawn = False
         if recording is not None:
             self._log_static(recording)
 
@@ -262,6 +273,7 @@ class OperatorView:
             self._note_rejections(rec, t.rejected)
             if t.pose is not None:
                 self._log_pose(rec, t)
+            self._log_via(rec, t)
             self._last = t
             self._robot_ns = t.stamp_ns
             self._log_pending_text(rec)
@@ -346,6 +358,17 @@ class OperatorView:
                 prediction,
             )
             rec.log(paths.LINK_TEXT, rr.TextDocument(text))
+
+    def on_route(self, points: tuple[tuple[float, float], ...], frame: str) -> None:
+        """The operator's via points (in order, in ``frame``); empty: none or cleared."""
+        with self._lock:
+            self._route = tuple((float(x), float(y)) for x, y in points)
+            self._route_frame = frame
+            rec = self._rec
+            if rec is None or self._last is None:
+                return  # drawn with the next telemetry
+            _set_time(rec, self._last.stamp_ns, self._cycle)
+            self._log_via(rec, self._last)
 
     def set_world(
         self,
@@ -434,6 +457,13 @@ class OperatorView:
         for path, colour in ((paths.REFERENCE_ARROW, REFERENCE_BLUE), (paths.SENT_ARROW, SENT_RED)):
             rec.log(path, rr.Arrows2D.from_fields(origins=[(0.0, 0.0)], colors=colour), static=True)
         rec.log(
+            paths.SUGGESTED_ARROW,
+            rr.Arrows2D.from_fields(
+                origins=[(0.0, 0.0)], colors=VIA_ORANGE, labels=["suggested"], show_labels=True
+            ),
+            static=True,
+        )
+        rec.log(
             paths.TRAJECTORY,
             rr.LineStrips2D.from_fields(radii=THIN_LINE, colors=TRAJECTORY_TEAL),
             static=True,
@@ -487,6 +517,50 @@ class OperatorView:
             )
         rec.log(paths.REFERENCE_ARROW, rr.Arrows2D(vectors=[scene.reference_vector]))
         rec.log(paths.SENT_ARROW, rr.Arrows2D(vectors=[scene.sent_vector]))
+        suggested = suggested_vector(t)
+        if suggested is not None:
+            rec.log(paths.SUGGESTED_ARROW, rr.Arrows2D(vectors=[suggested]))
+            self._suggested_drawn = True
+        elif self._suggested_drawn:
+            rec.log(paths.SUGGESTED_ARROW, rr.Arrows2D(vectors=[], origins=[], labels=[]))
+            self._suggested_drawn = False
+
+    def _log_via(self, rec: rr.RecordingStream, t: Telemetry) -> None:
+        """The via points in the world frame, and the active one in {R}: redrawn when the
+        route, the robot's echo or (while one is active) the robot's position changed."""
+        pose_key = None
+        if t.goal is not None and t.pose is not None:
+            step = TRAJECTORY_STEP_M * 2.5
+            pose_key = (round(t.pose[0] / step), round(t.pose[1] / step), round(t.pose[2], 1))
+        key = (self._route, self._route_frame, t.goal, t.goal_frame, t.goals_left, pose_key)
+        if key == self._via_key:
+            return
+        first = self._via_key is None
+        self._via_key = key
+        scene = via_scene(self._route, self._route_frame, t)
+        if scene.empty and first:
+            return  # nothing to draw, and nothing drawn to clear
+        active = [] if scene.active is None else [scene.active]
+        rec.log(
+            paths.VIA_ACTIVE,
+            rr.Points2D(
+                active,
+                radii=0.15,
+                colors=VIA_ORANGE,
+                labels=[scene.active_label] * len(active),
+                draw_order=30.0,
+            ),
+        )
+        rec.log(
+            paths.VIA_POINTS,
+            rr.Points2D(scene.others, radii=0.08, colors=scene.other_colours, draw_order=29.0),
+        )
+        strips = [scene.route] if len(scene.route) >= 2 else []
+        rec.log(paths.VIA_ROUTE, rr.LineStrips2D(strips, colors=VIA_ORANGE, radii=THIN_LINE))
+        seen = []
+        if scene.active is not None and t.pose is not None and t.goal_frame in (None, "odom"):
+            seen = [_to_robot_frame(scene.active, t.pose)]
+        rec.log(paths.ROBOT_VIA, rr.Points2D(seen, radii=0.1, colors=VIA_ORANGE))
 
     def _log_pose(self, rec: rr.RecordingStream, t: Telemetry) -> None:
         assert t.pose is not None
@@ -547,6 +621,15 @@ class OperatorView:
             text = f"robot rejected {new} more command(s) ({total} in total)"
             rec.log(paths.TEXT_LOG, rr.TextLog(text, level="WARN"))
         self._rejected_seen = max(self._rejected_seen, total)
+
+
+def _to_robot_frame(
+    point: tuple[float, float], pose: tuple[float, float, float]
+) -> tuple[float, float]:
+    """A world point in {R} of a robot at ``pose`` (telemetry pose: the odom frame)."""
+    dx, dy = point[0] - pose[0], point[1] - pose[1]
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    return float(c * dx + s * dy), float(-s * dx + c * dy)
 
 
 def _set_time(rec: rr.RecordingStream, robot_ns: int, cycle: int) -> None:

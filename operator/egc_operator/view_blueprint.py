@@ -5,10 +5,11 @@ Layout (paper Fig. 8 as a Rerun blueprint)::
     +---------------------------+----------------------+------------------+
     | robot frame {R}           | world frame          | v: ref vs sent   |
     | scan, footprint, circles, | map, trajectory,     | w: ref vs sent   |
-    | command arrows, status    | goal, robot, ghost   | w_SI             |
+    | command arrows, suggested | goal, via points,    | w_SI             |
+    | direction, status         | robot, ghost         |                  |
     +---------------------------+----------------------+ latency          |
-    | state / mode / limiter /  | link figures         |                  |
-    | region lanes              +----------------------+                  |
+    | state / mode / filter /   | link figures         |                  |
+    | limiter / region lanes    +----------------------+                  |
     |                           | text log             |                  |
     +---------------------------+----------------------+------------------+
 
@@ -36,6 +37,8 @@ STATUS = "robot/status"
 CIRCLES = "robot/circles"  # + /reachable, /igc, /agc, /egc
 REFERENCE_ARROW = "robot/command/reference"
 SENT_ARROW = "robot/command/sent"
+SUGGESTED_ARROW = "robot/suggested"  # the filter's suggested direction (assist), in {R}
+ROBOT_VIA = "robot/via"  # the active via point seen from the robot (odom frame only)
 
 # World-frame view: ``world`` carries the world -> screen transform.
 WORLD = "world"
@@ -44,6 +47,11 @@ GOAL = "world/goal"
 TRAJECTORY = "world/trajectory"
 ROBOT_POSE = "world/robot"  # Transform3D per cycle; its children are static, in {R}
 POSE_FOOTPRINT = "world/robot/footprint"
+# Via points (DESIGN 7 goal), in the world frame.
+VIA = "world/via"
+VIA_ACTIVE = "world/via/active"
+VIA_POINTS = "world/via/points"
+VIA_ROUTE = "world/via/route"
 # Predictive display (DESIGN 9), in world coordinates: never children of ``world/robot``.
 PREDICTED = "world/predicted"
 PREDICTED_FOOTPRINT = "world/predicted/footprint"
@@ -53,7 +61,7 @@ LINK_TEXT = "link"  # TextDocument: the link figures in plain numbers
 
 PLOTS = "plots"  # + /v/ref, /v/cmd, /w/ref, /w/cmd, /w_si, /latency/...
 LINK_RTT = "plots/latency/link_rtt_ms"
-LANES = "status"  # + /state, /mode, /limiter, /region
+LANES = "status"  # + /state, /mode, /filter, /limiter, /region
 TEXT_LOG = "log"
 
 
@@ -126,7 +134,7 @@ def operator_blueprint(
         rrb.Horizontal(
             rrb.Vertical(
                 robot_view,
-                rrb.StateTimelineView(name="state, mode, limiter, region", origin=LANES),
+                rrb.StateTimelineView(name="state, mode, filter, limiter, region", origin=LANES),
                 row_shares=[3, 1],
             ),
             rrb.Vertical(

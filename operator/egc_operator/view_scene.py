@@ -7,7 +7,10 @@ layer maps both onto the screen with one static transform each (``ROBOT_TO_SCREE
 Colour code, after the paper: blue is the operator's side (reference command, initial guide
 circle, Fig. 10 and 11), red is what the robot made of it (sent command, expanded guide circle).
 The region of the safety index circle (eq. 5) colours the footprint: green safe, amber
-conditional, red unsafe. The predictive display (DESIGN 9) is magenta, translucent and dashed,
+conditional, red unsafe. Via points (DESIGN 7) are orange in the world frame: the active one
+large and labelled, the ones ahead small, those passed grey, the route a line from the robot
+through the active one and those ahead; the filter's suggested direction (``assist``) is an
+orange arrow in {R}. The predictive display (DESIGN 9) is magenta, translucent and dashed,
 labelled as a prediction, so that it is never taken for a measurement.
 """
 
@@ -23,6 +26,7 @@ from egc_common.messages import Circle, Telemetry
 from egc_common.profiles import PROFILES, RobotProfile
 
 from egc_operator.prediction import Prediction
+from egc_operator.via_route import Route, active_index
 
 F32 = npt.NDArray[np.float32]
 Rgb = tuple[int, int, int]
@@ -50,11 +54,17 @@ UNKNOWN_REGION: Rgb = (120, 120, 120)
 PREDICTED_MAGENTA: Rgba = (200, 40, 190, 210)  # translucent: a prediction, not a measurement
 PREDICTED_LABEL = "predicted (not measured)"
 LATENCY_BROWN: Rgb = (150, 90, 30)
+VIA_ORANGE: Rgb = (240, 130, 0)
+VIA_PASSED_GREY: Rgb = (175, 175, 175)
+SUGGESTED_LENGTH_M = 1.0
 
 # Telemetry.limiter values (egc_robot.pipeline.Limiter plus the state machine's) -> short text.
 LIMITER_TEXT: dict[str, str] = {
     "none": "no limit",
     "egc": "EGC",
+    "ek-egc": "EK-EGC",
+    "assist": "assist",
+    "dwa": "DWA",
     "sweep": "footprint sweep",
     "limits": "v/a limits",
     "watchdog": "watchdog",
@@ -113,13 +123,19 @@ def status_text(t: Telemetry) -> str:
     """One line for the robot-frame view, e.g. ``DRIVING · shared · limit: EGC · conditional``.
 
     A robot that is not driving says why (``HOLD (command timeout) · ...``); the latency limiter
-    says its cap (``limit: latency <= 0.10 m/s``).
+    says its cap (``limit: latency <= 0.10 m/s``). The filter that runs follows the mode
+    (``shared (ek-egc)``), and the active via point comes last (``via 2.0,1.0 +1 more``).
     """
     limiter = LIMITER_TEXT.get(t.limiter, t.limiter)
     if t.limiter == "latency" and t.v_lim_latency is not None:
         limiter += f" <= {t.v_lim_latency:.2f} m/s"
     state = t.state if t.state == "DRIVING" or not t.reason else f"{t.state} ({t.reason})"
-    return f"{state} · {t.mode} · limit: {limiter} · {t.region} · w_SI {t.w_si:.2f}"
+    mode = t.mode if t.filter in ("", "none") else f"{t.mode} ({t.filter})"
+    text = f"{state} · {mode} · limit: {limiter} · {t.region} · w_SI {t.w_si:.2f}"
+    if t.goal is not None:
+        more = f" +{t.goals_left} more" if t.goals_left else ""
+        text += f" · via {t.goal[0]:.1f},{t.goal[1]:.1f}{more}"
+    return text
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -193,7 +209,7 @@ def time_series(t: Telemetry) -> dict[str, float]:
 LINK_SERIES = ("cmd_age_p50_ms", "cmd_age_p90_ms", "cmd_gap_max_ms", "view_age_ms", "loop_delay_ms")
 
 
-STATUS_LANES = ("state", "mode", "limiter", "region")
+STATUS_LANES = ("state", "mode", "filter", "limiter", "region")
 _AMBER: Rgb = REGION_COLOURS["conditional"]
 _GREY: Rgb = (190, 190, 190)
 # lane -> (value, colour) in the order shown by the state timeline.
@@ -208,6 +224,9 @@ LANE_COLOURS: dict[str, tuple[tuple[str, Rgb], ...]] = {
     "limiter": (
         ("none", _GREY),
         ("egc", SENT_RED),
+        ("ek-egc", (180, 30, 90)),
+        ("assist", VIA_ORANGE),
+        ("dwa", (100, 60, 160)),
         ("sweep", AGC_VIOLET),
         ("limits", (120, 160, 220)),
         ("watchdog", _AMBER),
@@ -215,16 +234,95 @@ LANE_COLOURS: dict[str, tuple[tuple[str, Rgb], ...]] = {
         ("estop", (140, 0, 0)),
         ("latency", LATENCY_BROWN),
     ),
+    "filter": (
+        ("none", _GREY),
+        ("egc", SENT_RED),
+        ("ek-egc", (180, 30, 90)),
+        ("assist", VIA_ORANGE),
+        ("dwa", (100, 60, 160)),
+        ("unknown", (120, 120, 120)),
+    ),
     "region": tuple(REGION_COLOURS.items()),
 }
 
 
+def _lane_value(t: Telemetry, lane: str) -> str:
+    if lane == "filter":
+        return t.filter or "unknown"  # an older robot does not say
+    return str(getattr(t, lane))
+
+
 def status_changes(previous: Telemetry | None, t: Telemetry) -> dict[str, str]:
-    """The status lanes (state, mode, limiter, region) whose value differs from ``previous``."""
-    now = {lane: str(getattr(t, lane)) for lane in STATUS_LANES}
+    """The status lanes (state, mode, filter, limiter, region) that differ from ``previous``."""
+    now = {lane: _lane_value(t, lane) for lane in STATUS_LANES}
     if previous is None:
         return now
-    return {lane: v for lane, v in now.items() if getattr(previous, lane) != v}
+    return {lane: v for lane, v in now.items() if _lane_value(previous, lane) != v}
+
+
+# ---------------------------------------------------------------------------------------------
+# Via points (DESIGN 7 goal) in the world frame, the suggested direction in {R}.
+
+
+@dataclass(frozen=True, slots=True)
+class ViaScene:
+    """What the world-frame view draws for the via points (world frame, metres)."""
+
+    active: Point | None  # the robot's active via point (telemetry ``goal``)
+    active_label: str
+    others: list[Point]  # the operator's other route points
+    other_colours: list[Rgb]  # grey: passed; orange: still ahead (or unknown)
+    route: list[Point]  # the robot's pose, the active point, then those ahead
+
+    @property
+    def empty(self) -> bool:
+        return self.active is None and not self.others
+
+
+NO_VIA = ViaScene(None, "", [], [], [])
+
+
+def via_scene(
+    route_points: tuple[Point, ...], route_frame: str | None, t: Telemetry | None
+) -> ViaScene:
+    """The via points to draw from the operator's route (may be empty: a view that was not
+    told, e.g. a headless episode) and the robot's echo in the newest telemetry.
+
+    With the route known and the echo of it, the points before the active one are passed and
+    those after it ahead; without the echo (route done, or not accepted yet) the route is drawn
+    as it is; without the route, the active point alone, with how many follow.
+    """
+    goal = None if t is None else t.goal
+    pose = None if t is None or t.pose is None else (t.pose[0], t.pose[1])
+    index = None
+    if goal is not None and t is not None and route_frame is not None and route_points:
+        route = Route(route_frame, route_points)
+        index = active_index(route, goal, t.goal_frame, t.goals_left)
+    if goal is None or t is None:
+        others = list(route_points)
+        return ViaScene(None, "", others, [VIA_ORANGE] * len(others), others)
+    frame = "" if t.goal_frame in (None, "odom") else f", {t.goal_frame}"
+    if index is None:
+        more = f", {t.goals_left} more" if t.goals_left else ""
+        label = f"via point (active{frame}){more}"
+        return ViaScene(goal, label, [], [], [*([pose] if pose else []), goal])
+    passed, ahead = list(route_points[:index]), list(route_points[index + 1 :])
+    label = f"via {index + 1}/{len(route_points)} (active{frame})"
+    return ViaScene(
+        goal,
+        label,
+        passed + ahead,
+        [VIA_PASSED_GREY] * len(passed) + [VIA_ORANGE] * len(ahead),
+        [*([pose] if pose else []), goal, *ahead],
+    )
+
+
+def suggested_vector(t: Telemetry, length_m: float = SUGGESTED_LENGTH_M) -> Point | None:
+    """The filter's suggested direction (``suggested_rad`` in {R}) as an arrow, or None."""
+    a = t.suggested_rad
+    if a is None or not math.isfinite(a):
+        return None
+    return length_m * math.cos(a), length_m * math.sin(a)
 
 
 def pose_moved(

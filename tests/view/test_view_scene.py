@@ -103,10 +103,12 @@ def test_status_changes_reports_only_what_changed() -> None:
     assert status_changes(None, first) == {
         "state": "DRIVING",
         "mode": "shared",
+        "filter": "unknown",  # the synthetic telemetry does not say (an older robot)
         "limiter": "egc",
         "region": "conditional",
     }
     assert status_changes(first, telemetry(2)) == {}
+    assert status_changes(first, telemetry(2, filter="ek-egc")) == {"filter": "ek-egc"}
     assert status_changes(first, telemetry(2, state="HOLD", limiter="watchdog")) == {
         "state": "HOLD",
         "limiter": "watchdog",
