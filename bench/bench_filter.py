@@ -6,6 +6,12 @@ nearest-point searches). Both implementations run in the same process on the sam
 results are checked to agree before timing. Targets: median <= 50 us at 720 points and <= 2 ms
 at 30,000 points.
 
+The filter family (DESIGN 6, issue 10), in the same run on the same scans: ``ek-egc`` (when its
+module is importable) with the same radii, target <= 2x EGC's median; ``dwa`` with the
+pioneer3dx profile on the same input (points beyond its reach cost nothing), and ``dwa`` with
+the jackal profile on the same scan (2.5 m look-ahead: nearly every point is within reach, the
+expensive case). DWA's cost is reported as a ratio to EGC's, without a target.
+
     python bench/bench_filter.py [--repeats N] [--out FILE.json]
 """
 
@@ -21,11 +27,23 @@ import time
 from pathlib import Path
 
 import numpy as np
-from egc_common.profiles import PIONEER3DX
+from egc_common.profiles import JACKAL, PIONEER3DX, RobotProfile
+from egc_robot.filters.dwa import DwaParams, dwa_filter
 from egc_robot.filters.egc import EgcCase, EgcParams, egc_filter
+
+try:  # written alongside this bench (issue 10); the bench reports it once it lands
+    from egc_robot.filters.ek_egc import ek_egc_filter
+except ImportError:  # pragma: no cover - depends on the checkout
+    ek_egc_filter = None
 
 PARAMS = EgcParams.from_profile(PIONEER3DX.r_min_m, PIONEER3DX.r_max_m, PIONEER3DX.v_max_mps)
 COMMAND = (0.14, 0.05)
+EK_L_M = PIONEER3DX.v_max_mps / PIONEER3DX.w_max_radps  # L = v_max / w_max (DESIGN 6)
+# DWA: the profile and the command at full speed, already driving it (goal: none).
+DWA_CASES: dict[str, tuple[RobotProfile, tuple[float, float]]] = {
+    "dwa": (PIONEER3DX, COMMAND),
+    "dwa jackal": (JACKAL, (2.0, 0.5)),
+}
 
 
 def room_scan(beams: int) -> np.ndarray:
@@ -90,6 +108,61 @@ def time_calls(fn, repeats: int) -> list[float]:
     return out
 
 
+def family_rows(cases: dict, egc_by_points: dict, repeats: int) -> list[dict]:
+    """ek-egc and dwa per call on the scans, next to EGC's median from the same run."""
+    fns = {}
+    if ek_egc_filter is not None:
+        fns["ek-egc"] = lambda pts: ek_egc_filter(*COMMAND, pts, PARAMS, EK_L_M)
+    for name, (profile, cmd) in DWA_CASES.items():
+        params = DwaParams.from_profile(profile)
+        fns[name] = lambda pts, p=profile, c=cmd, d=params: dwa_filter(*c, pts, *c, None, p, d)
+    rows = []
+    print()
+    print("Filter family per call, same scans (EGC median from the table above)")
+    print(
+        f"{'filter':<12}{'points':>8}{'median us':>12}{'p95 us':>10}{'egc us':>10}{'ratio':>8}  note"
+    )
+    for name, fn in fns.items():
+        for case, pts in cases.items():
+            if not case.startswith("scan"):
+                continue
+            res = fn(pts)
+            note = ""
+            if name.startswith("dwa"):
+                profile = DWA_CASES[name][0]
+                reach = profile.half_diagonal_m + DwaParams.from_profile(profile).margin_m
+                reach += DwaParams.from_profile(profile).lookahead_m
+                within = int((np.hypot(pts[:, 0], pts[:, 1]) <= reach).sum())
+                note = (
+                    f"{profile.name}, {within} points in reach, {res.candidates} candidates, "
+                    f"{res.admissible} admissible, {'modified' if res.modified else 'passed'}"
+                )
+            else:
+                note = str(res.case.value)
+            for _ in range(20):
+                fn(pts)
+            reps = max(50, repeats // 10) if name.startswith("dwa") else repeats
+            times = time_calls(lambda f=fn, p=pts: f(p), reps)
+            med, p95 = statistics.median(times), float(np.percentile(times, 95))
+            egc = egc_by_points[len(pts)]["median_us"]
+            rows.append(
+                {
+                    "filter": name,
+                    "points": len(pts),
+                    "median_us": med,
+                    "p95_us": p95,
+                    "egc_median_us": egc,
+                    "ratio_to_egc": med / egc,
+                    "repeats": reps,
+                    "note": note,
+                }
+            )
+            print(
+                f"{name:<12}{len(pts):>8}{med:>12.1f}{p95:>10.1f}{egc:>10.1f}{med / egc:>7.1f}x  {note}"
+            )
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=2000)
@@ -143,11 +216,24 @@ def main(argv: list[str] | None = None) -> int:
         "720 points <= 50 us": by[720]["median_us"] <= 50.0,
         "30000 points <= 2000 us": by[30000]["median_us"] <= 2000.0,
     }
+    family = family_rows(cases, by, args.repeats)
+    if ek_egc_filter is None:
+        print("ek-egc: egc_robot.filters.ek_egc is not importable in this checkout; not timed")
+    else:
+        for n in (360, 720, 1440):
+            ratio = next(
+                r["ratio_to_egc"] for r in family if r["filter"] == "ek-egc" and r["points"] == n
+            )
+            targets[f"ek-egc <= 2x egc at {n} points"] = ratio <= 2.0
     for k, ok in targets.items():
         print(f"target {k}: {'met' if ok else 'MISSED'}")
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"rows": rows, "targets": targets, "python": sys.version}, indent=2))
+    out.write_text(
+        json.dumps(
+            {"rows": rows, "family": family, "targets": targets, "python": sys.version}, indent=2
+        )
+    )
     print(f"wrote {out}")
     return 0 if all(targets.values()) else 1
 
