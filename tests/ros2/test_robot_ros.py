@@ -1,0 +1,187 @@
+"""``egc-teleop robot --driver ros2`` end to end (DESIGN 11, issue 14): a real ROS 2 graph (the
+test's FakeBase node), the real robot process, a real operator process over Zenoh."""
+
+from __future__ import annotations
+
+import re
+import signal
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("rclpy", reason="ROS 2's rclpy is not installed (pip install -e '.[ros2]')")
+
+from egc_common.transport import free_tcp_port, loopback_endpoint
+
+from tests.integration.harness import ROBOT, Processes, joystick_file, operator_args
+from tests.ros2.fake_base import FakeBase
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
+MS = 1_000_000
+
+
+@pytest.fixture
+def procs(tmp_path):
+    group = Processes(tmp_path)
+    try:
+        yield group
+    finally:
+        group.cleanup()
+        for name in group.children:  # shown by pytest when the test fails
+            print(f"---- {name} ----\n{group.log(name)[-3000:]}")
+
+
+def wait_log(procs: Processes, name: str, pattern: str, timeout_s: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if re.search(pattern, procs.log(name)):
+            return
+        assert procs.alive(name), f"{name} exited early:\n{procs.log(name)}"
+        time.sleep(0.05)
+    raise AssertionError(f"{name} did not log {pattern!r}:\n{procs.log(name)}")
+
+
+def start_robot_and_operator(
+    base: FakeBase, procs: Processes, workdir: Path, stick_x: float, *robot_extra: str
+) -> None:
+    """The robot on --driver ros2, then an operator holding the deadman: centred for 1 s, then
+    ``stick_x`` forward for a minute."""
+    port = free_tcp_port()
+    procs.start(
+        "robot",
+        "robot",
+        "--robot",
+        ROBOT,
+        "--driver",
+        "ros2",
+        "--listen",
+        loopback_endpoint(port),
+        *robot_extra,
+    )
+    wait_log(procs, "robot", r"ready: driver ros2")
+    base.wait_connected()
+    stick = joystick_file(
+        workdir / "stick.csv", [(0, 0, 0, 1), (1.0, stick_x, 0, 1), (60, stick_x, 0, 1)]
+    )
+    procs.start("operator", *operator_args(port, "op", stick))
+
+
+@pytest.fixture
+def base(ros_domain):
+    fake = FakeBase()
+    yield fake
+    fake.close()
+
+
+def test_drives_in_free_space_and_stops_within_half_a_second_of_a_silent_operator(
+    base, procs, tmp_path
+):
+    start_robot_and_operator(base, procs, tmp_path, 0.3)
+    base.wait_driving()
+    time.sleep(1.0)
+    moving = base.commands()[-1]
+    assert moving.linear_mps == pytest.approx(0.3 * 0.14, rel=0.05), moving  # all +inf: free
+    assert moving.angular_radps == 0.0
+    assert moving.frame_id is None
+    silent_ns = time.monotonic_ns()
+    procs.children["operator"].send_signal(signal.SIGSTOP)
+    zero = base.wait_for(
+        "a zero twist",
+        lambda: next((c for c in base.commands(silent_ns) if c.linear_mps == 0.0), None),
+        5.0,
+    )
+    assert (zero.rx_ns - silent_ns) / 1e9 < 0.5
+    time.sleep(0.5)
+    assert all(c.linear_mps == 0.0 for c in base.commands(zero.rx_ns)), "drove on after the stop"
+    # It keeps publishing (every control cycle), so a base that needs a stream stays stopped.
+    assert len(base.commands(zero.rx_ns)) >= 5
+
+
+def test_stops_within_a_second_of_the_scans_stopping(base, procs, tmp_path):
+    start_robot_and_operator(base, procs, tmp_path, 0.5)
+    base.wait_driving()
+    time.sleep(0.5)
+    assert base.commands()[-1].linear_mps > 0.05
+    quiet_ns = time.monotonic_ns()
+    base.scans_on.clear()
+    zero = base.wait_for(
+        "a zero twist",
+        lambda: next((c for c in base.commands(quiet_ns) if c.linear_mps == 0.0), None),
+        5.0,
+    )
+    assert (zero.rx_ns - quiet_ns) / 1e9 < 1.0
+    wait_log(procs, "robot", r"HOLD \(sensor stale\)", 2.0)
+
+
+def test_sigterm_while_driving_leaves_a_zero_twist_last(base, procs, tmp_path):
+    start_robot_and_operator(base, procs, tmp_path, 1.0)
+    base.wait_driving()
+    time.sleep(0.5)
+    assert base.commands()[-1].linear_mps > 0.05
+    assert procs.stop("robot", signal.SIGTERM) == 0
+    time.sleep(0.3)
+    last = base.commands()[-1]
+    assert (last.linear_mps, last.angular_radps) == (0.0, 0.0), base.commands()[-5:]
+    assert "last zero twist was not acknowledged" not in procs.log("robot")
+
+
+def test_twist_stamped_drives_and_stops_before_a_wall(ros_domain, procs, tmp_path):
+    base = FakeBase(cmd_type="twist-stamped", wall_x_m=1.2)
+    try:
+        start_robot_and_operator(base, procs, tmp_path, 1.0, "--ros-cmd-type", "twist-stamped")
+        base.wait_driving()
+        assert base.commands()[-1].frame_id == "base_link"
+        # Full stick towards the wall: EGC and the footprint sweep must stop it short.
+        base.wait_for("the robot to stop", lambda: _stopped_for(base, 1.0), 30.0)
+        # Pioneer 3-DX: half length 0.2275 m; it must stop with its front short of the wall.
+        assert base.max_x_m + 0.2275 < 1.2, base.max_x_m
+        assert base.max_x_m > 0.2, "it never drove"
+    finally:
+        base.close()
+
+
+def test_laser_mounted_upside_down_and_turned(ros_domain, procs, tmp_path):
+    """The laser looks left and is upside down: the wall ahead of the robot appears at the
+    laser's +90 deg. Read without the mounting, it would be behind the robot."""
+    base = FakeBase(wall_x_m=1.2, laser_yaw_rad=1.5707963, upside_down=True)
+    try:
+        start_robot_and_operator(
+            base, procs, tmp_path, 1.0, "--laser-pose", "0,0,1.5707963", "--laser-upside-down"
+        )
+        base.wait_driving()
+        base.wait_for("the robot to stop", lambda: _stopped_for(base, 1.0), 30.0)
+        assert base.max_x_m > 0.2 and base.max_x_m + 0.2275 < 1.2, base.max_x_m
+    finally:
+        base.close()
+
+
+def test_no_forward_motion_into_minus_inf_readings(base, procs, tmp_path):
+    import numpy as np
+
+    ranges = np.full(360, np.inf)
+    ranges[170:191] = -np.inf  # straight ahead: something closer than range_min
+    base.ranges_override = ranges
+    start_robot_and_operator(base, procs, tmp_path, 1.0)
+    wait_log(procs, "robot", r"state DRIVING", 30.0)
+    time.sleep(1.5)
+    cmds = base.commands()
+    assert len(cmds) > 20
+    assert max(c.linear_mps for c in cmds) <= 0.0, max(c.linear_mps for c in cmds)
+    # The same stick in free space drives: the -inf readings, not the setup, held it.
+    base.ranges_override = None
+    free_ns = time.monotonic_ns()
+    base.wait_for(
+        "forward motion once the -inf readings are gone",
+        lambda: any(c.linear_mps > 0.0 for c in base.commands(free_ns)),
+        5.0,
+    )
+
+
+def _stopped_for(base: FakeBase, seconds: float) -> bool:
+    """Moved at some point, and every command in the last ``seconds`` was a zero forward speed."""
+    cmds = base.commands()
+    if not any(c.linear_mps > 0 for c in cmds):
+        return False
+    recent = base.commands(time.monotonic_ns() - int(seconds * 1e9))
+    return len(recent) >= 10 and all(c.linear_mps <= 1e-6 for c in recent)
