@@ -126,3 +126,78 @@ def test_mapping_from_a_config_table():
         ButtonMap.from_table({"deadmen": "BTN_TL"})
     with pytest.raises(ValueError):
         resolve_code("BTN_NOPE")
+
+
+BTN_NORTH, BTN_WEST, BTN_TR = CODES["BTN_NORTH"], CODES["BTN_WEST"], CODES["BTN_TR"]
+
+
+def test_filter_button_cycles_the_shared_filters_in_design_order(caplog):
+    pad = FakePad()
+    js = EvdevJoystick(pad)
+    assert js.sample(0.0).filter is None  # no pick: the robot runs its default
+    picks = []
+    with caplog.at_level("INFO", logger="egc.operator.joystick"):
+        for i in range(5):
+            pad.push((EV_KEY, BTN_NORTH, 1), (EV_KEY, BTN_NORTH, 2), (EV_KEY, BTN_NORTH, 0))
+            picks.append(js.sample(0.1 * (i + 1)).filter)
+    assert picks == ["egc", "ek-egc", "assist", "dwa", "egc"]  # FILTER_NAMES without "none"
+    assert "filter ek-egc" in caplog.text  # each pick is logged
+
+
+def test_filter_button_starts_from_the_given_default_and_leaves_direct_mode():
+    pad = FakePad()
+    js = EvdevJoystick(pad, mode="direct", filter="assist")
+    s = js.sample(0.0)
+    assert (s.mode, s.filter) == ("direct", "assist")
+    pad.push((EV_KEY, BTN_NORTH, 1), (EV_KEY, BTN_NORTH, 0))
+    s = js.sample(0.1)
+    assert (s.mode, s.filter) == ("shared", "assist")  # first press: that filter, shared mode
+    pad.push((EV_KEY, BTN_NORTH, 1), (EV_KEY, BTN_NORTH, 0))
+    assert js.sample(0.2).filter == "dwa"
+    with pytest.raises(ValueError, match="filter must be one of"):
+        EvdevJoystick(FakePad(), filter="none")
+
+
+def test_via_buttons_read_true_while_held_and_a_short_tap_is_not_lost():
+    pad = FakePad()
+    js = EvdevJoystick(pad)
+    pad.push((EV_KEY, BTN_TR, 1))
+    assert js.sample(0.0).via_next and js.sample(0.02).via_next  # held
+    pad.push((EV_KEY, BTN_TR, 0))
+    assert not js.sample(0.04).via_next
+    pad.push((EV_KEY, BTN_WEST, 1), (EV_KEY, BTN_WEST, 0))  # press and release between samples
+    s = js.sample(0.06)
+    assert s.via_clear and not s.via_next
+    assert not js.sample(0.08).via_clear  # once, then released
+
+
+def test_via_and_filter_buttons_in_presets_and_config_table():
+    xbox = PRESETS["xbox"]
+    assert (xbox.filter_cycle, xbox.via_next, xbox.via_clear) == (BTN_NORTH, BTN_TR, BTN_WEST)
+    assert PRESETS["ps"] == xbox  # the Linux gamepad API reports the same codes by position
+    for name, preset in PRESETS.items():
+        buttons = [
+            preset.deadman,
+            preset.mode_toggle,
+            preset.estop,
+            preset.reset,
+            preset.filter_cycle,
+            preset.via_next,
+            preset.via_clear,
+        ]
+        assert len(set(buttons)) == len(buttons), name  # no button does two things
+    m = ButtonMap.from_table({"filter_cycle": "BTN_WEST", "via_clear": "BTN_NORTH"})
+    assert (m.filter_cycle, m.via_clear) == (BTN_WEST, BTN_NORTH)
+    pad = FakePad()
+    js = EvdevJoystick(pad, PRESETS["generic"])
+    pad.push((EV_KEY, CODES["BTN_THUMB2"], 1), (EV_KEY, CODES["BTN_TOP"], 1))
+    s = js.sample(0.0)
+    assert s.filter == "egc" and s.via_next
+
+
+def test_an_unplugged_pad_keeps_its_filter_pick():
+    pad = FakePad()
+    js = EvdevJoystick(pad, filter="dwa")
+    pad.unplugged = True
+    s = js.sample(0.0)
+    assert (s.deadman, s.filter, s.via_next) == (False, "dwa", False)

@@ -67,6 +67,7 @@ class RecordingView:
     def __init__(self) -> None:
         self.telemetry: list[tuple[Telemetry, int | None]] = []
         self.commands: list[tuple[int, int, int]] = []  # (robot_now, len, newest stamp)
+        self.routes: list[tuple[tuple[tuple[float, float], ...], str]] = []
         self.lock = threading.Lock()
 
     def on_telemetry(self, t: Telemetry, received_ns: int | None = None) -> None:
@@ -99,6 +100,10 @@ class RecordingView:
         goal_xy_m: tuple[float, float] | None = None,
     ) -> None:
         pass
+
+    def on_route(self, points: tuple[tuple[float, float], ...], frame: str) -> None:
+        with self.lock:
+            self.routes.append((points, frame))
 
 
 def robot_clock() -> int:

@@ -34,6 +34,9 @@ CASES = [
     ("DRIVING", "x", "latency", {}, "SLOWED: link delay -> speed capped"),
     ("DRIVING", "x", "egc", {"filter": "egc"}, "SLOWED: obstacle (filter egc)"),
     ("DRIVING", "x", "egc", {"filter": None}, "SLOWED: obstacle (filter egc)"),
+    ("DRIVING", "x", "ek-egc", {"filter": "ek-egc"}, "SLOWED: obstacle (filter ek-egc)"),
+    ("DRIVING", "x", "assist", {"filter": "assist"}, "SLOWED: obstacle (filter assist)"),
+    ("DRIVING", "x", "dwa", {"filter": None}, "SLOWED: obstacle (filter dwa)"),
     ("DRIVING", "x", "sweep", {}, "SLOWED: obstacle next to the footprint (sweep check)"),
     (
         "DRIVING",
@@ -198,3 +201,21 @@ def test_plain_lines_follow_the_latency_cap_but_not_a_flickering_filter() -> Non
     line.show(replace(BASE, limiter="latency", v_lim_latency=0.1), 0.6)
     lines = out.getvalue().splitlines()
     assert len(lines) == 2 and lines[1].startswith("SLOWED: link delay")
+
+
+def test_the_line_shows_the_filter_that_runs_and_the_active_via_point() -> None:
+    text = format_status(replace(BASE, filter="ek-egc", goal=(2.0, -1.25), goals_left=2))
+    assert "| shared (ek-egc) | via 2.0,-1.2 +2 | deadman ON" in text
+    assert "| shared | deadman ON" in format_status(replace(BASE, filter="none"))
+    last = format_status(replace(BASE, filter="assist", goal=(3.0, 1.0)))
+    assert "| shared (assist) | via 3.0,1.0 | deadman ON" in last
+
+
+def test_plain_lines_follow_a_new_filter_pick_and_via_point() -> None:
+    out = io.StringIO()
+    line = StatusLine(out, tty=False, plain_period_s=5.0)
+    line.show(replace(BASE, filter="egc"), 0.0)
+    line.show(replace(BASE, filter="egc"), 0.1)
+    line.show(replace(BASE, filter="dwa"), 0.2)
+    line.show(replace(BASE, filter="dwa", goal=(1.0, 1.0)), 0.3)
+    assert len(out.getvalue().splitlines()) == 3

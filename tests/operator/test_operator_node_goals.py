@@ -1,0 +1,189 @@
+"""The operator node's via points and filter pick (issues 10, 11) against an in-process Zenoh.
+
+The test plays the robot: it answers nothing but the liveliness token and the telemetry the
+node reads; it records the GoalMessages on ``egc/<robot>/goal`` and the commands' ``filter``.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import zenoh
+from egc_common import keys
+from egc_common.joystick_file import JoystickSample
+from egc_common.messages import (
+    GoalMessage,
+    OperatorCommand,
+    Telemetry,
+    decode_command,
+    decode_goal,
+)
+from egc_common.transport import payload_bytes
+from egc_operator.operator_node import OperatorNode, goal_publisher
+from egc_operator.via_route import Route
+
+from tests.operator.test_operator_node import RecordingView, session, wait_for  # noqa: F401
+
+ROBOT = "goaltest"
+ROUTE = Route("odom", ((1.0, 0.0), (2.0, -1.0), (3.0, 1.0)))
+
+
+class Buttons:
+    """Deadman held; the test presses the via buttons and picks a filter by setting fields."""
+
+    finished = False
+
+    def __init__(self) -> None:
+        self.via_next = False
+        self.via_clear = False
+        self.filter: str | None = None
+
+    def sample(self, t_s: float) -> JoystickSample:
+        return JoystickSample(
+            t_s,
+            0.0,
+            0.0,
+            deadman=True,
+            filter=self.filter,
+            via_next=self.via_next,
+            via_clear=self.via_clear,
+        )
+
+    def close(self) -> None:
+        pass
+
+
+def telemetry(goal: tuple[float, float] | None, goals_left: int) -> Telemetry:
+    return Telemetry(
+        seq=1,
+        stamp_ns=time.monotonic_ns(),
+        state="DRIVING",
+        mode="shared",
+        v_ref=0.0,
+        w_ref=0.0,
+        v_cmd=0.0,
+        w_cmd=0.0,
+        w_si=1.0,
+        goal=goal,
+        goal_frame=None if goal is None else "odom",
+        goals_left=goals_left,
+    )
+
+
+def test_goal_publisher_is_reliable(session: zenoh.Session) -> None:
+    publisher = goal_publisher(session, keys.goal(ROBOT))
+    try:
+        assert publisher.reliability == zenoh.Reliability.RELIABLE
+        assert publisher.congestion_control == zenoh.CongestionControl.BLOCK
+    finally:
+        publisher.undeclare()
+
+
+def test_route_goes_out_when_the_robot_is_seen_every_second_and_at_once_on_a_press(
+    session: zenoh.Session,
+) -> None:
+    lock = threading.Lock()
+    goals: list[tuple[float, GoalMessage]] = []
+    commands: list[OperatorCommand] = []
+
+    def on_goal(sample: zenoh.Sample) -> None:
+        goal = decode_goal(payload_bytes(sample))
+        assert isinstance(goal, GoalMessage), goal
+        with lock:
+            goals.append((time.monotonic(), goal))
+
+    def on_cmd(sample: zenoh.Sample) -> None:
+        cmd = decode_command(payload_bytes(sample))
+        assert isinstance(cmd, OperatorCommand)
+        with lock:
+            commands.append(cmd)
+
+    subs = [
+        session.declare_subscriber(keys.goal(ROBOT), on_goal),
+        session.declare_subscriber(keys.cmd(ROBOT), on_cmd),
+    ]
+    source = Buttons()
+    view = RecordingView()
+    node = OperatorNode(
+        session, ROBOT, "op1", source, view=view, route=ROUTE, filter_default="ek-egc"
+    )
+    stop = threading.Event()
+    runner = threading.Thread(target=node.run, args=(stop,))
+    runner.start()
+    token = None
+    try:
+        wait_for(lambda: len(commands) >= 20)
+        assert goals == []  # no robot yet: nothing sent
+        token = session.liveliness().declare_token(keys.alive_robot(ROBOT))
+        seen = time.monotonic()
+        wait_for(lambda: len(goals) >= 1, 3.0)
+        assert goals[0][0] - seen < 0.5
+        wait_for(lambda: len(goals) >= 3, 4.0)  # republished at 1 Hz
+        with lock:
+            first = [g for _, g in goals]
+            gaps = [b - a for (a, _), (b, _) in zip(goals, goals[1:], strict=False)]
+        assert all(g.points == ROUTE.points and g.frame == "odom" for g in first)
+        assert all(0.8 < gap < 1.5 for gap in gaps), gaps
+        # The robot reports the second point active: "next" skips it, at once.
+        session.put(keys.telemetry(ROBOT), telemetry((2.0, -1.0), 1).encode())
+        wait_for(lambda: node._telemetry is not None)  # noqa: SLF001
+        n = len(goals)
+        pressed = time.monotonic()
+        source.via_next = True
+        wait_for(lambda: len(goals) > n, 0.5)
+        assert goals[n][1].points == ((3.0, 1.0),)
+        assert goals[n][0] - pressed < 0.3
+        time.sleep(0.3)  # still held: one press, one skip
+        assert [g.points for _, g in goals[n:]] == [((3.0, 1.0),)]
+        source.via_next = False
+        source.via_clear = True
+        wait_for(lambda: any(g.points == () for _, g in goals), 0.5)
+        source.via_clear = False
+        # the operator's pick wins over the --filter default
+        source.filter = "dwa"
+        m = len(commands)
+        wait_for(lambda: len(commands) > m + 5)
+    finally:
+        stop.set()
+        runner.join(timeout=10)
+        node.close()
+        if token is not None:
+            token.undeclare()
+        for sub in subs:
+            sub.undeclare()
+    seqs = [g.seq for _, g in goals]
+    assert seqs == sorted(set(seqs)) and seqs[0] == 1  # increasing, never repeated
+    assert goals[-1][1].points == ()  # cleared, and the clear is what is republished
+    filters = [c.filter for c in commands]
+    assert filters[0] == "ek-egc" and filters[-1] == "dwa"
+    assert set(filters) == {"ek-egc", "dwa"}
+    assert [len(points) for points, _ in view.routes] == [3, 1, 0]  # the view follows
+
+
+def test_without_a_route_or_filter_nothing_extra_is_sent(session: zenoh.Session) -> None:
+    goals: list[bytes] = []
+    commands: list[OperatorCommand] = []
+    subs = [
+        session.declare_subscriber(keys.goal(ROBOT), lambda s: goals.append(payload_bytes(s))),
+        session.declare_subscriber(
+            keys.cmd(ROBOT),
+            lambda s: commands.append(decode_command(payload_bytes(s))),  # type: ignore[arg-type]
+        ),
+    ]
+    token = session.liveliness().declare_token(keys.alive_robot(ROBOT))
+    node = OperatorNode(session, ROBOT, "op2", Buttons())
+    stop = threading.Event()
+    runner = threading.Thread(target=node.run, args=(stop,))
+    runner.start()
+    try:
+        time.sleep(1.5)
+    finally:
+        stop.set()
+        runner.join(timeout=10)
+        node.close()
+        token.undeclare()
+        for sub in subs:
+            sub.undeclare()
+    assert goals == []
+    assert commands and all(c.filter is None for c in commands)  # the robot's default runs
