@@ -6,9 +6,12 @@ node reads; it records the GoalMessages on ``egc/<robot>/goal`` and the commands
 
 from __future__ import annotations
 
+import itertools
 import threading
 import time
+from collections.abc import Iterator
 
+import pytest
 import zenoh
 from egc_common import keys
 from egc_common.joystick_file import JoystickSample
@@ -19,14 +22,21 @@ from egc_common.messages import (
     decode_command,
     decode_goal,
 )
-from egc_common.transport import payload_bytes
+from egc_common.transport import ZenohOptions, open_session, payload_bytes
 from egc_operator.operator_node import OperatorNode, goal_publisher
 from egc_operator.via_route import Route
 
-from tests.operator.test_operator_node import RecordingView, session, wait_for  # noqa: F401
+from tests.operator.test_operator_node import RecordingView, wait_for
 
 ROBOT = "goaltest"
 ROUTE = Route("odom", ((1.0, 0.0), (2.0, -1.0), (3.0, 1.0)))
+
+
+@pytest.fixture
+def session() -> Iterator[zenoh.Session]:
+    s = open_session(ZenohOptions())
+    yield s
+    s.close()
 
 
 class Buttons:
@@ -122,12 +132,12 @@ def test_route_goes_out_when_the_robot_is_seen_every_second_and_at_once_on_a_pre
         wait_for(lambda: len(goals) >= 3, 4.0)  # republished at 1 Hz
         with lock:
             first = [g for _, g in goals]
-            gaps = [b - a for (a, _), (b, _) in zip(goals, goals[1:], strict=False)]
+            gaps = [b - a for (a, _), (b, _) in itertools.pairwise(goals)]
         assert all(g.points == ROUTE.points and g.frame == "odom" for g in first)
         assert all(0.8 < gap < 1.5 for gap in gaps), gaps
         # The robot reports the second point active: "next" skips it, at once.
         session.put(keys.telemetry(ROBOT), telemetry((2.0, -1.0), 1).encode())
-        wait_for(lambda: node._telemetry is not None)  # noqa: SLF001
+        wait_for(lambda: node._telemetry is not None)
         n = len(goals)
         pressed = time.monotonic()
         source.via_next = True
