@@ -14,10 +14,7 @@ from egc_operator.command_source import load_script, script_names
 
 def test_filter_and_via_columns_are_read():
     samples = parse_joystick_csv(
-        "t_s,x,y,filter,via_next,via_clear\n"
-        "0,0,0,,0,0\n"
-        "1,1,0,ek-egc,1,0\n"
-        "2,1,0,assist,0,1\n"
+        "t_s,x,y,filter,via_next,via_clear\n0,0,0,,0,0\n1,1,0,ek-egc,1,0\n2,1,0,assist,0,1\n"
     )
     assert [s.filter for s in samples] == [None, "ek-egc", "assist"]
     assert [s.via_next for s in samples] == [False, True, False]
