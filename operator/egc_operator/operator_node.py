@@ -15,10 +15,11 @@
 - Sends ``filter`` with every command (DESIGN 6): the source's pick (a gamepad button, a file's
   column), else the ``--filter`` default, else none (the robot runs its own default).
 - Via points (DESIGN 7 ``egc/<robot>/goal``, ``egc_operator.via_route``): the route goes out on
-  a reliable publisher (goals are rare and must not be lost), once the robot is seen and then
-  every second (the robot keeps its progress on a repeat; a robot that starts later or control
-  taken later still gets it), and at once after the source's ``via_next`` / ``via_clear``
-  press (the sample's rising edge). Its own thread sends it, so a congested link that blocks a
+  a reliable publisher (goals are rare and must not be lost), once the robot is seen with this
+  operator in control (its state message says who is; the robot takes via points from that
+  operator only) and then every second (the robot keeps its progress on a repeat; a robot that
+  restarts, or control lost and taken again, still gets it), at once on taking control, and at
+  once after the source's ``via_next`` / ``via_clear`` press (the sample's rising edge). Its own thread sends it, so a congested link that blocks a
   reliable put never holds back the commands.
 
 ``local_clock`` is the operator's monotonic clock; the hidden ``--clock-offset-s`` flag shifts it
@@ -149,6 +150,7 @@ class OperatorNode:
         self._planner = RoutePlanner(route)
         self._actions: list[str] = []  # "next" / "clear" presses for the goal thread (locked)
         self._goal_wake = threading.Event()
+        self._goal_in_control = False
         self.goals_published = 0
         self._publisher = command_publisher(session, keys.cmd(robot_id))
         self._goal_publisher = goal_publisher(session, keys.goal(robot_id))
@@ -363,9 +365,13 @@ class OperatorNode:
     def _goal_step(self) -> None:
         with self._lock:
             actions, self._actions = self._actions, []
-            t, present = self._telemetry, self._robot_alive
+            t, present, state = self._telemetry, self._robot_alive, self._state
             stamp = self._sync.robot_now(self._clock())
         planner = self._planner
+        in_control = present and state is not None and state.operator == self._op
+        if in_control and not self._goal_in_control:
+            planner.resend()  # control (re)taken: the robot has no via points of ours
+        self._goal_in_control = in_control
         for action in actions:
             before = planner.route
             if action == "clear":
@@ -381,7 +387,7 @@ class OperatorNode:
             if self._view is not None:
                 self._view.on_text("INFO", f"via points: {action}")
         now = self._clock()
-        if planner.due(now, present):
+        if planner.due(now, in_control):
             message = planner.message(self._op, stamp, now)
             self._goal_publisher.put(message.encode())
             self.goals_published += 1

@@ -13,8 +13,10 @@
   its first point. With nothing active (route done, or not accepted yet) there is nothing to
   skip. **Clear**: the empty route (the robot drops its via points).
 - ``RoutePlanner`` holds the route and numbers the GoalMessages (``seq`` increasing) and says
-  when one is due: as soon as the robot is seen, then every ``REPUBLISH_NS``, and at once after
-  next and clear. An operator without a route sends nothing until it acts.
+  when one is due: as soon as the robot is seen with this operator in control (the robot takes
+  via points from the operator in control only; sending earlier would only be rejected and
+  counted), then every ``REPUBLISH_NS``, and at once after next, clear and on taking control.
+  An operator without a route sends nothing until it acts.
 """
 
 from __future__ import annotations
@@ -191,8 +193,13 @@ class RoutePlanner:
         """The operator clears the via points (sent at once, even when already empty)."""
         self._route, self._engaged, self._urgent = after_clear(self._route), True, True
 
+    def resend(self) -> None:
+        """Send at once when next due (this operator has just taken control)."""
+        self._urgent = True
+
     def due(self, now_ns: int, robot_present: bool) -> bool:
-        """A GoalMessage is due: the robot is there and the route is new, changed or 1 s old."""
+        """A GoalMessage is due: the robot is there (and listens to this operator) and the
+        route is new, changed or 1 s old."""
         if not self._engaged or not robot_present:
             return False
         return self._urgent or self._sent_ns is None or now_ns - self._sent_ns >= REPUBLISH_NS

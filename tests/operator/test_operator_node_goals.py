@@ -1,7 +1,8 @@
 """The operator node's via points and filter pick (issues 10, 11) against an in-process Zenoh.
 
-The test plays the robot: it answers nothing but the liveliness token and the telemetry the
-node reads; it records the GoalMessages on ``egc/<robot>/goal`` and the commands' ``filter``.
+The test plays the robot: its liveliness token, the state message saying who is in control,
+and the telemetry the node reads; it records the GoalMessages on ``egc/<robot>/goal`` and the
+commands' ``filter``.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from egc_common.joystick_file import JoystickSample
 from egc_common.messages import (
     GoalMessage,
     OperatorCommand,
+    StateMessage,
     Telemetry,
     decode_command,
     decode_goal,
@@ -126,9 +128,15 @@ def test_route_goes_out_when_the_robot_is_seen_every_second_and_at_once_on_a_pre
         wait_for(lambda: len(commands) >= 20)
         assert goals == []  # no robot yet: nothing sent
         token = session.liveliness().declare_token(keys.alive_robot(ROBOT))
+        state = StateMessage(time.monotonic_ns(), "HOLD", "x", "someone-else")
+        session.put(keys.state(ROBOT), state.encode())
+        time.sleep(1.2)
+        assert goals == []  # another operator in control: the robot would reject ours
+        state = StateMessage(time.monotonic_ns(), "DRIVING", "x", "op1")
+        session.put(keys.state(ROBOT), state.encode())
         seen = time.monotonic()
         wait_for(lambda: len(goals) >= 1, 3.0)
-        assert goals[0][0] - seen < 0.5
+        assert goals[0][0] - seen < 0.5  # at once on taking control
         wait_for(lambda: len(goals) >= 3, 4.0)  # republished at 1 Hz
         with lock:
             first = [g for _, g in goals]
@@ -182,13 +190,17 @@ def test_without_a_route_or_filter_nothing_extra_is_sent(session: zenoh.Session)
         ),
     ]
     token = session.liveliness().declare_token(keys.alive_robot(ROBOT))
+    state = session.declare_publisher(keys.state(ROBOT))
     node = OperatorNode(session, ROBOT, "op2", Buttons())
     stop = threading.Event()
     runner = threading.Thread(target=node.run, args=(stop,))
     runner.start()
     try:
-        time.sleep(1.5)
+        for _ in range(15):
+            state.put(StateMessage(time.monotonic_ns(), "DRIVING", "x", "op2").encode())
+            time.sleep(0.1)
     finally:
+        state.undeclare()
         stop.set()
         runner.join(timeout=10)
         node.close()

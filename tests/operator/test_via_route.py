@@ -177,6 +177,15 @@ def test_planner_sends_at_once_after_next_and_clear_with_increasing_seq():
     assert seqs == [1, 2, 3]
 
 
+def test_taking_control_sends_at_once():
+    planner = RoutePlanner(ROUTE)
+    planner.message("op", 0, 0)
+    assert not planner.due(REPUBLISH_NS // 2, True)
+    planner.resend()
+    assert planner.due(REPUBLISH_NS // 2, True)
+    assert not RoutePlanner().due(0, True)  # no route: still nothing to send
+
+
 def test_an_operator_without_a_route_sends_nothing_until_it_acts():
     planner = RoutePlanner()
     assert not planner.engaged and not planner.due(10 * S, True)
