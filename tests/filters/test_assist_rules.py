@@ -385,6 +385,13 @@ def test_wall_following_parallel_to_a_wall_on_the_right():
     assert r.v_mps > 0.9 * P.v_max_mps
 
 
+def test_wall_following_turns_in_place_with_something_right_ahead():
+    """FRONT CLOSE and a sharp turn: turning on an arc there is what the sweep would stop."""
+    r = run(1.0, 0.0, line(0.45, -0.8, 0.45, 0.2, 40), goal=(3.0, 0.0))
+    assert r.rule == "wall-follow-right" and r.levels[FRONT] == CLOSE
+    assert r.v_mps == 0.0 and r.w_radps == pytest.approx(P.w_max_radps)
+
+
 def test_wall_following_leaves_when_the_way_is_clear_and_closer():
     following = run(1.0, 0.0, WALL_OPEN_LEFT, goal=(3.0, 0.0)).memory  # entered 3.0 m away
     beside = line(-0.5, -0.6, 0.4, -0.6, 20)  # the obstacle now on the right, way ahead clear

@@ -67,7 +67,9 @@ How each part maps to the paper
   formula; ours is a tangent follower: with m the nearest scan point on the wall's side (or
   ahead) within ``wall_range_m``, at angle alpha and distance d, theta = alpha -+ pi/2 (parallel
   to the wall), corrected by ``wall_gain_rad_per_m`` (``wall_distance_m`` - d) away from it; no
-  such point (a corner passed) -> turn towards the wall side by ``wall_lost_turn_rad``. Rule
+  such point (a corner passed) -> turn towards the wall side by ``wall_lost_turn_rad`` at
+  ``front_intermediate_speed``. With FRONT CLOSE and a turn of at least ``front_turn_rad`` it
+  turns in place (a sharp arc in a tight spot is what the sweep stops, for good). Rule
   ``wall-follow-right`` keeps the wall on the robot's right, ``wall-follow-left`` on its left.
   Left when the corridor towards the via point is clear for min(distance, ``leave_clear_m``) and
   the robot is at least ``progress_m`` closer to it than where it started following (Bug2's
@@ -643,7 +645,9 @@ def assist_step(
         if side is not None:
             theta, found = _wall_heading(obs, side, params, profile)
             rule = f"wall-follow-{side}"
-            if not found:
+            if front == CLOSE and abs(theta) >= params.front_turn_rad:
+                speed_scale = 0.0  # a sharp turn with something right ahead: turn in place
+            elif not found:
                 speed_scale = params.front_intermediate_speed
         else:
             theta, speed_scale, avoided = _avoid(theta_d, levels, params, memory.front_turn)
