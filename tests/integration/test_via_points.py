@@ -203,3 +203,38 @@ def test_goals_from_an_operator_not_in_control_and_malformed_ones_are_rejected(
     robot_log = procs.log("robot")
     assert "rejected goal (not_in_control): goal from mallory: control held by alice" in robot_log
     assert "Traceback" not in robot_log
+
+
+def test_next_and_clear_from_the_joystick_file_reach_the_robot(port, procs, observer, tmp_path):
+    """The file's via_next / via_clear columns act on their press: one skip, then a clear."""
+    summary_path = tmp_path / "robot.json"
+    start_robot(procs, port, tmp_path, summary_path)
+    observer.wait_for("robot telemetry", observer.last_telemetry, 20)
+    buttons = tmp_path / "buttons.csv"
+    buttons.write_text(
+        "t_s,x,y,deadman,mode,via_next,via_clear\n"
+        "0,0,0,1,shared,0,0\n"
+        "3.0,0,0,1,shared,1,0\n"  # next, held for 0.5 s: one skip
+        "3.5,0,0,1,shared,0,0\n"
+        "6.0,0,0,1,shared,0,1\n"  # clear
+        "6.5,0,0,1,shared,0,0\n"
+        "30,0,0,1,shared,0,0\n"
+    )
+    procs.start("op", *operator_args(port, "alice", buttons, *goal_args()))
+
+    def echoes() -> list[tuple[object, int]]:
+        ts = [t for t in observer.telemetry() if t.operator == "alice"]
+        seq = [(t.goal, t.goals_left) for t in ts]
+        return [e for i, e in enumerate(seq) if i == 0 or e != seq[i - 1]]
+
+    observer.wait_for("the clear", lambda: (VIA[1], 0) in echoes() and echoes()[-1][0] is None, 20)
+    time.sleep(1.5)  # the cleared route is republished: nothing comes back
+    assert procs.stop("op") == 0, procs.log("op")
+    assert procs.stop("robot") == 0, procs.log("robot")
+    phases = echoes()
+    start = phases.index((VIA[0], 1))
+    assert phases[start:] == [(VIA[0], 1), (VIA[1], 0), (None, 0)], phases
+    op_log = procs.log("op")
+    assert op_log.count("via point skipped: 1 left") == 1 and "via points cleared" in op_log
+    rejected = json.loads(summary_path.read_text())["rejected"]
+    assert not any(k.startswith("goal_") for k in rejected), rejected
