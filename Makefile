@@ -9,7 +9,7 @@ DEMO_ARGS ?=
 # `make venv EXTRAS=` leaves it out.
 EXTRAS  ?= ,ros2
 
-.PHONY: demo test venv lint typecheck pytest bench clean
+.PHONY: demo demo-ros2 test venv lint typecheck pytest bench clean
 
 $(BIN)/egc-teleop: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -21,6 +21,10 @@ venv: $(BIN)/egc-teleop
 
 demo: venv
 	$(BIN)/egc-teleop demo $(DEMO_ARGS)
+
+# The same with a real ROS 2 graph in the loop: sim --ros2 and robot --driver ros2 (DESIGN 11).
+demo-ros2: venv
+	$(BIN)/egc-teleop demo --ros2 $(DEMO_ARGS)
 
 # `test` always rebuilds the environment from scratch so that CI proves a clean install.
 test:
