@@ -1,0 +1,788 @@
+"""The filter arena (issue 10 item 5) and the assist experiment (issue 11 item 4).
+
+    python -m egc_experiments.arena --out docs/filters --report docs/filters.md
+        [--worlds 50] [--jobs 2] [--filters none,egc,...] [--operators goal,sighted]
+        [--suites hallway,mrpb,random] [--reuse RUNS.jsonl ...]
+    python -m egc_experiments.arena --experiment assist --out docs/assist --report docs/assist.md
+        --worlds 100 [--reuse docs/filters/runs.jsonl]
+
+Every filter runs on the same worlds, starts, goals, operators and via points, as headless
+episodes of ``egc-teleop episode`` (``egc_app.episode.run_batch``; the robot's own pipeline):
+
+- ``hallway``: the built-in hallway (pioneer3dx), via point at its goal;
+- ``mrpb``: the 19 start/goal tests of ``../shared/worlds/mrpb/*/tests.txt`` (pioneer3dx), via
+  points at the corners of a route planned on the map (``--via route``);
+- ``random``: seeded random obstacle fields ``random:0`` ... ``random:N-1`` (jackal, as in the
+  issue's "20 obstacle worlds"), via point at the goal.
+
+Each episode ends at the goal, at a contact, after ``STALL_TIME_S`` standing still (stalled), or
+at a time limit of ``max(60, 3 * route / v_max + 30)`` s, where ``route`` is the length of the
+route planned on the map (timeout). Direct mode is ``--filter none``; every other filter runs in
+shared mode. ``DIR/runs.jsonl`` holds one line per episode (the episode JSON plus ``suite``,
+``case``, ``route_m``, ``settings`` and ``code``, a hash of the robot, simulator and episode
+sources); ``--reuse`` takes episodes from earlier runs with the same settings and code hash
+instead of running them again. ``--report`` writes the Markdown tables (and, for ``assist``,
+``assist_*.png`` figures next to it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import itertools
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+import time
+from collections import defaultdict
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from egc_common.errors import UsageError
+from egc_common.profiles import get_profile
+from egc_robot.pipeline import FILTERS
+from egc_sim.route import plan_route
+from egc_sim.worlds import load_world
+
+from egc_app.episode import EpisodeSettings, run_batch, run_settings
+
+ROOT = Path(__file__).resolve().parents[2]
+MRPB_DIR = ROOT.parent / "shared" / "worlds" / "mrpb"
+SUITES = ("hallway", "mrpb", "random")
+OPERATORS = ("goal", "sighted")
+ARENA_FILTERS = ("none", "egc", "ek-egc", "dwa", "assist")
+ASSIST_FILTERS = ("none", "egc", "assist")
+STALL_TIME_S = 10.0
+MIN_TIME_S = 60.0
+SUITE_PROFILE = {"hallway": "pioneer3dx", "mrpb": "pioneer3dx", "random": "jackal"}
+# The random worlds' profile: jackal as in issue 10's "20 obstacle worlds" (``egc-teleop
+# episode`` itself defaults to pioneer3dx everywhere); ``--random-profile`` changes it.
+SUITE_VIA = {"hallway": "goal", "mrpb": "route", "random": "goal"}
+CODE_DIRS = ("robot/egc_robot", "sim_robot/egc_sim", "common/egc_common")
+CODE_FILES = ("egc_app/episode.py",)
+_TEST_RE = re.compile(r'name="(initial|goal)_pose_([xya])" default="([-0-9.eE+]+)"')
+
+
+@dataclass(frozen=True, slots=True)
+class Case:
+    """One world with its start and goal; the filter and operator are added per episode."""
+
+    suite: str
+    name: str
+    settings: EpisodeSettings
+    route_m: float
+
+
+# ---------------------------------------------------------------------------------------------
+# Cases
+
+
+def mrpb_tests(
+    mrpb_dir: Path = MRPB_DIR,
+) -> list[tuple[str, Path, tuple[float, ...], tuple[float, ...]]]:
+    """(name, map.yaml, start (x, y, yaw), goal (x, y)) of every MRPB test, in map order."""
+    out = []
+    for tests in sorted(mrpb_dir.glob("*/tests.txt")):
+        values: dict[tuple[str, str], float] = {}
+        number = 0
+        for kind, axis, value in _TEST_RE.findall(tests.read_text(encoding="utf-8")):
+            values[(kind, axis)] = float(value)
+            if (kind, axis) == ("goal", "a"):
+                number += 1
+                start = (values["initial", "x"], values["initial", "y"], values["initial", "a"])
+                goal = (values["goal", "x"], values["goal", "y"])
+                out.append(
+                    (f"{tests.parent.name}#{number}", tests.parent / "map.yaml", start, goal)
+                )
+    return out
+
+
+def _route_length(settings: EpisodeSettings) -> float:
+    world = load_world(settings.map, seed=settings.seed)
+    start = settings.start or world.start_pose
+    goal = settings.goal or world.goal
+    assert start is not None and goal is not None
+    half_width = 0.5 * get_profile(settings.profile).width_m
+    route = plan_route(
+        world.occupancy, world.resolution_m, world.origin, start[:2], goal, half_width + 0.1
+    )
+    if len(route) < 2:
+        return math.dist(start[:2], goal)
+    return float(sum(math.dist(a, b) for a, b in itertools.pairwise(route)))
+
+
+def time_limit(route_m: float, profile: str) -> float:
+    """The episode's time limit (module docstring), in whole seconds."""
+    return float(math.ceil(max(MIN_TIME_S, 3.0 * route_m / get_profile(profile).v_max_mps + 30)))
+
+
+def _case(suite: str, name: str, settings: EpisodeSettings) -> Case:
+    route_m = _route_length(settings)
+    settings = replace(
+        settings,
+        via=SUITE_VIA[suite],
+        stall_time_s=STALL_TIME_S,
+        max_time_s=time_limit(route_m, settings.profile),
+    )
+    return Case(suite, name, settings, round(route_m, 3))
+
+
+def build_cases(
+    suites: Sequence[str],
+    worlds: int,
+    mrpb_dir: Path = MRPB_DIR,
+    mrpb_limit: int | None = None,
+    random_profile: str | None = None,
+) -> list[Case]:
+    cases: list[Case] = []
+    for suite in suites:
+        profile = SUITE_PROFILE[suite]
+        if suite == "random" and random_profile:
+            profile = random_profile
+        if suite == "hallway":
+            cases.append(_case(suite, "hallway", EpisodeSettings(map="hallway", profile=profile)))
+        elif suite == "mrpb":
+            for name, path, start, goal in mrpb_tests(mrpb_dir)[:mrpb_limit]:
+                s = EpisodeSettings(
+                    map=str(path),
+                    start=(start[0], start[1], start[2]),
+                    goal=(goal[0], goal[1]),
+                    profile=profile,
+                    via="route",
+                )
+                cases.append(_case(suite, name, s))
+        elif suite == "random":
+            for seed in range(worlds):
+                s = EpisodeSettings(map=f"random:{seed}", seed=seed, profile=profile)
+                cases.append(_case(suite, f"random:{seed}", s))
+        else:
+            raise UsageError(f"unknown suite {suite!r}; choose from {', '.join(SUITES)}")
+    return cases
+
+
+def episodes(
+    cases: Sequence[Case], filters: Sequence[str], operators: Sequence[str]
+) -> list[tuple[Case, EpisodeSettings]]:
+    """Every case x operator x filter, with the same settings apart from the filter."""
+    return [
+        (c, replace(c.settings, operator=op, filter=f))
+        for c in cases
+        for op in operators
+        for f in filters
+    ]
+
+
+# ---------------------------------------------------------------------------------------------
+# Running
+
+
+def code_hash(root: Path = ROOT) -> str:
+    """A hash of the sources an episode runs (robot, simulator, common, the episode wiring)."""
+    h = hashlib.sha256()
+    paths = [p for d in CODE_DIRS for p in (root / d).rglob("*.py")]
+    paths += [root / f for f in CODE_FILES]
+    for p in sorted(paths):
+        h.update(str(p.relative_to(root)).encode())
+        h.update(p.read_bytes())
+    return h.hexdigest()[:12]
+
+
+def settings_key(settings: EpisodeSettings | dict[str, Any]) -> str:
+    d = asdict(settings) if isinstance(settings, EpisodeSettings) else settings
+    return json.dumps(
+        {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}, sort_keys=True
+    )
+
+
+def load_runs(paths: Iterable[str | Path]) -> list[dict[str, Any]]:
+    out = []
+    for path in paths:
+        for line in Path(path).read_text(encoding="utf-8").splitlines():
+            if line.strip():
+                out.append(json.loads(line))
+    return out
+
+
+def run_arena(
+    todo: Sequence[tuple[Case, EpisodeSettings]],
+    jobs: int,
+    reuse: Sequence[dict[str, Any]] = (),
+    progress: bool = True,
+) -> list[dict[str, Any]]:
+    """The records of ``todo`` in order; episodes found in ``reuse`` (same code) are not rerun."""
+    code = code_hash()
+    known = {
+        settings_key(r["settings"]): r
+        for r in reuse
+        if r.get("code") == code and "settings" in r and "error" not in r
+    }
+    missing = [s for _, s in todo if settings_key(s) not in known]
+    fresh = dict(
+        zip((settings_key(s) for s in missing), run_batch(missing, jobs, progress), strict=True)
+    )
+    records = []
+    for case, s in todo:
+        key = settings_key(s)
+        summary = dict(known.get(key) or fresh[key])
+        summary.update(
+            suite=case.suite,
+            case=case.name,
+            route_m=case.route_m,
+            max_time_s=s.max_time_s,
+            stall_time_s=s.stall_time_s,
+            settings=json.loads(key),
+            code=code,
+        )
+        records.append(summary)
+    return records
+
+
+# ---------------------------------------------------------------------------------------------
+# Report
+
+
+def _mean(values: Sequence[float]) -> float | None:
+    return sum(values) / len(values) if values else None
+
+
+def _fmt(value: float | None, digits: int = 1) -> str:
+    return "–" if value is None else f"{value:.{digits}f}"
+
+
+def outcome_table(
+    records: Sequence[dict[str, Any]], filters: Sequence[str], operators: Sequence[str]
+) -> list[str]:
+    """Per operator and filter: outcomes, time and path of reached runs, interventions."""
+    lines = [
+        "| operator | filter | episodes | reached | collided | stalled | timeout | error "
+        "| time s (reached, mean) | path m (reached, mean) | interventions / episode "
+        "| interventions / s |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for op in operators:
+        for f in filters:
+            rows = [r for r in records if r.get("operator") == op and r.get("filter") == f]
+            if not rows:
+                continue
+            count = defaultdict(int)
+            for r in rows:
+                count[r.get("outcome", "error")] += 1
+            reached = [r for r in rows if r.get("outcome") == "reached"]
+            ok = [r for r in rows if "error" not in r]
+            total_t = sum(r["time_s"] for r in ok)
+            total_i = sum(r["interventions"] for r in ok)
+            lines.append(
+                f"| {op} | {f} | {len(rows)} | {count['reached']} | {count['collided']} "
+                f"| {count['stalled']} | {count['timeout']} | {count['error']} "
+                f"| {_fmt(_mean([r['time_s'] for r in reached]))} "
+                f"| {_fmt(_mean([r['path_m'] for r in reached]), 2)} "
+                f"| {_fmt(_mean([r['interventions'] for r in ok]), 0)} "
+                f"| {_fmt(total_i / total_t if total_t else None, 1)} |"
+            )
+    return lines
+
+
+def collision_table(
+    records: Sequence[dict[str, Any]], filters: Sequence[str], suites: Sequence[str]
+) -> list[str]:
+    lines = [
+        "| filter | mode | " + " | ".join(suites) + " | all |",
+        "|---|---|" + "---:|" * (len(suites) + 1),
+    ]
+    for f in filters:
+        rows = [r for r in records if r.get("filter") == f]
+        per = [
+            f"{sum(r.get('outcome') == 'collided' for r in rows if r['suite'] == s)} / "
+            f"{sum(r['suite'] == s for r in rows)}"
+            for s in suites
+        ]
+        total = f"{sum(r.get('outcome') == 'collided' for r in rows)} / {len(rows)}"
+        mode = "direct" if f == "none" else "shared"
+        lines.append(f"| {f} | {mode} | " + " | ".join(per) + f" | {total} |")
+    return lines
+
+
+def reproduce_command(r: dict[str, Any], record: str | None = None) -> str:
+    s = r["settings"]
+    parts = ["egc-teleop episode", f"--map {s['map']}"]
+    if s.get("start"):
+        parts.append("--start=" + ",".join(f"{v:g}" for v in s["start"]))
+    if s.get("goal"):
+        parts.append("--goal=" + ",".join(f"{v:g}" for v in s["goal"]))
+    parts += [
+        f"--operator {s['operator']}",
+        f"--filter {s['filter']}",
+        f"--via {s['via']}",
+        f"--profile {s['profile']}",
+        f"--seed {s['seed']}",
+        f"--max-time {s['max_time_s']:g}",
+        f"--stall-time {s['stall_time_s']:g}",
+    ]
+    if record:
+        parts.append(f"--record {record}")
+    return " ".join(parts) + " --json"
+
+
+def shared_collisions(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    return [r for r in records if r.get("outcome") == "collided" and r.get("filter") != "none"]
+
+
+def _git_head() -> str:
+    try:
+        out = subprocess.run(
+            ["git", "log", "-1", "--format=%h %cd", "--date=iso"],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        return out.stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def _header(
+    title: str, command: str, records: Sequence[dict[str, Any]], wall_s: float
+) -> list[str]:
+    codes = sorted({r.get("code", "?") for r in records})
+    return [
+        f"# {title}",
+        "",
+        "Generated by (from the repository root, in the venv; a full run takes about "
+        f"{wall_s / 60:.0f} min on 2 busy cores):",
+        "",
+        "```sh",
+        command,
+        "```",
+        "",
+        f"Code: HEAD {_git_head()}, sources hash {', '.join(codes)} (`arena.code_hash`: robot, "
+        "simulator, common and the episode wiring as they were in the working tree); "
+        f"{len(records)} episodes.",
+        "",
+    ]
+
+
+def setup_text(records: Sequence[dict[str, Any]]) -> list[str]:
+    """The setup paragraph, with the profiles the records actually used."""
+    profiles = {
+        suite: ", ".join(sorted({r["profile"] for r in records if r.get("suite") == suite}))
+        or SUITE_PROFILE[suite]
+        for suite in SUITES
+    }
+    return [line.format(**profiles) for line in SETUP_TEXT]
+
+
+SETUP_TEXT = [
+    "Setup (`egc_experiments/arena.py`): headless `egc-teleop episode` runs through the robot's "
+    "own pipeline (filter, profile limits, footprint sweep, no-dead-lock rule). `none` is direct "
+    "mode; every other filter runs in shared mode. Suites: `hallway` ({hallway}, via point at "
+    "the goal), `mrpb` (the 19 tests of the MRPB maps, {mrpb}, via points at the corners of "
+    "a route planned on the map, `--via route`) and `random` (seeded random obstacle fields "
+    "`random:0..N-1`, {random}, via point at the goal). Every filter gets the same via points; "
+    "only `assist` and `dwa` use them. Operators: `goal` steers straight at the goal and cannot "
+    "see; `sighted` sees what the operator view shows (after a 0.25 s reaction time) and steers "
+    "through the free direction nearest to the goal. An episode ends `reached` (within the "
+    "goal tolerance), `collided` (footprint contact), `stalled` (standing still for "
+    f"{STALL_TIME_S:g} s) or `timeout` (after max(60, 3 x planned route / v_max + 30) s). "
+    "Times and paths are means over reached episodes; interventions are control cycles in which "
+    "the filter changed the command or the sweep scaled it down.",
+    "",
+]
+
+
+def write_filters_report(
+    path: Path,
+    records: Sequence[dict[str, Any]],
+    filters: Sequence[str],
+    operators: Sequence[str],
+    suites: Sequence[str],
+    command: str,
+    wall_s: float,
+) -> None:
+    lines = _header("The filter arena (issue 10)", command, records, wall_s) + setup_text(records)
+    lines += ["## Collisions (the must-show: none in shared mode)", ""]
+    lines += [*collision_table(records, filters, suites), ""]
+    bad = shared_collisions(records)
+    if bad:
+        lines += ["Shared-mode collisions, with the command that reproduces each:", ""]
+        for r in bad:
+            pose = ", ".join(f"{v:.2f}" for v in r["final_pose"])
+            lines += [
+                f"- {r['case']} / {r['operator']} / `{r['filter']}`: contact at t = "
+                f"{r['time_s']:.2f} s, pose ({pose})",
+                f"  `{reproduce_command(r)}`",
+            ]
+        lines.append("")
+    else:
+        lines += ["No shared-mode episode touched anything.", ""]
+    for suite in suites:
+        rows = [r for r in records if r.get("suite") == suite]
+        if not rows:
+            continue
+        n_cases = len({r["case"] for r in rows})
+        lines += [f"## {suite} ({n_cases} {'case' if n_cases == 1 else 'cases'})", ""]
+        lines += [*outcome_table(rows, filters, operators), ""]
+    lines += ["## Reading", "", *reading_filters(records, filters, operators, suites), ""]
+    path.write_text("\n".join(lines), encoding="utf-8")
+
+
+def _rate(records: Sequence[dict[str, Any]], **match: Any) -> tuple[int, int]:
+    rows = [r for r in records if all(r.get(k) == v for k, v in match.items())]
+    return sum(r.get("outcome") == "reached" for r in rows), len(rows)
+
+
+def _count(records: Sequence[dict[str, Any]], outcome: str, **match: Any) -> int:
+    return sum(
+        r.get("outcome") == outcome and all(r.get(k) == v for k, v in match.items())
+        for r in records
+    )
+
+
+def reading_filters(
+    records: Sequence[dict[str, Any]],
+    filters: Sequence[str],
+    operators: Sequence[str],
+    suites: Sequence[str],
+) -> list[str]:
+    """Plain-words reading of the numbers (generated, so that it always matches the tables)."""
+    out = []
+    bad = shared_collisions(records)
+    shared = [f for f in filters if f != "none"]
+    n_shared = sum(r.get("filter") in shared for r in records)
+    if bad:
+        which = sorted({r["filter"] for r in bad})
+        out.append(
+            f"- Safety: {len(bad)} of {n_shared} shared-mode episodes ended in a contact "
+            f"(filters: {', '.join(which)}); the must-show (no collision, ever, in shared mode) "
+            "does not hold for them. See the list above."
+        )
+    elif n_shared:
+        out.append(
+            f"- Safety: none of the {n_shared} shared-mode episodes touched anything; direct "
+            f"mode (`none`) collided in {_count(records, 'collided', filter='none')} of "
+            f"{sum(r.get('filter') == 'none' for r in records)}."
+        )
+    for suite in suites:
+        for op in operators:
+            parts = []
+            for f in filters:
+                k, n = _rate(records, suite=suite, operator=op, filter=f)
+                if n:
+                    parts.append(f"`{f}` {k}/{n}")
+            if parts:
+                out.append(f"- {suite}, `{op}` operator, reached: " + ", ".join(parts) + ".")
+    out.append(
+        "- EGC and EK-EGC only ever slow or bend the operator's command; an operator who steers "
+        "into an obstacle and cannot see it ends up stopped in front of it (stalled). DWA and "
+        "assist also steer towards the via point, so they can get a blind operator round an "
+        "obstacle; what is left unreached is stalled or timed out, not crashed."
+    )
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# The assist report
+
+
+def _paired_times(
+    records: Sequence[dict[str, Any]], a: dict[str, Any], b: dict[str, Any]
+) -> tuple[int, float | None, float | None]:
+    """Cases reached under both settings a and b: count and mean times."""
+
+    def index(match: dict[str, Any]) -> dict[str, dict[str, Any]]:
+        return {
+            r["case"]: r
+            for r in records
+            if r.get("outcome") == "reached" and all(r.get(k) == v for k, v in match.items())
+        }
+
+    ia, ib = index(a), index(b)
+    both = sorted(set(ia) & set(ib))
+    if not both:
+        return 0, None, None
+    return (
+        len(both),
+        _mean([ia[c]["time_s"] for c in both]),
+        _mean([ib[c]["time_s"] for c in both]),
+    )
+
+
+def write_assist_report(
+    path: Path,
+    records: Sequence[dict[str, Any]],
+    filters: Sequence[str],
+    operators: Sequence[str],
+    suites: Sequence[str],
+    command: str,
+    wall_s: float,
+    figures: Sequence[str] = (),
+) -> None:
+    lines = _header(
+        "The rule-based assistant with via points (issue 11): the paper's experiment",
+        command,
+        records,
+        wall_s,
+    ) + setup_text(records)
+    lines += [
+        "Without assistance is `none` (direct mode: the operator's command as it is) and `egc` "
+        "(the obstacle filter alone, no via point); with assistance is `assist` with the via "
+        "points above.",
+        "",
+    ]
+    for suite in suites:
+        rows = [r for r in records if r.get("suite") == suite]
+        if not rows:
+            continue
+        n_cases = len({r["case"] for r in rows})
+        lines += [f"## {suite} ({n_cases} {'case' if n_cases == 1 else 'cases'})", ""]
+        lines += [*outcome_table(rows, filters, operators), ""]
+    lines += ["## Time with and without assistance (cases reached by both)", ""]
+    lines += [
+        "| suite | compared | cases reached by both | mean time A s | mean time B s |",
+        "|---|---|---:|---:|---:|",
+    ]
+    pairs = [
+        (
+            "goal+assist",
+            "sighted+none",
+            {"operator": "goal", "filter": "assist"},
+            {"operator": "sighted", "filter": "none"},
+        ),
+        (
+            "goal+assist",
+            "goal+egc",
+            {"operator": "goal", "filter": "assist"},
+            {"operator": "goal", "filter": "egc"},
+        ),
+        (
+            "goal+assist",
+            "goal+none",
+            {"operator": "goal", "filter": "assist"},
+            {"operator": "goal", "filter": "none"},
+        ),
+        (
+            "sighted+assist",
+            "sighted+none",
+            {"operator": "sighted", "filter": "assist"},
+            {"operator": "sighted", "filter": "none"},
+        ),
+        (
+            "sighted+assist",
+            "sighted+egc",
+            {"operator": "sighted", "filter": "assist"},
+            {"operator": "sighted", "filter": "egc"},
+        ),
+    ]
+    for suite in suites:
+        for name_a, name_b, a, b in pairs:
+            n, ta, tb = _paired_times(records, {"suite": suite, **a}, {"suite": suite, **b})
+            lines.append(f"| {suite} | A {name_a} vs B {name_b} | {n} | {_fmt(ta)} | {_fmt(tb)} |")
+    lines.append("")
+    for fig in figures:
+        lines += [f"![{Path(fig).stem}]({fig})", ""]
+    lines += ["## Which of the paper's claims hold here", "", *reading_assist(records, suites), ""]
+    path.write_text("\n".join(lines), encoding="utf-8")
+
+
+def reading_assist(records: Sequence[dict[str, Any]], suites: Sequence[str]) -> list[str]:
+    out = []
+    for suite in suites:
+        ka, na = _rate(records, suite=suite, operator="goal", filter="assist")
+        ke, ne = _rate(records, suite=suite, operator="goal", filter="egc")
+        kn, nn = _rate(records, suite=suite, operator="goal", filter="none")
+        if not na:
+            continue
+        ca = _count(records, "collided", suite=suite, operator="goal", filter="assist")
+        verdict = "holds" if ka > max(ke, kn) and ca == 0 else "does not hold"
+        out.append(
+            f"- {suite}: the blind (`goal`) operator with `assist` and via points reached "
+            f"{ka}/{na} ({100 * ka / na:.0f}%) with {ca} collisions; without assistance "
+            f"`egc` {ke}/{ne}, direct {kn}/{nn} (direct collided "
+            f"{_count(records, 'collided', suite=suite, operator='goal', filter='none')}). "
+            f"'With a via point an operator who cannot see reaches the destination': {verdict}."
+        )
+    return out
+
+
+def write_assist_figures(
+    out_dir: Path,
+    records: Sequence[dict[str, Any]],
+    filters: Sequence[str],
+    operators: Sequence[str],
+    suites: Sequence[str],
+    path_worlds: Sequence[int] = (0, 1, 2, 3),
+) -> list[str]:
+    """Reach rate per suite/operator/filter, and paths of the goal operator on a few worlds."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    names = []
+    fig, axes = plt.subplots(1, len(suites), figsize=(4.2 * len(suites), 3.4), squeeze=False)
+    width = 0.8 / max(1, len(filters))
+    for ax, suite in zip(axes[0], suites, strict=True):
+        for i, f in enumerate(filters):
+            rates = []
+            for op in operators:
+                k, n = _rate(records, suite=suite, operator=op, filter=f)
+                rates.append(100.0 * k / n if n else 0.0)
+            ax.bar(
+                np.arange(len(operators)) + (i - (len(filters) - 1) / 2) * width,
+                rates,
+                width,
+                label=f,
+            )
+        ax.set_xticks(range(len(operators)), [f"{op} operator" for op in operators])
+        ax.set_ylim(0, 100)
+        ax.set_title(suite)
+        ax.set_ylabel("reached %")
+    axes[0][0].legend(fontsize="small")
+    fig.tight_layout()
+    name = "assist_reach.png"
+    fig.savefig(out_dir / name, dpi=110)
+    plt.close(fig)
+    names.append(name)
+
+    if "random" in suites and path_worlds:
+        fig, axes = plt.subplots(
+            1, len(path_worlds), figsize=(4.2 * len(path_worlds), 3.2), squeeze=False
+        )
+        for ax, seed in zip(axes[0], path_worlds, strict=True):
+            world = load_world(f"random:{seed}", seed=seed)
+            h, w = world.occupancy.shape
+            x0, y0 = world.origin
+            ax.imshow(
+                world.occupancy,
+                origin="lower",
+                cmap="Greys",
+                extent=(x0, x0 + w * world.resolution_m, y0, y0 + h * world.resolution_m),
+            )
+            for f in filters:
+                rec = next(
+                    (
+                        r
+                        for r in records
+                        if r.get("case") == f"random:{seed}"
+                        and r.get("operator") == "goal"
+                        and r.get("filter") == f
+                    ),
+                    None,
+                )
+                if rec is None or "error" in rec:
+                    continue
+                s = EpisodeSettings(
+                    **{
+                        k: tuple(v) if isinstance(v, list) else v
+                        for k, v in rec["settings"].items()
+                    }
+                )
+                result, _ = run_settings(s, record_trace=True)
+                xs = [row.x_m for row in result.trace]
+                ys = [row.y_m for row in result.trace]
+                ax.plot(xs, ys, label=f"{f}: {result.outcome}")
+            gx, gy = rec["goal"] if rec else world.goal
+            ax.plot([gx], [gy], "r*", markersize=12)
+            ax.set_title(f"random:{seed}, goal operator")
+            ax.set_aspect("equal")
+            ax.legend(fontsize="x-small", loc="lower left")
+        fig.tight_layout()
+        name = "assist_paths.png"
+        fig.savefig(out_dir / name, dpi=110)
+        plt.close(fig)
+        names.append(name)
+    return names
+
+
+# ---------------------------------------------------------------------------------------------
+# Command line
+
+
+def _names(text: str, allowed: Sequence[str], what: str) -> tuple[str, ...]:
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    bad = [n for n in names if n not in allowed]
+    if bad or not names:
+        raise UsageError(f"--{what} must be a comma list of {', '.join(allowed)}, got {text!r}")
+    return names
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = argparse.ArgumentParser(
+        prog="python -m egc_experiments.arena",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--experiment", choices=("arena", "assist"), default="arena")
+    p.add_argument("--out", required=True, help="directory for runs.jsonl (and figures)")
+    p.add_argument("--report", help="Markdown report to write (default DIR/report.md)")
+    p.add_argument("--worlds", type=int, help="random worlds (arena 50, assist 100)")
+    p.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    p.add_argument("--filters", help="comma list (arena: all five; assist: none,egc,assist)")
+    p.add_argument("--operators", default=",".join(OPERATORS))
+    p.add_argument("--suites", default=",".join(SUITES))
+    p.add_argument("--mrpb-dir", default=str(MRPB_DIR))
+    p.add_argument("--random-profile", default="jackal", help="profile on random worlds (jackal)")
+    p.add_argument("--mrpb-limit", type=int, help="only the first N MRPB tests (for tests)")
+    p.add_argument("--reuse", action="append", default=[], help="earlier runs.jsonl to reuse")
+    p.add_argument("--no-figures", action="store_true")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    args = p.parse_args(argv)
+    try:
+        assist = args.experiment == "assist"
+        filters = _names(
+            args.filters or ",".join(ASSIST_FILTERS if assist else ARENA_FILTERS),
+            FILTERS,
+            "filters",
+        )
+        operators = _names(args.operators, ("goal", "forward", "sighted", "route"), "operators")
+        suites = _names(args.suites, SUITES, "suites")
+        worlds = args.worlds if args.worlds is not None else (100 if assist else 50)
+        if worlds < 0 or args.jobs < 1:
+            raise UsageError("--worlds must be >= 0 and --jobs >= 1")
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        report = Path(args.report) if args.report else out / "report.md"
+        t0 = time.perf_counter()
+        cases = build_cases(
+            suites, worlds, Path(args.mrpb_dir), args.mrpb_limit, args.random_profile
+        )
+        todo = episodes(cases, filters, operators)
+        reuse = load_runs(args.reuse)
+        records = run_arena(todo, args.jobs, reuse, progress=not args.quiet)
+        with open(out / "runs.jsonl", "w", encoding="utf-8") as fh:
+            for r in records:
+                fh.write(json.dumps(r, allow_nan=False) + "\n")
+        wall_s = time.perf_counter() - t0
+        command = "python -m egc_experiments.arena " + " ".join(
+            a for a in (sys.argv[1:] if argv is None else argv)
+        )
+        if assist:
+            figures: list[str] = []
+            if not args.no_figures:
+                names = write_assist_figures(report.parent, records, filters, operators, suites)
+                figures = [os.path.relpath(report.parent / n, report.parent) for n in names]
+            write_assist_report(
+                report, records, filters, operators, suites, command, wall_s, figures
+            )
+        else:
+            write_filters_report(report, records, filters, operators, suites, command, wall_s)
+    except UsageError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    bad = shared_collisions(records)
+    print(
+        f"{len(records)} episodes in {wall_s:.0f} s; shared-mode collisions: {len(bad)}; "
+        f"report {report}",
+        file=sys.stderr,
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
