@@ -258,11 +258,12 @@ def contact_angles(
     beta = np.arctan2(q, half_l)
     take(-beta, (q2 >= 0.0) & (np.abs(r - q) <= half_w))  # front x = half_l, y = R - q
     take(math.pi - beta, (q2 >= 0.0) & (r + q <= half_w))  # back x = -half_l, y = R + q
-    for h, psi_of in ((half_w, lambda g: g), (-half_w, lambda g: math.pi - g)):
+    for left, h in ((True, half_w), (False, -half_w)):
         # Side y = h, at x = +p (left) or x = -p (right), p^2 = rho^2 - (h - R)^2.
         p2 = x_m * x_m + (y_m - h) * (y_m + h - 2.0 * r)
         p = np.sqrt(np.maximum(p2, 0.0))
-        take(psi_of(np.arctan2(h - r, p)), (p2 >= 0.0) & (p <= half_l))
+        g = np.arctan2(h - r, p)
+        take(g if left else math.pi - g, (p2 >= 0.0) & (p <= half_l))
     if best.size == 0:
         return np.full(len(r), np.inf)
     result: FloatArray = best.min(axis=1)
