@@ -16,7 +16,7 @@ episodes of ``egc-teleop episode`` (``egc_app.episode.run_batch``; the robot's o
   issue's "20 obstacle worlds"), via point at the goal.
 
 Each episode ends at the goal, at a contact, after ``STALL_TIME_S`` standing still (stalled), or
-at a time limit of ``max(60, 3 * route / v_max + 30)`` s, where ``route`` is the length of the
+at a time limit of ``max(60, 2 * route / v_max + 30)`` s, where ``route`` is the length of the
 route planned on the map (timeout). Direct mode is ``--filter none``; every other filter runs in
 shared mode. ``DIR/runs.jsonl`` holds one line per episode (the episode JSON plus ``suite``,
 ``case``, ``route_m``, ``settings`` and ``code``, a hash of the robot, simulator and episode
@@ -118,7 +118,7 @@ def _route_length(settings: EpisodeSettings) -> float:
 
 def time_limit(route_m: float, profile: str) -> float:
     """The episode's time limit (module docstring), in whole seconds."""
-    return float(math.ceil(max(MIN_TIME_S, 3.0 * route_m / get_profile(profile).v_max_mps + 30)))
+    return float(math.ceil(max(MIN_TIME_S, 2.0 * route_m / get_profile(profile).v_max_mps + 30)))
 
 
 def _case(suite: str, name: str, settings: EpisodeSettings) -> Case:
@@ -213,8 +213,12 @@ def run_arena(
     jobs: int,
     reuse: Sequence[dict[str, Any]] = (),
     progress: bool = True,
+    partial: Path | None = None,
 ) -> list[dict[str, Any]]:
-    """The records of ``todo`` in order; episodes found in ``reuse`` (same code) are not rerun."""
+    """The records of ``todo`` in order; episodes found in ``reuse`` (same code) are not rerun.
+
+    ``partial``: each fresh episode is appended there as it ends (reusable after a crash).
+    """
     code = code_hash()
     known = {
         settings_key(r["settings"]): r
@@ -222,9 +226,18 @@ def run_arena(
         if r.get("code") == code and "settings" in r and "error" not in r
     }
     missing = [s for _, s in todo if settings_key(s) not in known]
-    fresh = dict(
-        zip((settings_key(s) for s in missing), run_batch(missing, jobs, progress), strict=True)
-    )
+    fresh: dict[str, dict[str, Any]] = {}
+    fh = open(partial, "w", encoding="utf-8") if partial else None  # noqa: SIM115
+    try:
+        for s, summary in zip(missing, run_batch(missing, jobs, progress), strict=True):
+            key = settings_key(s)
+            fresh[key] = summary
+            if fh is not None:
+                fh.write(json.dumps({**summary, "settings": json.loads(key), "code": code}) + "\n")
+                fh.flush()
+    finally:
+        if fh is not None:
+            fh.close()
     records = []
     for case, s in todo:
         key = settings_key(s)
@@ -388,7 +401,7 @@ SETUP_TEXT = [
     "see; `sighted` sees what the operator view shows (after a 0.25 s reaction time) and steers "
     "through the free direction nearest to the goal. An episode ends `reached` (within the "
     "goal tolerance), `collided` (footprint contact), `stalled` (standing still for "
-    f"{STALL_TIME_S:g} s) or `timeout` (after max(60, 3 x planned route / v_max + 30) s). "
+    f"{STALL_TIME_S:g} s) or `timeout` (after max(60, 2 x planned route / v_max + 30) s). "
     "Times and paths are means over reached episodes; interventions are control cycles in which "
     "the filter changed the command or the sweep scaled it down.",
     "",
@@ -476,11 +489,28 @@ def reading_filters(
                     parts.append(f"`{f}` {k}/{n}")
             if parts:
                 out.append(f"- {suite}, `{op}` operator, reached: " + ", ".join(parts) + ".")
+    for f in filters:
+        for op in operators:
+            rows = [r for r in records if r.get("filter") == f and r.get("operator") == op]
+            if not rows:
+                continue
+            misses = defaultdict(int)
+            for r in rows:
+                if r.get("outcome") != "reached":
+                    misses[r.get("outcome", "error")] += 1
+            if misses:
+                how = ", ".join(
+                    f"{k} {v}" for k, v in sorted(misses.items(), key=lambda kv: -kv[1])
+                )
+                out.append(
+                    f"- `{f}` with the `{op}` operator, over all suites: of "
+                    f"{sum(misses.values())} episodes that did not arrive: {how}."
+                )
     out.append(
-        "- EGC and EK-EGC only ever slow or bend the operator's command; an operator who steers "
-        "into an obstacle and cannot see it ends up stopped in front of it (stalled). DWA and "
-        "assist also steer towards the via point, so they can get a blind operator round an "
-        "obstacle; what is left unreached is stalled or timed out, not crashed."
+        "- How to read it: `stalled` means the filter held the robot still in front of "
+        "something (safe, but the operator is stuck); `timeout` means it kept moving without "
+        "getting there in time (circling, rocking or crawling); `collided` in direct mode is "
+        "what the operator alone would have done."
     )
     return out
 
@@ -754,10 +784,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
         todo = episodes(cases, filters, operators)
         reuse = load_runs(args.reuse)
-        records = run_arena(todo, args.jobs, reuse, progress=not args.quiet)
+        partial = out / "partial.jsonl"
+        records = run_arena(todo, args.jobs, reuse, not args.quiet, partial)
         with open(out / "runs.jsonl", "w", encoding="utf-8") as fh:
             for r in records:
                 fh.write(json.dumps(r, allow_nan=False) + "\n")
+        partial.unlink(missing_ok=True)
         wall_s = time.perf_counter() - t0
         command = "python -m egc_experiments.arena " + " ".join(
             a for a in (sys.argv[1:] if argv is None else argv)
