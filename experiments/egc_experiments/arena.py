@@ -214,6 +214,7 @@ def run_arena(
     reuse: Sequence[dict[str, Any]] = (),
     progress: bool = True,
     partial: Path | None = None,
+    any_code: bool = False,
 ) -> list[dict[str, Any]]:
     """The records of ``todo`` in order; episodes found in ``reuse`` (same code) are not rerun.
 
@@ -223,7 +224,7 @@ def run_arena(
     known = {
         settings_key(r["settings"]): r
         for r in reuse
-        if r.get("code") == code and "settings" in r and "error" not in r
+        if (any_code or r.get("code") == code) and "settings" in r and "error" not in r
     }
     missing = [s for _, s in todo if settings_key(s) not in known]
     fresh: dict[str, dict[str, Any]] = {}
@@ -242,6 +243,7 @@ def run_arena(
     for case, s in todo:
         key = settings_key(s)
         summary = dict(known.get(key) or fresh[key])
+        summary.setdefault("code", code)
         summary.update(
             suite=case.suite,
             case=case.name,
@@ -249,7 +251,6 @@ def run_arena(
             max_time_s=s.max_time_s,
             stall_time_s=s.stall_time_s,
             settings=json.loads(key),
-            code=code,
         )
         records.append(summary)
     return records
@@ -760,6 +761,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--random-profile", default="jackal", help="profile on random worlds (jackal)")
     p.add_argument("--mrpb-limit", type=int, help="only the first N MRPB tests (for tests)")
     p.add_argument("--reuse", action="append", default=[], help="earlier runs.jsonl to reuse")
+    p.add_argument(
+        "--reuse-other-code",
+        action="store_true",
+        help="reuse episodes even if the sources changed since (the report lists every hash)",
+    )
     p.add_argument("--no-figures", action="store_true")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     args = p.parse_args(argv)
@@ -785,7 +791,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         todo = episodes(cases, filters, operators)
         reuse = load_runs(args.reuse)
         partial = out / "partial.jsonl"
-        records = run_arena(todo, args.jobs, reuse, not args.quiet, partial)
+        records = run_arena(todo, args.jobs, reuse, not args.quiet, partial, args.reuse_other_code)
         with open(out / "runs.jsonl", "w", encoding="utf-8") as fh:
             for r in records:
                 fh.write(json.dumps(r, allow_nan=False) + "\n")
