@@ -42,6 +42,7 @@ with nothing within r_max of P_IGC passes unchanged. |v'| <= w_SI |v| since |P_E
 from __future__ import annotations
 
 import math
+from decimal import Decimal
 
 import numpy as np
 import numpy.typing as npt
@@ -68,12 +69,38 @@ def _check_l(l_m: float) -> None:
         raise ValueError("ek-egc needs L = v_max / w_max, a positive finite length in metres")
 
 
-# Points with |y| below _Y_ZERO (m), or within sqrt(_R2_TINY) = 1e-145 m of the origin, take the
-# y = 0 rule. For |y| < 1e-250 and |x| <= 1e6 it is the transform itself to double precision
-# (d = x (1 + O((y/x)^2)), theta = O(L y / x^2)); both bounds keep R, the arc length and
-# tan theta from overflowing. A point within 1e-145 m of the origin is inside the robot.
+# Points with 0 < |y| < _Y_ZERO (m), or within sqrt(_R2_TINY) = 1e-145 m of the origin, would
+# overflow or underflow the vectorised formulas (R, tan theta, the arc length); they are rare
+# (real scans have y == 0 exactly, which is the y = 0 rule, vectorised) and go through
+# ``_ek_point_careful``, the same formulas in decimal arithmetic.
 _Y_ZERO = 1e-250
 _R2_TINY = 1e-290
+_TINY_RATIO = Decimal("1e-200")
+
+
+def _ek_point_careful(x: float, y: float, l_m: float) -> tuple[float, float] | None:
+    """Step 1 for one point with y != 0 at any magnitude, in decimal arithmetic where floats
+    would overflow or underflow; None if the arc length is beyond the float range."""
+    ax, ay = Decimal(x), Decimal(abs(y))
+    r2 = ax * ax + ay * ay  # exact, in decimal
+    if x > 0.0:
+        ratio = ay / ax
+        if ratio < _TINY_RATIO:  # atan(r) = r (1 - r^2 / 3): u / |y| = 1 / x to double precision
+            d = r2 / ax
+        else:
+            d = r2 * Decimal(math.atan(float(ratio))) / ay
+    else:  # u in [pi/2, pi]: a float atan2 is accurate
+        d = r2 * Decimal(math.atan2(float(ay), x) if ay.adjusted() > -300 else math.pi) / ay
+    t = float(Decimal(2.0 * l_m) * Decimal(y) / r2)  # tan theta = L / R; may be +-inf
+    if math.isinf(t):
+        c, s = 0.0, math.copysign(1.0, t)
+    else:
+        c = 1.0 / math.hypot(1.0, t)
+        s = t * c
+    ex, ey = float(d * Decimal(c)), float(d * Decimal(s))
+    if not (math.isfinite(ex) and math.isfinite(ey)):
+        return None
+    return ex, ey
 
 
 def _ek_xy(
@@ -103,12 +130,19 @@ def _ek_xy(
     special |= r2 < _R2_TINY
     if not special.any():
         return ex, ey, None
-    ex[special] = x[special]  # y = 0: d = x, theta = 0 ...
-    ey[special] = 0.0
-    special &= x <= 0.0  # ... and dropped at x <= 0 (unreachable going forward)
-    if not special.any():
+    kept = np.ones(x.shape, dtype=np.bool_)
+    for i in np.flatnonzero(special).tolist():
+        xi, yi = float(x[i]), float(y[i])
+        if yi == 0.0:  # d = x, theta = 0 ahead; dropped at x <= 0 (unreachable going forward)
+            p: tuple[float, float] | None = (xi, 0.0) if xi > 0.0 else None
+        else:
+            p = _ek_point_careful(xi, yi, l_m)
+        if p is None:
+            kept[i] = False
+        else:
+            ex[i], ey[i] = p
+    if kept.all():
         return ex, ey, None
-    kept = ~special
     return ex[kept], ey[kept], kept
 
 
@@ -192,6 +226,9 @@ def ek_egc_filter(
         if not near.all():
             x, y, r2 = x[near], y[near], r2[near]
         ex, ey, _ = _ek_xy(-x if reverse else x, y, r2, l_m)
+        if ex.size and ex.max() > bound:  # far along the EK space (d >= x_EK): same argument
+            near = ex <= bound  # (and no overflow in the distances; |y_EK| <= 2 pi L always)
+            ex, ey = ex[near], ey[near]
 
         def to_command(p: Point, w_si: float, horizon_s: float) -> tuple[float, float]:
             return ek_command_from_point(p, w_si, horizon_s, l_m)
