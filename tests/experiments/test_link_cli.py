@@ -150,7 +150,7 @@ def test_tcp_delay_applied_and_byte_order_kept(tmp_path: Path) -> None:
     stats = json.loads(stats_file.read_text())
     assert stats["connections"] == 1
     assert 49.9 <= stats["up"]["p50_ms"] <= 55.0  # measured by the relay: 50 ms applied
-    assert stats["up"]["late_p99_ms"] < 5.0
+    assert stats["up"]["late_p99_ms"] < 20.0  # scheduling lateness; a loaded 2-core CI saw 9 ms
     assert stats["down"]["dropped"] == 0 and stats["down"]["max_ms"] > 20.0
 
 
