@@ -13,6 +13,21 @@ def reference_egc(v, w, points, r_min, r_max, kT):
     """Returns dict(v, w, w_si, region, side, rc, igc, agc, egc) or None for undefined cases."""
     x_igc = v * kT * math.cos(w * kT / 2)
     y_igc = v * kT * math.sin(w * kT / 2)
+
+    def to_command(x_egc, y_egc, w_si):  # step 7, eqs. 14-15
+        if x_egc == 0:
+            sign = 1 if y_egc > 0 else -1 if y_egc < 0 else 0
+            return 0.0, w_si * (2 / kT) * (math.pi / 2) * sign
+        v_out = w_si * math.copysign(1, x_egc) * math.sqrt(x_egc**2 + y_egc**2) / kT
+        return v_out, w_si * (2 / kT) * math.atan(y_egc / x_egc)
+
+    return reference_circles(v, w, x_igc, y_igc, points, r_min, r_max, to_command)
+
+
+def reference_circles(v, w, x_igc, y_igc, points, r_min, r_max, to_command):
+    """DESIGN 5 steps 2-6 around a given P_IGC, then ``to_command(x_egc, y_egc, w_si)`` back to
+    (v', w'); shared by the EGC and EK-EGC references (EK-EGC runs the same steps on EK points).
+    Returns the result dict, or None for the undefined cases."""
     r_rc = math.sqrt(x_igc**2 + y_igc**2)
 
     def nearest(cx, cy):
@@ -59,12 +74,7 @@ def reference_egc(v, w, points, r_min, r_max, kT):
         w_si, region = r_egc / r_max, "conditional"
     else:
         w_si, region = 0.0, "unsafe"
-    if x_egc == 0:
-        v_out = 0.0
-        w_out = w_si * (2 / kT) * (math.pi / 2) * (1 if y_egc > 0 else -1 if y_egc < 0 else 0)
-    else:
-        v_out = w_si * math.copysign(1, x_egc) * math.sqrt(x_egc**2 + y_egc**2) / kT
-        w_out = w_si * (2 / kT) * math.atan(y_egc / x_egc)
+    v_out, w_out = to_command(x_egc, y_egc, w_si)
     return {
         "v": v_out,
         "w": w_out,
