@@ -39,6 +39,9 @@ Metrics (``RESULT_KEYS`` and more; times in simulated seconds):
 - ``cmd_age_p50_ms`` / ``cmd_age_p99_ms``: arrival minus stamp of the accepted commands;
   ``stale_rejected``: commands the robot dropped as too old;
 - ``mean_speed_mps`` = path / time, ``max_speed_mps`` the highest speed the base reached,
+  ``contact_speed_mps`` / ``contact_turn_radps`` the base's |v| and |w| entering the step that
+  made contact (None without one: a contact at v = 0 is a turn in place, no speed cap can
+  prevent it),
   ``loop_delay_p50_ms`` the robot's median tau (DESIGN 9) over the cycles it drove.
 """
 
@@ -205,6 +208,7 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
     hold_cycles = hold_events = interventions = latency_cycles = cycles = 0
     in_hold = False
     max_speed = 0.0
+    before = contact = (0.0, 0.0)  # the base's twist entering the step that made contact
     anchor = (start[0], start[1], 0)  # (x, y, t_ns) of the last 0.1 m of progress
     outcome = "timeout"
     dt_s = ROBOT_PERIOD_NS / NS_PER_S
@@ -244,12 +248,14 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
                 ages_ms.append(verdict.latency_ns / 1e6)
         else:  # the robot's control cycle
             if t_ns > 0:
+                before = sim.twist
                 sim.step(base[0], base[1], (t_ns - last_robot_ns) / NS_PER_S)
             last_robot_ns = t_ns
             x, y, _ = sim.pose
             max_speed = max(max_speed, abs(sim.twist[0]))
             if sim.collided:
                 outcome = "collided"
+                contact = before
                 break
             if math.hypot(x - goal[0], y - goal[1]) <= tolerance:
                 outcome = "reached"
@@ -319,6 +325,8 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
         "outages": [list(o) for o in point.outages],
         "dist": point.dist,
         "max_speed_mps": round(max_speed, 4),
+        "contact_speed_mps": round(abs(contact[0]), 4) if outcome == "collided" else None,
+        "contact_turn_radps": round(abs(contact[1]), 4) if outcome == "collided" else None,
         "latency_limited_s": round(latency_cycles * dt_s, 3),
         "loop_delay_p50_ms": _percentile(loop_delays, 50),
         "profile": point.profile,

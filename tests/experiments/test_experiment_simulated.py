@@ -65,3 +65,12 @@ def test_link_aware_driving_resumes_after_an_outage_and_caps_the_speed():
 def test_other_operators_run(operator):
     r = run_simulated(point(operator=operator, max_time_s=5))
     assert r["outcome"] in ("timeout", "collided", "reached") and r["path_m"] > 0.1
+
+
+def test_a_collision_records_the_speed_at_contact():
+    # The blind `goal` operator steers the Jackal straight at the goal, into a wall.
+    r = run_simulated(point(world="hallway", operator="goal", profile="jackal", max_time_s=30))
+    assert r["outcome"] == "collided"
+    assert r["contact_speed_mps"] > 0.5 and r["contact_turn_radps"] is not None
+    clean = run_simulated(point())
+    assert clean["outcome"] == "reached" and clean["contact_speed_mps"] is None
