@@ -2,6 +2,9 @@
 
 Behind the Driver seam (``egc_robot.drivers``), like the Zenoh driver: the robot's loop polls it
 once per control cycle and sends it one command per cycle. The operator link stays Zenoh.
+Besides the fixed-rate cycles and those on each accepted command, the robot runs a cycle on
+each accepted scan (``set_scan_listener``), so a scan acts on ``/cmd_vel`` within one pipeline
+run rather than at the next deadline (up to 50 ms later at 20 Hz; bench/bench_ros2.py).
 
 - ``sensor_msgs/LaserScan`` on ``--ros-scan`` (default ``/scan``) and ``nav_msgs/Odometry`` on
   ``--ros-odom`` (``/odom``), sensor-data QoS (best effort, keep last 5; it also receives reliable
@@ -30,6 +33,7 @@ import logging
 import threading
 import time
 from collections import Counter
+from collections.abc import Callable
 from typing import Any
 
 from egc_common.errors import UsageError
@@ -96,6 +100,7 @@ class Ros2Driver:
         self._closed = False
         self._stamped = settings.cmd_type == "twist-stamped"
         self._twist_type: Any = TwistStamped if self._stamped else Twist
+        self._scan_listener: Callable[[], None] | None = None
 
         # Our own context: rclpy installs no signal handlers (the robot process owns SIGINT and
         # SIGTERM, to send the last zero twist) and nothing global is touched.
@@ -173,6 +178,12 @@ class Ros2Driver:
             self._scan, self._scan_rx_ns = result, rx_ns
             self.scans_received += 1
             self._header_age_ns = age_ns if abs(age_ns) <= _CLOCKS_AGREE_NS else None
+            listener = self._scan_listener
+        if listener is not None:
+            try:
+                listener()
+            except Exception as exc:  # never out of a callback
+                log.error("scan listener failed: %s", exc)
 
     def _on_odometry(self, msg: Any) -> None:
         rx_ns = time.monotonic_ns()
@@ -205,6 +216,12 @@ class Ros2Driver:
             )
 
     # -- the Driver seam (the robot's loop) -------------------------------------------------------
+
+    def set_scan_listener(self, listener: Callable[[], None] | None) -> None:
+        """Call ``listener`` (in the executor's thread) after each accepted scan, so that the
+        robot runs a cycle on it at once instead of at its next deadline (up to one period)."""
+        with self._lock:
+            self._scan_listener = listener
 
     @property
     def header_age_ms(self) -> float | None:

@@ -9,6 +9,8 @@ command, or the loop thread at each deadline. So there are
 - plus an immediate cycle, in the receiving callback itself, whenever a command from the
   operator in control is accepted: the base sees it after one pipeline run, with no thread
   hand-off (bench/bench_link.py measures publish-to-base latency),
+- and one whenever a driver that announces its scans (``set_scan_listener``: the ROS 2 driver)
+  has a new one, in the driver's thread (bench/bench_ros2.py measures scan-to-``/cmd_vel``),
 - telemetry on every cycle (congestion DROP), state on change and at 1 Hz,
 - the clock queryable ``egc/<robot>/clock`` answered straight from the callback,
 - the liveliness token ``egc/<robot>/alive/robot`` and a liveliness subscriber (with history)
@@ -124,6 +126,9 @@ class RobotNode:
                 keys.alive_operators(robot_id), self._on_liveliness, history=True
             ),
         ]
+        attach = getattr(driver, "set_scan_listener", None)
+        if callable(attach):
+            attach(self._on_fresh_scan)
 
     @property
     def controller(self) -> RobotController:
@@ -142,6 +147,18 @@ class RobotNode:
                     now = self._clock()
                     self._poll_driver(now)
                     self._cycle(now)
+            except Exception as exc:
+                self._fail_safe(exc)
+
+    def _on_fresh_scan(self) -> None:
+        """The driver has a new scan: run a cycle on it now (its thread)."""
+        with self._lock:
+            if self._shut_down:
+                return
+            try:
+                now = self._clock()
+                self._poll_driver(now)
+                self._cycle(now)
             except Exception as exc:
                 self._fail_safe(exc)
 
