@@ -19,6 +19,10 @@ deadman or presses e-stop the robot's stop rule applies (``egc_robot.safety.dece
   ``office02``, ``random:SEED``); ``--start``/``--goal``/``--goal-tolerance`` default to the
   world's own where it has them.
 - Control runs at 1 / ``--dt`` Hz (20 Hz); the simulator sub-steps within a cycle.
+- ``--via`` gives the filter its via points (DESIGN 7); the robot echoes the active one in its
+  telemetry and the operator view draws it, so the ``goal`` and ``sighted`` operators steer at
+  the active via point while there is one, and at the goal after the last (issue 11). With
+  ``--via goal`` (the default) that is the goal throughout.
 - ``--record OUT.rrd`` saves the episode as the operator view shows a live run
   (``egc_operator.view.record_episode``), one telemetry message per cycle; open it with
   ``rerun OUT.rrd``.
@@ -205,8 +209,17 @@ def run_settings(
         raise UsageError(f"map {settings.map!r} suggests no goal: give --goal X,Y")
     tolerance = settings.goal_tolerance_m or world.goal_tolerance_m or DEFAULT_GOAL_TOLERANCE_M
     mode = "direct" if settings.filter == "none" else "shared"
+    # The simulated lidar declares "no return" as free: within its range it truly is.
+    config = PipelineConfig(profile, filter=settings.filter, no_return_is_free=True)
     try:
+        via = episode_via_points(settings.via, world, start, goal, 0.5 * profile.width_m)
         sim = Simulator(world, profile, start, seed=settings.seed)
+        controller = PipelineController(config, lambda: sim.pose, via, min(tolerance, 0.5))
+
+        def active_via_point() -> tuple[float, float] | None:
+            # What the robot echoes in its telemetry (DESIGN 7) and the operator view draws.
+            return controller.route.active
+
         operator = make_operator(
             settings.operator,
             goal,
@@ -215,17 +228,11 @@ def run_settings(
             world=world,
             start=start,
             half_width_m=0.5 * profile.width_m,
-            sensor=SimSensor(sim),
+            sensor=SimSensor(sim, via=active_via_point),
+            via=active_via_point,
         )
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    # The simulated lidar declares "no return" as free: within its range it truly is.
-    config = PipelineConfig(profile, filter=settings.filter, no_return_is_free=True)
-    try:
-        via = episode_via_points(settings.via, world, start, goal, 0.5 * profile.width_m)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
-    controller = PipelineController(config, lambda: sim.pose, via, min(tolerance, 0.5))
     recorder = (
         None if record_path is None else EpisodeRecorder(record_path, world, goal, controller)
     )

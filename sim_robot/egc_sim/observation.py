@@ -39,7 +39,9 @@ class Observation:
 
     ``scan_xy`` is (N, 2) obstacle points in the robot frame {R} at that time; ``pose`` the
     robot's pose (x, y, yaw) in the world frame, None when the robot did not report one;
-    ``state`` and ``reason`` the robot's safety state (DESIGN 8) as the view shows it.
+    ``state`` and ``reason`` the robot's safety state (DESIGN 8) as the view shows it;
+    ``goal`` the active via point the robot echoes in its telemetry (DESIGN 7, world frame), None
+    when it has none (then the operator steers at its own goal).
     """
 
     stamp_s: float
@@ -47,6 +49,7 @@ class Observation:
     scan_xy: FloatArray = field(default_factory=lambda: np.zeros((0, 2), np.float64))
     state: str = "DRIVING"
     reason: str = ""
+    goal: tuple[float, float] | None = None
 
 
 class ObservingOperator(Protocol):
@@ -85,16 +88,24 @@ class ViewBuffer:
 class SimSensor:
     """The current operator view in a plain episode: the simulator's scan and true pose.
 
-    The scan is decimated like the robot's telemetry (every ``decimation``-th point).
+    The scan is decimated like the robot's telemetry (every ``decimation``-th point). ``via``,
+    when given, returns the active via point the robot echoes (``Observation.goal``).
     """
 
-    def __init__(self, sim: Simulator, decimation: int = 2) -> None:
+    def __init__(
+        self,
+        sim: Simulator,
+        decimation: int = 2,
+        via: Callable[[], tuple[float, float] | None] | None = None,
+    ) -> None:
         self.sim = sim
         self.decimation = max(1, int(decimation))
+        self.via = via
 
     def __call__(self, t_s: float, pose: Pose) -> Observation:
         points = self.sim.scan(stamp_ns=round(t_s * 1e9)).points()[:: self.decimation]
-        return Observation(t_s, pose, np.asarray(points, dtype=np.float64))
+        goal = None if self.via is None else self.via()
+        return Observation(t_s, pose, np.asarray(points, dtype=np.float64), goal=goal)
 
 
 class Sensing:

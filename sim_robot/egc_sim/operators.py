@@ -8,7 +8,10 @@ paper's eq. 4; operators know nothing about the robot's speeds.
 - ``ForwardOperator``: the stick held straight forward, the paper's Fig. 9 experiment.
 - ``GoalOperator``: a naive operator who steers at the goal and cannot see obstacles: turn rate
   proportional to the heading error, forward deflection ``cos(error)`` (turning in place while
-  the goal is behind).
+  the goal is behind). Given ``target`` (the active via point the robot echoes in its
+  telemetry, DESIGN 7, which the operator view draws), it steers at that one while there is
+  one: blind to the obstacles, not to the marker on the screen (issue 11). Without via points,
+  or with the single via point at the goal, that is the same thing.
 - ``sighted`` (``sighted.SightedOperator``) and ``route`` (``route.RouteOperator``): the models
   of the network-delay experiments (DESIGN 10), fed with what the operator view shows
   (``observation``) rather than the true pose.
@@ -80,12 +83,14 @@ class ForwardOperator:
 class GoalOperator:
     """Steers at ``goal`` (x_m, y_m) from the true pose; blind to obstacles.
 
-    y_o = clamp(gain * heading error / pi), x_o = max(cos(heading error), 0).
+    y_o = clamp(gain * heading error / pi), x_o = max(cos(heading error), 0). ``target``
+    (optional) returns the active via point the view shows, steered at instead while not None.
     """
 
     goal: tuple[float, float]
     mode: str = "shared"
     gain: float = 2.0
+    target: Callable[[], tuple[float, float] | None] | None = None
 
     def __post_init__(self) -> None:
         check_mode(self.mode)
@@ -94,7 +99,9 @@ class GoalOperator:
 
     def command(self, t_s: float, pose: Pose) -> Stick:
         x, y, yaw = pose
-        error = wrap_angle(math.atan2(self.goal[1] - y, self.goal[0] - x) - yaw)
+        via = None if self.target is None else self.target()
+        gx, gy = self.goal if via is None else via
+        error = wrap_angle(math.atan2(gy - y, gx - x) - yaw)
         return Stick(
             max(math.cos(error), 0.0), clamp_unit(self.gain * error / math.pi), True, self.mode
         )
@@ -125,6 +132,7 @@ def make_operator(
     start: Pose | None = None,
     half_width_m: float = 0.2,
     sensor: Callable[[float, Pose], Observation] | None = None,
+    via: Callable[[], tuple[float, float] | None] | None = None,
 ) -> Operator:
     """``forward``, ``goal`` (needs the goal), ``sighted[:K=V,...]`` (the goal),
     ``route[:K=V,...]`` (the goal, the world and the start) or the path of a joystick file.
@@ -136,14 +144,16 @@ def make_operator(
     noise_std=0.1,...`` (``sighted.SightedParams``), ``route:map=building,reaction_s=...``
     (``route.RouteParams``; ``map=building`` plans on the map without its furniture).
     ``seed`` seeds the steering noise; ``half_width_m`` is the robot's (route inflation, sighted
-    corridor). Raises ValueError (a ``JoystickFileError`` for files) with a clear message.
+    corridor). ``via`` returns the active via point the robot echoes (the ``goal`` operator
+    steers at it; ``sighted`` reads it from its ``sensor``'s observations). Raises ValueError (a
+    ``JoystickFileError`` for files) with a clear message.
     """
     if spec == "forward":
         return ForwardOperator(mode)
     if spec == "goal":
         if goal is None:
             raise ValueError("the goal operator needs a goal")
-        return GoalOperator(goal, mode)
+        return GoalOperator(goal, mode, target=via)
     name, _, options = spec.partition(":")
     if name in ("sighted", "route"):
         observing = _make_observing(name, options, goal, mode, seed, world, start, half_width_m)

@@ -3,7 +3,10 @@
 A person at the joystick who sees what the operator view shows, no more: the newest telemetry
 that has arrived (``observation.Observation``: the scan in the robot frame, the pose, the
 state), acted on after a reaction time (``reaction_s``, default 0.25 s, through
-``observation.ViewBuffer``). The goal is known (it is drawn in the view).
+``observation.ViewBuffer``). The goal is known (it is drawn in the view). When the robot echoes
+an active via point (``Observation.goal``, DESIGN 7), the view draws that one as the place to go
+next, and the operator steers at it instead of the goal (issue 11: with via points planned
+round the walls, the straight line at the final goal is no one's honest intention).
 
 Each command:
 
@@ -194,7 +197,8 @@ class SightedOperator:
         assert obs.pose is not None
         p = self.params
         x, y, yaw = obs.pose
-        dx, dy = self.goal[0] - x, self.goal[1] - y
+        target = self.goal if obs.goal is None else obs.goal
+        dx, dy = target[0] - x, target[1] - y
         distance = math.hypot(dx, dy)
         bearing = wrap_angle(math.atan2(dy, dx) - yaw)
         need = min(p.look_m, distance)

@@ -398,10 +398,11 @@ def test_wall_following_leaves_when_the_way_is_clear_and_closer():
     # Farther from the via point than where following began: keep following (Bug2 rule).
     stay = run(1.0, 0.0, beside, goal=(3.5, 0.0), memory=following, t0_ms=1000, cycles=6)
     assert stay.rule == "wall-follow-right"
-    # Closer and the way clear: leave, steer at the via point (once the histogram has let go of
-    # the wall that was ahead: 16 - 5 x 2 = 6, no longer above the threshold).
+    # Closer and the way clear: leave, and steer at the via point at once (the footprint's way
+    # to it is clear, so the wall still counted ahead in the histogram does not hold it back).
     leave = run(1.0, 0.0, beside, goal=(2.0, 0.1), memory=following, t0_ms=1000, cycles=1)
-    assert leave.memory.wall_side is None and leave.rule == "avoid-front"
+    assert leave.memory.wall_side is None and leave.rule == "goal"
+    assert leave.levels[FRONT] is not None
     leave = run(1.0, 0.0, beside, goal=(2.0, 0.1), memory=following, t0_ms=1000, cycles=6)
     assert leave.rule == "goal" and leave.memory.wall_side is None
     assert leave.memory.last_wall_side == "right"

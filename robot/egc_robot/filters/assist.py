@@ -53,7 +53,15 @@ How each part maps to the paper
   one, s the speed factor of the rule.
 - **Heading sources** (sec. V): with a via point and the stick roughly in line with it (within
   ``align_tolerance_rad``, both angles clipped to +-90 deg, so "turn towards it" counts as in
-  line), the rules "sent it towards the target destination" (rule ``goal``); with a via point
+  line), the rules "sent it towards the target destination" (rule ``goal``). Deviation (issue
+  11): when not wall following, ``goal`` steers straight at the via point, past the obstacle
+  rules, whenever the footprint's way to it (``way_half_width_m``) is clear for min(distance,
+  ``block_m``) and no single side is CLOSE on the via point's side (both CLOSE is a corridor).
+  The bands are distances from the robot's centre, so in a 1 m corridor both sides are CLOSE
+  all the time and FRONT turns active at every bend: the rules (``gap``'s +-15 deg,
+  ``avoid-front``'s turn in place) then fought the via point at every corner, and the blind
+  operator reached none of the MRPB tests. The pipeline's footprint sweep still guards the
+  command. With a via point
   and the stick elsewhere, "an average between the angle to the target destination and the angle
   requested by the joystick" (rule ``blend``); without a via point the heading is the one whose
   turn rate is the stick's eq. 4 turn rate (theta = w_ref / gain), so with nothing active the
@@ -73,7 +81,14 @@ How each part maps to the paper
   ``wall-follow-right`` keeps the wall on the robot's right, ``wall-follow-left`` on its left.
   Left when the corridor towards the via point is clear for min(distance, ``leave_clear_m``) and
   the robot is at least ``progress_m`` closer to it than where it started following (Bug2's
-  leave condition, so it never leaves into the obstacle it is going round).
+  leave condition, so it never leaves into the obstacle it is going round), or the via point is
+  itself within ``leave_clear_m`` (the clear corridor reaches it). Entry and leave check the way
+  to the via point at the footprint's width plus 5 cm (``way_half_width_m``), not the FRONT
+  sector's 0.75 W: MRPB's corridors are about 1 m wide and the route keeps the robot's centre
+  only 0.29 m off the walls, so the wider strip saw walls beside the route as "blocked". After
+  ``wall_max_s`` of following without getting closer than where it began, it gives up and the
+  next entry takes the other side (issue 11: in a pocket with the via point behind its wall the
+  tangent follower went round the pocket for ever).
 - **Operator's override** (sec. V: "if the joystick remained fixed (roughly) in a particular
   position then that input was integrated over time and the wishes of the tele-operator overrode
   that behaviour"; avoidance "initially overrode other behaviours"): the memory integrates, like
@@ -176,6 +191,9 @@ class AssistParams:
     leave_clear_m: float = 1.505
     progress_m: float = 0.05
     rejoin_s: float = 5.0
+    wall_max_s: float = 30.0
+    # Half width (m) of the way to the via point that wall following checks (entry, leave).
+    way_half_width_m: float = 0.2405
     # A via point closer than this (m) gives no direction: joystick plus avoidance.
     goal_min_m: float = 0.05
     # dt larger than this (s) counts as this (a resumed link does not jump the confidence).
@@ -211,6 +229,8 @@ class AssistParams:
             "wall_range_m",
             "block_m",
             "leave_clear_m",
+            "wall_max_s",
+            "way_half_width_m",
             "max_dt_s",
         )
         for name in positive:
@@ -246,6 +266,7 @@ class AssistParams:
             "intermediate_m": r_max + length,
             "faraway_m": r_max + 2.0 * length,
             "corridor_half_width_m": 0.75 * profile.width_m,
+            "way_half_width_m": 0.5 * profile.width_m + 0.05,
             "wall_distance_m": 0.5 * (profile.r_min_m + r_max),
             "wall_range_m": r_max + length,
             "block_m": r_max + length,
@@ -307,6 +328,7 @@ class AssistMemory:
     last_wall_side: str | None = None
     wall_left_ns: int | None = None
     front_turn: float = 0.0
+    wall_start_ns: int | None = None
 
     @staticmethod
     def initial() -> AssistMemory:
@@ -478,6 +500,26 @@ def _wall_heading(
     return _wrap(tangent - s * correction), True
 
 
+def _way_is_free(
+    obstacles: ObstaclePoints,
+    bearing: float,
+    distance: float,
+    levels: tuple[int | None, int | None, int | None],
+    params: AssistParams,
+) -> bool:
+    """Steer straight at the via point past the obstacle rules (module docstring): no single
+    CLOSE side on the via point's side (both CLOSE is a corridor) and the footprint's way to it
+    clear for min(distance, ``block_m``)."""
+    left, _, right = levels
+    if left == CLOSE and right != CLOSE and bearing > 0.0:
+        return False
+    if right == CLOSE and left != CLOSE and bearing < 0.0:
+        return False
+    return corridor_clear(
+        obstacles, bearing, min(distance, params.block_m), params.way_half_width_m
+    )
+
+
 def _avoid(
     theta: float,
     levels: tuple[int | None, int | None, int | None],
@@ -563,14 +605,20 @@ def assist_step(
         contest: float = 0.0,
         wall: tuple[str | None, float] = (None, math.inf),
         bearing: float | None = None,
+        gave_up: bool = False,
     ) -> AssistResult:
         turning = rule == "avoid-front" and heading is not None and v == 0.0
         turn = math.copysign(1.0, heading) if turning and heading is not None else 0.0
         last_side, left_ns = memory.last_wall_side, memory.wall_left_ns
+        start_ns = memory.wall_start_ns if memory.wall_side is not None else now_ns
         if memory.wall_side is not None and wall[0] is None:  # following just ended
             last_side, left_ns = memory.wall_side, now_ns
+            if gave_up:  # round and round: the other side next time
+                last_side = "left" if memory.wall_side == "right" else "right"
         elif wall[0] is not None:
             last_side = wall[0]
+        if wall[0] is None:
+            start_ns = None
         new_memory = AssistMemory(
             counts,
             confidence,
@@ -583,6 +631,7 @@ def assist_step(
             last_side,
             left_ns,
             turn,
+            start_ns,
         )
         modified = abs(v - v_ref) > _SAME or abs(w - w_ref) > _SAME
         return AssistResult(
@@ -614,6 +663,7 @@ def assist_step(
 
     # The rules' proposal.
     wall: tuple[str | None, float] = (None, math.inf)
+    gave_up = False
     speed_scale = 1.0
     if bearing is None:
         theta_d, source, drive = w_ref / gain, "free", xs
@@ -629,17 +679,25 @@ def assist_step(
         front = levels[FRONT]
         if side is None:
             blocked = not corridor_clear(
-                obs, bearing, min(distance, params.block_m), params.corridor_half_width_m
+                obs, bearing, min(distance, params.block_m), params.way_half_width_m
             )
             if front is not None and front <= INTERMEDIATE and blocked and abs(bearing) < _HALF_PI:
                 side = _choose_wall_side(obs, bearing, params, memory, now_ns)
                 wall = (side, distance)
         else:
             clear = corridor_clear(
-                obs, bearing, min(distance, params.leave_clear_m), params.corridor_half_width_m
+                obs, bearing, min(distance, params.leave_clear_m), params.way_half_width_m
             )
-            if clear and distance <= memory.wall_entry_m - params.progress_m:
+            following_s = (
+                0.0 if memory.wall_start_ns is None else (now_ns - memory.wall_start_ns) * 1e-9
+            )
+            if clear and (
+                distance <= memory.wall_entry_m - params.progress_m
+                or distance <= params.leave_clear_m
+            ):
                 side = None
+            elif following_s > params.wall_max_s and distance > memory.wall_entry_m:
+                side, gave_up = None, True
             else:
                 wall = (side, memory.wall_entry_m)
         if side is not None:
@@ -649,6 +707,10 @@ def assist_step(
                 speed_scale = 0.0  # a sharp turn with something right ahead: turn in place
             elif not found:
                 speed_scale = params.front_intermediate_speed
+        elif _way_is_free(obs, bearing, distance, levels, params):
+            # The way to the via point is clear for the footprint: go (sec. V, "when there were
+            # no objects in the way ... sent it towards the target destination").
+            theta, rule = bearing, source
         else:
             theta, speed_scale, avoided = _avoid(theta_d, levels, params, memory.front_turn)
             rule = avoided or source
@@ -673,4 +735,4 @@ def assist_step(
         contest = 0.0
     if contest >= params.override_confidence and conf >= params.override_confidence:
         return result(v_ref, w_ref, "override", phi, contest, (None, math.inf), bearing)
-    return result(v, w, rule, theta, contest, wall, bearing)
+    return result(v, w, rule, theta, contest, wall, bearing, gave_up)
