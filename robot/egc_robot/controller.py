@@ -59,8 +59,8 @@ from egc_common.messages import (
 from egc_common.scan import ObstaclePoints, Scan
 
 from egc_robot.latency_governor import govern, latency_speed_limit
-from egc_robot.link_stats import LinkFigures, LinkStats
-from egc_robot.pipeline import FILTERS, Limiter, PipelineConfig, PipelineResult, step_command
+from egc_robot.link_stats import LinkStats
+from egc_robot.pipeline import FILTERS, MODES, Limiter, PipelineConfig, PipelineResult, step_command
 from egc_robot.safety import decelerate
 from egc_robot.state_machine import (
     COMMAND_TIMEOUT,
@@ -161,8 +161,10 @@ class CommandVerdict:
 class CycleOutput:
     """One cycle's base command, with its telemetry built on first use.
 
-    The telemetry is a snapshot of the cycle (every value is fixed when ``step`` returns) but is
-    only assembled when asked for, so that the robot can send the base command first.
+    The telemetry is a snapshot of the cycle (every value is the one when ``step`` returns) but
+    is only assembled when asked for, so that the robot can send the base command first: the
+    controller assembles it itself before anything that could change those values (its next
+    input or cycle), if nobody asked for it by then.
     """
 
     base: BaseCommand
@@ -173,25 +175,6 @@ class CycleOutput:
     @cached_property
     def telemetry(self) -> Telemetry:
         return self.build_telemetry()
-
-
-@dataclass(frozen=True, slots=True)
-class _TelemetrySnapshot:
-    """The controller's mutable state that a cycle's telemetry reports, fixed at ``step``."""
-
-    state: str
-    reason: str
-    operator: str | None
-    command_rx_ns: int
-    scan_rx_ns: int | None
-    scan_xy: npt.NDArray[np.float32]
-    pose: tuple[float, float, float] | None
-    rejected: int
-    cycle: int
-    link: LinkFigures
-    v_lim_mps: float | None
-    filter: str
-    route: ViaPoints
 
 
 @dataclass(slots=True)
@@ -235,7 +218,7 @@ class RobotController:
         self._alive: set[str] = set()
         self._estop_pending = False
         self._scan: _Scan | None = None
-        self._telemetry_xy = np.zeros((0, 2), np.float32)
+        self._telemetry_xy: npt.NDArray[np.float32] | None = None  # of ``_scan``, when asked for
         self._pose: tuple[float, float, float] | None = None
         self._map_pose: tuple[float, float, float] | None = None
         self._route = NO_ROUTE
@@ -250,6 +233,9 @@ class RobotController:
         self._link = LinkStats(
             reaction_time_s=config.reaction_time_s, unknown_part_s=config.command_timeout_s
         )
+        self._max_age_ns = {mode: int(config.max_age_s(mode) * NS_PER_S) for mode in MODES}
+        self._release_ns = int(config.release_timeout_s * NS_PER_S)
+        self._unreported: CycleOutput | None = None  # the last cycle, telemetry not built yet
 
     # -- inputs -------------------------------------------------------------------------------
 
@@ -273,19 +259,22 @@ class RobotController:
 
     def on_command(self, payload: object, now_ns: int) -> CommandVerdict:
         """Decode and vet one payload from ``egc/<robot>/cmd``; never raises."""
+        if self._unreported is not None:
+            self._report()
         decoded = decode_command(payload)
         if isinstance(decoded, Rejection):
             return self._reject(None, decoded, now_ns)
         cmd = decoded
+        op = cmd.op
+        seq = cmd.seq
         if cmd.estop:
             self._estop_pending = True
-        cfg = self.config
-        max_age_ns = int(cfg.max_age_s(cmd.mode) * NS_PER_S)
-        if cmd.op == self._controller_op:
-            self._link.on_arrival(cmd.seq, now_ns)
+        max_age_ns = self._max_age_ns[cmd.mode]
+        if op == self._controller_op:
+            self._link.on_arrival(seq, now_ns)
         latency_ns: int | None = None
         if cmd.stamp_ns == 0:
-            if cfg.require_clock_sync:
+            if self.config.require_clock_sync:
                 return self._reject(
                     cmd, Rejection(RejectReason.STALE, "operator not synchronised"), now_ns
                 )
@@ -301,32 +290,33 @@ class RobotController:
                     Rejection(RejectReason.STALE, f"stamped {-latency_ns / 1e6:.0f} ms ahead"),
                     now_ns,
                 )
-        track = self._tracks.get(cmd.op)
-        release_ns = int(cfg.release_timeout_s * NS_PER_S)
-        if track is not None and now_ns - track.last_rx_ns > release_ns:
-            track = None  # a new session of that operator
-        if track is not None and cmd.seq <= track.last_seq:
+        track = self._tracks.get(op)
+        if (
+            track is not None
+            and now_ns - track.last_rx_ns <= self._release_ns  # else a new session of that op
+            and seq <= track.last_seq
+        ):
             reason = (
-                RejectReason.DUPLICATE_SEQ
-                if cmd.seq == track.last_seq
-                else RejectReason.OUT_OF_ORDER
+                RejectReason.DUPLICATE_SEQ if seq == track.last_seq else RejectReason.OUT_OF_ORDER
             )
-            return self._reject(
-                cmd, Rejection(reason, f"seq {cmd.seq} after {track.last_seq}"), now_ns
-            )
-        self._track(cmd.op, cmd.seq, now_ns)
+            return self._reject(cmd, Rejection(reason, f"seq {seq} after {track.last_seq}"), now_ns)
+        if track is not None:
+            track.last_seq, track.last_rx_ns = seq, now_ns
+            self._tracks.move_to_end(op)
+        else:
+            self._track(op, seq, now_ns)
         took_control = False
         if self._controller_op is None and cmd.deadman:
-            self._controller_op = cmd.op
+            self._controller_op = op
             self._control_epoch += 1
             self._link.reset()
-            self._link.on_arrival(cmd.seq, now_ns)
+            self._link.on_arrival(seq, now_ns)
             took_control = True
-        if self._controller_op != cmd.op:
+        if self._controller_op != op:
             holder = self._controller_op or "nobody (hold the deadman to take control)"
             return self._reject(
                 cmd,
-                Rejection(RejectReason.NOT_IN_CONTROL, f"{cmd.op}: control held by {holder}"),
+                Rejection(RejectReason.NOT_IN_CONTROL, f"{op}: control held by {holder}"),
                 now_ns,
             )
         self._command = cmd
@@ -346,6 +336,8 @@ class RobotController:
         Only the operator in control may set via points; the seq must increase per operator;
         a frame the driver gives no pose in is refused (the robot could not follow it).
         """
+        if self._unreported is not None:
+            self._report()
         decoded = decode_goal(payload)
         if isinstance(decoded, Rejection):
             return self._reject_goal(decoded)
@@ -390,12 +382,14 @@ class RobotController:
 
     def on_scan(self, scan: Scan, now_ns: int) -> None:
         """The newest scan; its arrival time decides freshness (scan_timeout)."""
-        points = scan.obstacles()
-        self._scan = _Scan(points, now_ns)
-        step = self.config.telemetry_scan_decimation
-        self._telemetry_xy = np.ascontiguousarray(points.xy[::step], dtype=np.float32)
+        if self._unreported is not None:
+            self._report()
+        self._scan = _Scan(scan.obstacles(), now_ns)
+        self._telemetry_xy = None  # decimated for the telemetry when it is built
 
     def on_odometry(self, odometry: Odometry) -> None:
+        if self._unreported is not None:
+            self._report()
         self._pose = (odometry.x_m, odometry.y_m, odometry.theta_rad)
         self._map_pose = odometry.map_pose
         if self._route.active is not None:
@@ -404,6 +398,8 @@ class RobotController:
 
     def on_operator_alive(self, operator_id: str, alive: bool) -> None:
         """A liveliness token ``alive/operator/<id>`` appeared or went away."""
+        if self._unreported is not None:
+            self._report()
         if alive:
             if operator_id not in self._alive:
                 self._tracks.pop(operator_id, None)  # a (re)started operator: new seq session
@@ -417,7 +413,13 @@ class RobotController:
     # -- the control cycle --------------------------------------------------------------------
 
     def step(self, now_ns: int) -> CycleOutput:
-        """One control cycle at ``now_ns``: decide the state, compute and return the base command."""
+        """One control cycle at ``now_ns``: decide the state, compute and return the base command.
+
+        Only what the base command needs is computed here; the telemetry is built after it has
+        been sent (``CycleOutput.telemetry``).
+        """
+        if self._unreported is not None:
+            self._report()
         cfg = self.config
         dt_s = (
             cfg.nominal_period_s
@@ -467,12 +469,11 @@ class RobotController:
         result: PipelineResult | None = None
         state = self._transition.state
         self._driving_epoch = self._control_epoch if state is State.DRIVING else -1
-        link = self._link.figures(now_ns)
         v_lim: float | None = None
         if cfg.link_aware:
             profile = cfg.pipeline.profile
             v_lim = latency_speed_limit(
-                link.loop_delay_s,
+                self._link.loop_delay_s(now_ns),
                 profile.v_max_mps,
                 profile.decel_max_mps2,
                 cfg.blind_time_s(cmd.mode if cmd is not None else "shared"),
@@ -512,23 +513,15 @@ class RobotController:
         self._previous = (v, w)
 
         base = BaseCommand(stamp_ns=now_ns, seq=self.counters.cycles, linear_mps=v, angular_radps=w)
-        snapshot = _TelemetrySnapshot(
-            state=state.value,
-            reason=self.reason,
-            operator=self._controller_op,
-            command_rx_ns=self._command_rx_ns,
-            scan_rx_ns=None if scan is None else scan.rx_ns,
-            scan_xy=self._telemetry_xy,
-            pose=self._pose,
-            rejected=self.counters.rejected_total,
-            cycle=self.counters.cycles,
-            link=link,
-            v_lim_mps=v_lim,
-            filter=filter_name if cmd is not None and cmd.mode == "shared" else "none",
-            route=self._route,
+        shown_filter = filter_name if cmd is not None and cmd.mode == "shared" else "none"
+        build = partial(
+            self._telemetry, now_ns, cmd, fresh, v, w, limiter, result, v_lim, shown_filter
         )
-        build = partial(self._telemetry, now_ns, cmd, fresh, v, w, limiter, result, snapshot)
-        return CycleOutput(base, self.state_message(now_ns) if changed else None, result, build)
+        out = CycleOutput(base, self.state_message(now_ns) if changed else None, result, build)
+        # Nothing the telemetry reports changes before it is built: every input and the next
+        # cycle build it first (``_report``) when nobody has asked for it.
+        self._unreported = out
+        return out
 
     def state_message(self, now_ns: int) -> StateMessage:
         return StateMessage(
@@ -561,6 +554,13 @@ class RobotController:
             return False
         return cmd.stamp_ns == 0 or now_ns - cmd.stamp_ns <= cfg.max_age_s(cmd.mode) * NS_PER_S
 
+    def _report(self) -> None:
+        """Build the last cycle's telemetry before the state it reports changes."""
+        out = self._unreported
+        self._unreported = None
+        if out is not None:
+            out.telemetry  # noqa: B018 (cached on the output)
+
     def _telemetry(
         self,
         now_ns: int,
@@ -570,19 +570,34 @@ class RobotController:
         w: float,
         limiter: Limiter,
         result: PipelineResult | None,
-        snap: _TelemetrySnapshot,
+        v_lim: float | None,
+        shown_filter: str,
     ) -> Telemetry:
+        """The telemetry of the cycle at ``now_ns``, from the state that cycle left (which stays
+        as it is until the telemetry is built, see ``step``)."""
+        self._unreported = None
+        link = self._link.figures(now_ns)
+        scan = self._scan
+        scan_xy = self._telemetry_xy
+        if scan_xy is None:
+            if scan is None:
+                scan_xy = np.zeros((0, 2), np.float32)
+            else:
+                step = self.config.telemetry_scan_decimation
+                scan_xy = np.ascontiguousarray(scan.points.xy[::step], dtype=np.float32)
+                self._telemetry_xy = scan_xy
+        route = self._route
         # Guide circles for the view only from egc: ek-egc's live in the EK space, not in {R}.
         filtered = result.filtered if result is not None and result.filter_name == "egc" else None
         if cmd is None:
             cmd_age_ms = None
         else:
-            since = cmd.stamp_ns if cmd.stamp_ns else snap.command_rx_ns
+            since = cmd.stamp_ns if cmd.stamp_ns else self._command_rx_ns
             cmd_age_ms = (now_ns - since) / 1e6
         return Telemetry(
             seq=cmd.seq if cmd is not None else 0,
             stamp_ns=now_ns,
-            state=snap.state,
+            state=self.state.value,
             mode=cmd.mode if cmd is not None else "shared",
             v_ref=result.v_ref_mps if result is not None else 0.0,
             w_ref=result.w_ref_radps if result is not None else 0.0,
@@ -596,27 +611,27 @@ class RobotController:
             agc=filtered.agc if filtered is not None else None,
             egc=filtered.egc if filtered is not None else None,
             r_rc=filtered.r_rc_m if filtered is not None else 0.0,
-            scan_xy=snap.scan_xy,
-            pose=snap.pose,
+            scan_xy=scan_xy,
+            pose=self._pose,
             cmd_age_ms=cmd_age_ms,
-            scan_age_ms=None if snap.scan_rx_ns is None else (now_ns - snap.scan_rx_ns) / 1e6,
-            operator=snap.operator,
+            scan_age_ms=None if scan is None else (now_ns - scan.rx_ns) / 1e6,
+            operator=self._controller_op,
             profile=self.config.pipeline.profile.name,
-            rejected=snap.rejected,
-            cycle=snap.cycle,
-            reason=snap.reason,
+            rejected=self.counters.rejected_total,
+            cycle=self.counters.cycles,
+            reason=self.reason,
             # DESIGN 7: which filter of DESIGN 6 runs ("none" in direct mode)
-            filter=snap.filter,
-            loop_delay_ms=snap.link.loop_delay_s * 1e3,
-            cmd_age_p50_ms=snap.link.cmd_age_p50_ms,
-            cmd_age_p90_ms=snap.link.cmd_age_p90_ms,
-            cmd_gap_max_ms=snap.link.cmd_gap_max_ms,
-            link_loss=snap.link.link_loss,
-            view_age_ms=snap.link.view_age_ms,
-            v_lim_latency=snap.v_lim_mps,
-            goal=snap.route.active,
-            goal_frame=snap.route.frame if snap.route.active is not None else None,
-            goals_left=snap.route.remaining_after_active,
+            filter=shown_filter,
+            loop_delay_ms=link.loop_delay_s * 1e3,
+            cmd_age_p50_ms=link.cmd_age_p50_ms,
+            cmd_age_p90_ms=link.cmd_age_p90_ms,
+            cmd_gap_max_ms=link.cmd_gap_max_ms,
+            link_loss=link.link_loss,
+            view_age_ms=link.view_age_ms,
+            v_lim_latency=v_lim,
+            goal=route.active,
+            goal_frame=route.frame if route.active is not None else None,
+            goals_left=route.remaining_after_active,
             suggested_rad=None
             if result is None or result.family is None
             else result.family.suggested_rad,

@@ -13,6 +13,7 @@ both arrived) and with the accepted ones' ages, it reports over a sliding window
 
 from __future__ import annotations
 
+from bisect import bisect_left, insort
 from collections import deque
 from dataclasses import dataclass
 
@@ -45,6 +46,7 @@ class LinkStats:
         self._unknown_s = unknown_part_s
         self._arrivals: deque[tuple[int, int]] = deque()  # (rx_ns, seq)
         self._ages: deque[tuple[int, int]] = deque()  # (rx_ns, age_ns) of accepted commands
+        self._sorted_ages: list[int] = []  # the same ages, ascending
         self._view_age_ms: float | None = None
         self._last_rx_ns: int | None = None
         self._seq_before: int | None = None  # the last seq that left the window
@@ -58,6 +60,7 @@ class LinkStats:
         """A new operator session: forget everything."""
         self._arrivals.clear()
         self._ages.clear()
+        self._sorted_ages.clear()
         self._view_age_ms = None
         self._last_rx_ns = None
         self._seq_before = None
@@ -78,19 +81,26 @@ class LinkStats:
     def on_accepted(self, age_ns: int | None, view_age_ms: int | None, rx_ns: int) -> None:
         if age_ns is not None:
             self._ages.append((rx_ns, age_ns))
+            insort(self._sorted_ages, age_ns)
         if view_age_ms is not None:
             self._view_age_ms = float(view_age_ms)
 
-    def figures(self, now_ns: int) -> LinkFigures:
-        # Plain Python on purpose: the window holds ~50 commands, and this runs on the command
-        # path before the base command is sent, where numpy's per-call overhead (~300 us from
-        # cold caches) cost more than the filter itself (bench link).
+    def loop_delay_s(self, now_ns: int) -> float:
+        """The loop delay tau at ``now_ns``, as ``figures(now_ns).loop_delay_s``.
+
+        The latency governor needs it before the base command is sent; the other figures are
+        only reported, so the robot computes them after the send (``figures``).
+        """
         self._expire(now_ns)
-        p50 = p90 = None
-        if self._ages:
-            ages = sorted(a for _, a in self._ages)
-            p50 = _percentile(ages, 0.5) / NS_PER_MS
-            p90 = _percentile(ages, 0.9) / NS_PER_MS
+        return self._tau(self._p90_ms())
+
+    def figures(self, now_ns: int) -> LinkFigures:
+        # Plain Python on purpose: the window holds ~50 commands, where numpy's per-call
+        # overhead (~300 us from cold caches) cost more than the filter itself (bench link).
+        self._expire(now_ns)
+        ages = self._sorted_ages
+        p50 = _percentile(ages, 0.5) / NS_PER_MS if ages else None
+        p90 = self._p90_ms()
         gap_ms = None
         if self._last_rx_ns is not None:
             gap_ns = now_ns - self._last_rx_ns
@@ -106,12 +116,18 @@ class LinkStats:
             first = min(seqs) if self._seq_before is None else self._seq_before + 1
             expected = max(seqs) - first + 1
             loss = min(max(1.0 - len(seqs) / expected, 0.0), 1.0) if expected > 0 else 0.0
-        tau = (
-            (p90 / 1e3 if p90 is not None else self._unknown_s)
+        return LinkFigures(p50, p90, gap_ms, loss, self._view_age_ms, self._tau(p90))
+
+    def _p90_ms(self) -> float | None:
+        ages = self._sorted_ages
+        return _percentile(ages, 0.9) / NS_PER_MS if ages else None
+
+    def _tau(self, p90_ms: float | None) -> float:
+        return (
+            (p90_ms / 1e3 if p90_ms is not None else self._unknown_s)
             + (self._view_age_ms / 1e3 if self._view_age_ms is not None else self._unknown_s)
             + self._reaction_s
         )
-        return LinkFigures(p50, p90, gap_ms, loss, self._view_age_ms, tau)
 
     def _expire(self, now_ns: int) -> None:
         horizon = now_ns - self._window_ns
@@ -119,7 +135,9 @@ class LinkStats:
             _, seq = self._arrivals.popleft()
             self._seq_before = seq if self._seq_before is None else max(self._seq_before, seq)
         while self._ages and self._ages[0][0] < horizon:
-            self._ages.popleft()
+            _, age = self._ages.popleft()
+            ages = self._sorted_ages
+            del ages[bisect_left(ages, age)]
 
 
 def _percentile(sorted_values: list[int], q: float) -> float:
