@@ -102,16 +102,83 @@ class ObstaclePoints:
 
     A scan arrives at sensor rate but is filtered against every command until the next one;
     checking and laying out the points once, when the scan arrives, keeps that work off the
-    command path.
+    command path. So does ``index``, which a driver builds in its receiving thread.
     """
 
     xy: FloatArray
     x: FloatArray
     y: FloatArray
     r2: FloatArray  # squared distance of each point from the origin of {R}
+    _index: PointIndex | None = field(default=None, init=False, repr=False)
 
     def __len__(self) -> int:
         return len(self.xy)
+
+    def index(self) -> PointIndex:
+        """The points' ``PointIndex``, built once and cached."""
+        index = self._index
+        if index is None:
+            index = PointIndex.build(self.x, self.y, self.r2)
+            object.__setattr__(self, "_index", index)
+        return index
+
+    @property
+    def prepared_index(self) -> PointIndex | None:
+        """``index()`` if it was built already, else None (then numpy does the work)."""
+        return self._index
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class PointIndex:
+    """The points of an ``ObstaclePoints`` for plain-Python queries near a place (issue 9).
+
+    A control cycle looks at the few points near a place instead of running numpy over the
+    whole scan for every command. Built once per scan (a driver builds it in its receiving
+    thread), from the very values of the arrays:
+
+    - ``x``, ``y``: the coordinates, in the arrays' order;
+    - bounding boxes of every ``BLOCK`` consecutive points (``block_*``: min x, max x, min y,
+      max y) and of every ``GROUP`` consecutive blocks (``group_*``); a scan's consecutive
+      points are mostly neighbours, so the boxes are small;
+    - ``r2_sorted``: the squared distances from the origin of {R}, ascending.
+    """
+
+    BLOCK = 8
+    GROUP = 8
+
+    x: list[float]
+    y: list[float]
+    block_x0: list[float]
+    block_x1: list[float]
+    block_y0: list[float]
+    block_y1: list[float]
+    group_x0: list[float]
+    group_x1: list[float]
+    group_y0: list[float]
+    group_y1: list[float]
+    r2_sorted: list[float]
+
+    @staticmethod
+    def build(x: FloatArray, y: FloatArray, r2: FloatArray) -> PointIndex:
+        if x.size == 0:
+            return PointIndex([], [], [], [], [], [], [], [], [], [], [])
+        starts = np.arange(0, x.size, PointIndex.BLOCK)
+        x0, x1 = np.minimum.reduceat(x, starts), np.maximum.reduceat(x, starts)
+        y0, y1 = np.minimum.reduceat(y, starts), np.maximum.reduceat(y, starts)
+        groups = np.arange(0, starts.size, PointIndex.GROUP)
+        return PointIndex(
+            x.tolist(),
+            y.tolist(),
+            x0.tolist(),
+            x1.tolist(),
+            y0.tolist(),
+            y1.tolist(),
+            np.minimum.reduceat(x0, groups).tolist(),
+            np.maximum.reduceat(x1, groups).tolist(),
+            np.minimum.reduceat(y0, groups).tolist(),
+            np.maximum.reduceat(y1, groups).tolist(),
+            np.sort(r2).tolist(),
+        )
 
 
 def ranges_to_points(

@@ -52,7 +52,9 @@ class ZenohDriver:
             self._count(decoded, "scan")
             return
         scan = scan_from_message(decoded)
-        scan.obstacles()  # prepared here, in the receiving thread, off the command path
+        # Prepared here, in the receiving thread, off the command path: the checked points and
+        # their index by distance, which the filter and the sweep look near places with.
+        scan.obstacles().index()
         with self._lock:
             self._scan, self._scan_rx_ns = scan, now_ns
 

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from egc_common.scan import MAX_ABS_COORD_M, ObstaclePoints, obstacle_points
+from egc_common.scan import MAX_ABS_COORD_M, ObstaclePoints, PointIndex, obstacle_points
 
 FloatArray = npt.NDArray[np.float64]
 Point = tuple[float, float]
@@ -205,6 +205,104 @@ def _nearest(px: FloatArray, py: FloatArray, c: Point) -> tuple[float, int]:
     return math.sqrt(float(d2[i])), i
 
 
+# ``_nearest_indexed`` computes no more than this many distances, then leaves it to numpy.
+MAX_INDEXED_VISITS = 96
+_BEYOND: tuple[float, int] = (math.inf, -1)  # nothing closer than the limit
+
+
+def _nearest_indexed(index: PointIndex, c: Point, limit: float) -> tuple[float, int] | None:
+    """``_nearest`` from the scan's ``PointIndex``, for a nearest point closer than ``limit``.
+
+    Returns the same (distance, position) as ``_nearest`` when the nearest point is closer than
+    ``limit``, ``_BEYOND`` when no point is, and None when more than ``MAX_INDEXED_VISITS``
+    distances would be needed (the caller then asks ``_nearest``).
+
+    Only blocks whose bounding box is within ``limit`` of ``c`` are looked at, nearest box
+    first, and none farther than the best point so far. A box's squared distance is computed
+    with the same floating-point steps as a point's, from coordinate differences that are each
+    at most as large, so it is never more than any of its points': a point left out is
+    strictly farther than the best. Ties go to the first position, as ``argmin``'s do.
+    """
+    cx, cy = c
+    bx0, bx1, by0, by1 = index.block_x0, index.block_x1, index.block_y0, index.block_y1
+    gx0, gx1, gy0, gy1 = index.group_x0, index.group_x1, index.group_y0, index.group_y1
+    n_blocks, per_group = len(bx0), index.GROUP
+    reach = limit * (1.0 + 1e-9)
+    bound = reach * reach  # boxes farther than this (squared) hold nothing of interest
+    near: list[tuple[float, int]] = []  # (squared box distance, block)
+    for g in range(len(gx0)):
+        dx = gx0[g] - cx
+        if dx < 0.0:
+            dx = cx - gx1[g]
+            if dx < 0.0:
+                dx = 0.0
+        dy = gy0[g] - cy
+        if dy < 0.0:
+            dy = cy - gy1[g]
+            if dy < 0.0:
+                dy = 0.0
+        if dx * dx + dy * dy > bound:
+            continue
+        first_block = g * per_group
+        for b in range(first_block, min(first_block + per_group, n_blocks)):
+            dx = bx0[b] - cx
+            if dx < 0.0:
+                dx = cx - bx1[b]
+                if dx < 0.0:
+                    dx = 0.0
+            dy = by0[b] - cy
+            if dy < 0.0:
+                dy = cy - by1[b]
+                if dy < 0.0:
+                    dy = 0.0
+            box2 = dx * dx + dy * dy
+            if box2 <= bound:
+                near.append((box2, b))
+    best = math.inf
+    best_at = -1
+    if near:
+        near.sort()
+        xs, ys = index.x, index.y
+        n, per_block = len(xs), index.BLOCK
+        visits = MAX_INDEXED_VISITS
+        for box2, b in near:
+            if box2 > bound:
+                break  # this box and every later one are farther than the best point
+            first = b * per_block
+            last = min(first + per_block, n)
+            visits -= last - first
+            if visits < 0:
+                return None
+            for j in range(first, last):
+                dx = xs[j] - cx
+                dy = ys[j] - cy
+                d2 = dx * dx + dy * dy
+                if d2 < best or (d2 == best and j < best_at):
+                    best, best_at = d2, j
+                    if d2 < bound:
+                        bound = d2
+    d = math.sqrt(best)
+    return (d, best_at) if d < limit else _BEYOND
+
+
+def _nearest_to(
+    px: FloatArray,
+    py: FloatArray,
+    index: PointIndex | None,
+    c: Point,
+    limit: float,
+    exact: bool = False,
+) -> tuple[float, int]:
+    """``_nearest``, from the scan's index when it has one and the nearest point is closer than
+    ``limit``. Else ``_BEYOND`` where the result is only clamped to ``limit`` (eqs. 11, 13),
+    ``_nearest`` itself with ``exact`` (eq. 8: the result reports the distance)."""
+    if index is not None:
+        found = _nearest_indexed(index, c, limit)
+        if found is not None and not (exact and found is _BEYOND):
+            return found
+    return _nearest(px, py, c)
+
+
 def _clamp(d: float, r_max_m: float) -> float:
     """Eqs. 9, 11, 13: the circle grows to the nearest point, but not beyond r_max."""
     return d if d < r_max_m else r_max_m
@@ -226,7 +324,14 @@ def egc_filter(
     if obstacles.x.size == 0:
         return no_points(v_mps, w_radps, p_igc, params)
     return guide_circles(
-        v_mps, w_radps, p_igc, obstacles.x, obstacles.y, params, command_from_point
+        v_mps,
+        w_radps,
+        p_igc,
+        obstacles.x,
+        obstacles.y,
+        params,
+        command_from_point,
+        obstacles.prepared_index,
     )
 
 
@@ -257,6 +362,7 @@ def guide_circles(
     py: FloatArray,
     params: EgcParams,
     to_command: Callable[[Point, float, float], tuple[float, float]],
+    index: PointIndex | None = None,
 ) -> EgcResult:
     """DESIGN 5.2-5.6 and the rules of 5.9 on given points and a given P_IGC.
 
@@ -266,11 +372,15 @@ def guide_circles(
     CLEAR passes (v, w), NO_TRANSLATION keeps (0, w), NO_INTERSECTION scales (v, w) by w_SI,
     ZERO_WEIGHTS stops. No point at all (possible after the EK transform drops points) is
     nothing within r_max: CLEAR. Callers decide the empty-scan rule (``no_points``) before.
+    ``index``, the points' ``PointIndex`` when it was built, answers the nearest-point
+    queries near the robot without numpy (same results).
     """
     r_min, r_max = params.r_min_m, params.r_max_m
     r_rc = math.hypot(*p_igc)  # eq. 7
 
-    d_igc, i_igc = _nearest(px, py, p_igc) if px.size else (math.inf, -1)  # eq. 8
+    d_igc, i_igc = (  # eq. 8
+        _nearest_to(px, py, index, p_igc, r_max, exact=True) if px.size else (math.inf, -1)
+    )
     r_igc = _clamp(d_igc, r_max)  # eq. 9
     if d_igc >= r_max:  # Table 1, lines 4-6
         return EgcResult(
@@ -328,7 +438,7 @@ def guide_circles(
         )
 
     p_agc = meets[0] if side is Side.LEFT else meets[1]
-    r_agc = _clamp(_nearest(px, py, p_agc)[0], r_max)  # eqs. 10-11
+    r_agc = _clamp(_nearest_to(px, py, index, p_agc, r_max)[0], r_max)  # eqs. 10-11
 
     weight = r_igc + r_agc
     if weight <= 0.0:  # DESIGN 5.9: both circles collapsed onto a point
@@ -354,7 +464,7 @@ def guide_circles(
         (r_igc * p_igc[0] + r_agc * p_agc[0]) / weight,
         (r_igc * p_igc[1] + r_agc * p_agc[1]) / weight,
     )
-    r_egc = _clamp(_nearest(px, py, p_egc)[0], r_max)  # eq. 13
+    r_egc = _clamp(_nearest_to(px, py, index, p_egc, r_max)[0], r_max)  # eq. 13
     w_si = safety_index(r_egc, r_min, r_max)  # eq. 16
     v_out, w_out = to_command(p_egc, w_si, params.horizon_s)  # eqs. 14-15 / DESIGN 6.4
     return EgcResult(
