@@ -28,6 +28,7 @@ nothing within range_max, and the driver never delivers a scan without any infor
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import gc
 import json
 import logging
@@ -342,6 +343,8 @@ def run(args: argparse.Namespace) -> int:
     controller_config = build_controller_config(args, cfg)
     if args.driver == "ros2":
         _ros2_settings(args, cfg)  # bad settings or no rclpy: one line, before anything opens
+        # DESIGN 11: a zero twist in HOLD; a ROS 2 base brakes at its own limits.
+        controller_config = dataclasses.replace(controller_config, hold_ramp=False)
     rate_hz = 1.0 / controller_config.nominal_period_s
     session = open_session(options_from_args(args))
     stop = threading.Event()

@@ -105,6 +105,9 @@ class ControllerConfig:
     telemetry_scan_decimation: int = 2
     nominal_period_s: float = 0.05
     via_tolerance_m: float = DEFAULT_TOLERANCE_M  # a via point within this is reached
+    # HOLD and IDLE decelerate at the profile's limit (DESIGN 8); False: zero at once, for a
+    # base that brakes at its own limits (DESIGN 11: a zero twist in HOLD on ROS 2).
+    hold_ramp: bool = True
 
     def __post_init__(self) -> None:
         for name in (
@@ -508,7 +511,11 @@ class RobotController:
             v, w, limiter = 0.0, 0.0, Limiter.ESTOP
         else:
             self._filter_memory = None
-            v, w = decelerate(self._previous, dt_s, cfg.pipeline.profile)
+            v, w = (
+                decelerate(self._previous, dt_s, cfg.pipeline.profile)
+                if cfg.hold_ramp
+                else (0.0, 0.0)
+            )
             limiter = Limiter.WATCHDOG if self.reason in LINK_REASONS else Limiter.HOLD
         self._previous = (v, w)
 

@@ -196,6 +196,19 @@ def test_watchdog_holds_and_decelerates_at_the_profile_limit():
     assert out.base.linear_mps == 0.0
 
 
+def test_without_the_hold_ramp_a_hold_is_a_zero_command_at_once():
+    # DESIGN 11: on a ROS 2 base the robot sends a zero twist in HOLD (the base brakes itself).
+    rig = driving_rig(hold_ramp=False)
+    assert rig.cycle(dt_ms=0).base.linear_mps > 0.1
+    out = rig.cycle(dt_ms=260)
+    assert out.telemetry.state == "HOLD" and out.telemetry.limiter == "watchdog"
+    assert (out.base.linear_mps, out.base.angular_radps) == (0.0, 0.0)
+    rig.send(x=1.0)  # back within the resume window: it ramps up from zero, not from before
+    out = rig.cycle()
+    assert out.telemetry.state == "DRIVING"
+    assert 0 < out.base.linear_mps <= PROFILE.accel_max_mps2 * 0.02 + 1e-9
+
+
 def test_resume_after_hold_needs_a_centred_stick_without_link_aware_driving():
     rig = driving_rig(link_aware=False)
     rig.cycle(dt_ms=300)
