@@ -55,8 +55,9 @@ How each part maps to the paper
   ``align_tolerance_rad``, both angles clipped to +-90 deg, so "turn towards it" counts as in
   line), the rules "sent it towards the target destination" (rule ``goal``). Deviation (issue
   11): when not wall following, ``goal`` steers straight at the via point, past the obstacle
-  rules, whenever the footprint's way to it (``way_half_width_m``) is clear for min(distance,
-  ``block_m``) and no single side is CLOSE on the via point's side (both CLOSE is a corridor).
+  rules, whenever FRONT is not CLOSE, the footprint's way towards it (``way_half_width_m``) is
+  clear for ``block_m`` (even when the via point is nearer: the robot has to stop past it) and no
+  single side is CLOSE on the via point's side (both CLOSE is a corridor).
   The bands are distances from the robot's centre, so in a 1 m corridor both sides are CLOSE
   all the time and FRONT turns active at every bend: the rules (``gap``'s +-15 deg,
   ``avoid-front``'s turn in place) then fought the via point at every corner, and the blind
@@ -503,21 +504,21 @@ def _wall_heading(
 def _way_is_free(
     obstacles: ObstaclePoints,
     bearing: float,
-    distance: float,
     levels: tuple[int | None, int | None, int | None],
     params: AssistParams,
 ) -> bool:
-    """Steer straight at the via point past the obstacle rules (module docstring): no single
-    CLOSE side on the via point's side (both CLOSE is a corridor) and the footprint's way to it
-    clear for min(distance, ``block_m``)."""
-    left, _, right = levels
+    """Steer straight at the via point past the obstacle rules (module docstring): FRONT not
+    CLOSE, no single CLOSE side on the via point's side (both CLOSE is a corridor) and the
+    footprint's way towards it clear for ``block_m``."""
+    left, front, right = levels
+    if front == CLOSE:  # something right ahead: the obstacle rules (turn in place) decide
+        return False
     if left == CLOSE and right != CLOSE and bearing > 0.0:
         return False
     if right == CLOSE and left != CLOSE and bearing < 0.0:
         return False
-    return corridor_clear(
-        obstacles, bearing, min(distance, params.block_m), params.way_half_width_m
-    )
+    # The whole of block_m, even when the via point is nearer: past it the robot has to stop.
+    return corridor_clear(obstacles, bearing, params.block_m, params.way_half_width_m)
 
 
 def _avoid(
@@ -707,7 +708,7 @@ def assist_step(
                 speed_scale = 0.0  # a sharp turn with something right ahead: turn in place
             elif not found:
                 speed_scale = params.front_intermediate_speed
-        elif _way_is_free(obs, bearing, distance, levels, params):
+        elif _way_is_free(obs, bearing, levels, params):
             # The way to the via point is clear for the footprint: go (sec. V, "when there were
             # no objects in the way ... sent it towards the target destination").
             theta, rule = bearing, source
