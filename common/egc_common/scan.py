@@ -109,10 +109,14 @@ class ObstaclePoints:
     x: FloatArray
     y: FloatArray
     r2: FloatArray  # squared distance of each point from the origin of {R}
+    count: int = field(init=False)  # len(xy), without asking numpy on the command path
     _index: PointIndex | None = field(default=None, init=False, repr=False)
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "count", len(self.xy))
+
     def __len__(self) -> int:
-        return len(self.xy)
+        return self.count
 
     def index(self) -> PointIndex:
         """The points' ``PointIndex``, built once and cached."""

@@ -40,10 +40,11 @@ import math
 from collections import Counter, OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import cached_property, partial
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from egc_common.frozen import fast_init
 from egc_common.messages import (
     BaseCommand,
     GoalMessage,
@@ -146,6 +147,7 @@ class ControllerConfig:
         return self.blind_time_filtered_s if self.filtered(mode) else self.blind_time_direct_s
 
 
+@fast_init
 @dataclass(frozen=True, slots=True)
 class CommandVerdict:
     """What happened to one received command payload."""
@@ -160,7 +162,8 @@ class CommandVerdict:
         return self.rejection is None
 
 
-@dataclass(frozen=True)
+@fast_init
+@dataclass(frozen=True, slots=True)
 class CycleOutput:
     """One cycle's base command, with its telemetry built on first use.
 
@@ -173,11 +176,17 @@ class CycleOutput:
     base: BaseCommand
     state_changed: StateMessage | None
     result: PipelineResult | None
-    build_telemetry: Callable[[], Telemetry] = field(repr=False, compare=False)
+    _build: Callable[..., Telemetry] = field(repr=False, compare=False)
+    _args: tuple[Any, ...] = field(repr=False, compare=False)
+    _telemetry: Telemetry | None = field(default=None, init=False, repr=False, compare=False)
 
-    @cached_property
+    @property
     def telemetry(self) -> Telemetry:
-        return self.build_telemetry()
+        telemetry = self._telemetry
+        if telemetry is None:
+            telemetry = self._build(*self._args)
+            object.__setattr__(self, "_telemetry", telemetry)
+        return telemetry
 
 
 @dataclass(slots=True)
@@ -236,8 +245,16 @@ class RobotController:
         self._link = LinkStats(
             reaction_time_s=config.reaction_time_s, unknown_part_s=config.command_timeout_s
         )
+        # The configuration's times in ns, computed once: as ints where commands are vetted, as
+        # the floats the cycle always compared with.
         self._max_age_ns = {mode: int(config.max_age_s(mode) * NS_PER_S) for mode in MODES}
         self._release_ns = int(config.release_timeout_s * NS_PER_S)
+        self._fresh_age_ns = {mode: config.max_age_s(mode) * NS_PER_S for mode in MODES}
+        self._blind_time_s = {mode: config.blind_time_s(mode) for mode in MODES}
+        self._release_after_ns = config.release_timeout_s * NS_PER_S
+        self._timeout_ns = config.command_timeout_s * NS_PER_S
+        self._scan_timeout_ns = config.scan_timeout_s * NS_PER_S
+        self._resume_window_ns = config.resume_window_s * NS_PER_S
         self._unreported: CycleOutput | None = None  # the last cycle, telemetry not built yet
 
     # -- inputs -------------------------------------------------------------------------------
@@ -432,19 +449,21 @@ class RobotController:
         self._last_step_ns = now_ns
         self.counters.cycles += 1
         cmd = self._command
-        if (
-            self._controller_op is not None
-            and now_ns - self._command_rx_ns > cfg.release_timeout_s * NS_PER_S
-        ):
+        silent_ns = now_ns - self._command_rx_ns
+        if self._controller_op is not None and silent_ns > self._release_after_ns:
             self._release(f"operator {self._controller_op} silent")
             cmd = None
-        fresh = cmd is not None and self._command_fresh(cmd, now_ns)
-        timeout_ns = cfg.command_timeout_s * NS_PER_S
-        timed_out = now_ns - self._command_rx_ns > timeout_ns
+        timeout_ns = self._timeout_ns
+        timed_out = silent_ns > timeout_ns
+        fresh = (
+            cmd is not None
+            and not timed_out
+            and (cmd.stamp_ns == 0 or now_ns - cmd.stamp_ns <= self._fresh_age_ns[cmd.mode])
+        )
         stale_arriving = self._stale_rx_ns is not None and now_ns - self._stale_rx_ns <= timeout_ns
         session_kept = cfg.link_aware and self._last_drive_epoch == self._control_epoch
         scan = self._scan
-        scan_fresh = scan is not None and now_ns - scan.rx_ns <= cfg.scan_timeout_s * NS_PER_S
+        scan_fresh = scan is not None and now_ns - scan.rx_ns <= self._scan_timeout_ns
         tol = cfg.centre_tolerance
         inputs = Inputs(
             operator_present=self._controller_op is not None,
@@ -459,8 +478,7 @@ class RobotController:
             no_operator_reason=self._no_operator_reason,
             stale_reason=STALE_COMMANDS if not timed_out or stale_arriving else COMMAND_TIMEOUT,
             session_kept=session_kept,
-            resume_allowed=session_kept
-            and now_ns - self._last_drive_ns <= cfg.resume_window_s * NS_PER_S,
+            resume_allowed=session_kept and now_ns - self._last_drive_ns <= self._resume_window_ns,
         )
         self._estop_pending = False
         before = self._transition
@@ -479,7 +497,7 @@ class RobotController:
                 self._link.loop_delay_s(now_ns),
                 profile.v_max_mps,
                 profile.decel_max_mps2,
-                cfg.blind_time_s(cmd.mode if cmd is not None else "shared"),
+                self._blind_time_s[cmd.mode if cmd is not None else "shared"],
             )
         filter_name = self._filter_for(cmd)
         if state is State.DRIVING and cmd is not None and scan is not None:
@@ -496,7 +514,7 @@ class RobotController:
                 self._previous,
                 dt_s,
                 filter_name=filter_name,
-                goal_xy_m=self._goal_in_robot_frame(),
+                goal_xy_m=None if self._route.active is None else self._goal_in_robot_frame(),
                 now_ns=now_ns,
                 memory=self._filter_memory,
             )
@@ -521,10 +539,13 @@ class RobotController:
 
         base = BaseCommand(stamp_ns=now_ns, seq=self.counters.cycles, linear_mps=v, angular_radps=w)
         shown_filter = filter_name if cmd is not None and cmd.mode == "shared" else "none"
-        build = partial(
-            self._telemetry, now_ns, cmd, fresh, v, w, limiter, result, v_lim, shown_filter
+        out = CycleOutput(
+            base,
+            self.state_message(now_ns) if changed else None,
+            result,
+            self._telemetry,
+            (now_ns, cmd, fresh, v, w, limiter, result, v_lim, shown_filter),
         )
-        out = CycleOutput(base, self.state_message(now_ns) if changed else None, result, build)
         # Nothing the telemetry reports changes before it is built: every input and the next
         # cycle build it first (``_report``) when nobody has asked for it.
         self._unreported = out
@@ -555,18 +576,12 @@ class RobotController:
             return None
         return to_robot_frame(active, pose)
 
-    def _command_fresh(self, cmd: OperatorCommand, now_ns: int) -> bool:
-        cfg = self.config
-        if now_ns - self._command_rx_ns > cfg.command_timeout_s * NS_PER_S:
-            return False
-        return cmd.stamp_ns == 0 or now_ns - cmd.stamp_ns <= cfg.max_age_s(cmd.mode) * NS_PER_S
-
     def _report(self) -> None:
         """Build the last cycle's telemetry before the state it reports changes."""
         out = self._unreported
         self._unreported = None
         if out is not None:
-            out.telemetry  # noqa: B018 (cached on the output)
+            out.telemetry  # noqa: B018 (kept on the output)
 
     def _telemetry(
         self,

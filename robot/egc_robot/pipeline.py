@@ -16,6 +16,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy.typing as npt
+from egc_common.frozen import fast_init
 from egc_common.joystick import JoystickMapping, deflection_to_velocity
 from egc_common.profiles import RobotProfile
 from egc_common.scan import ObstaclePoints, obstacle_points
@@ -29,6 +30,7 @@ from egc_robot.filters.family import (
     FilterSettings,
     RobotState,
     available_filters,
+    run_egc,
     run_filter,
 )
 from egc_robot.safety import (
@@ -61,6 +63,8 @@ class Limiter(enum.Enum):
     HOLD = "hold"
     ESTOP = "estop"
 
+
+_LIMITER_OF_FILTER = {limiter.value: limiter for limiter in Limiter}
 
 # Limiters that mean "the shared-autonomy layer changed the operator's command" (an intervention).
 INTERVENING = (Limiter.EGC, Limiter.EK_EGC, Limiter.ASSIST, Limiter.DWA, Limiter.SWEEP)
@@ -95,6 +99,7 @@ class PipelineConfig:
         object.__setattr__(self, "settings", FilterSettings(p, params, self.dwa, self.assist))
 
 
+@fast_init
 @dataclass(frozen=True, slots=True)
 class PipelineResult:
     v_ref_mps: float
@@ -163,9 +168,12 @@ def filter_velocity(
     v, w = v_ref_mps, w_ref_radps
     escape = False
     if shared:
-        state = RobotState(*previous_cmd) if previous_cmd is not None else RobotState()
-        inp = FilterInput(v_ref_mps, w_ref_radps, obstacles, state, goal_xy_m, now_ns)
-        family = run_filter(name, inp, config.settings, memory)
+        if name == "egc":  # the default filter reads only these (and keeps no memory)
+            family = run_egc(v_ref_mps, w_ref_radps, obstacles, config.settings)
+        else:
+            state = RobotState(*previous_cmd) if previous_cmd is not None else RobotState()
+            inp = FilterInput(v_ref_mps, w_ref_radps, obstacles, state, goal_xy_m, now_ns)
+            family = run_filter(name, inp, config.settings, memory)
         v, w = family.v_mps, family.w_radps
         if family.stopped_near_obstacle and increases_clearance(
             v_ref_mps, w_ref_radps, _CLEARANCE_HORIZON_S, pts, profile
@@ -187,7 +195,7 @@ def filter_velocity(
         and not escape
         and (abs(after_filter[0] - v_ref_mps) > _SAME or abs(after_filter[1] - w_ref_radps) > _SAME)
     ):
-        limiter = Limiter(family.name)
+        limiter = _LIMITER_OF_FILTER[family.name]
     elif limited:
         limiter = Limiter.LIMITS
     else:

@@ -12,7 +12,6 @@ wall turn in place or back away (no dead-lock) while never driving into it.
 from __future__ import annotations
 
 import math
-from bisect import bisect_right
 from dataclasses import dataclass
 
 import numpy as np
@@ -114,8 +113,8 @@ def sweep_scale(
     t_full = stopping_time_s(v_mps, w_radps, profile, params)
     reach = profile.half_diagonal_m + abs(v_mps) * t_full + params.margin_m
     index = obstacles.prepared_index
-    if index is not None and bisect_right(index.r2_sorted, reach * reach) == 0:
-        return 1.0  # nothing within reach (the scan's sorted distances say so without numpy)
+    if index is not None and index.r2_sorted[0] > reach * reach:
+        return 1.0  # nothing within reach (the scan's nearest point says so, without numpy)
     near = obstacles.xy[obstacles.r2 <= reach * reach]
     if len(near) == 0:
         return 1.0

@@ -28,6 +28,7 @@ from egc_common.transport import command_publisher, payload_bytes
 from egc_robot.drivers import SensorUpdate, scan_from_message
 
 log = logging.getLogger("egc.robot.driver")
+_NOTHING_NEW = SensorUpdate()
 
 
 class ZenohDriver:
@@ -77,6 +78,8 @@ class ZenohDriver:
         with self._lock:
             scan, rx_ns, odometry = self._scan, self._scan_rx_ns, self._odometry
             self._scan, self._odometry = None, None
+        if scan is None and odometry is None:
+            return _NOTHING_NEW  # most polls, e.g. each command's between two scans
         return SensorUpdate(scan=scan, scan_rx_ns=rx_ns, odometry=odometry)
 
     def send(self, command: BaseCommand) -> None:

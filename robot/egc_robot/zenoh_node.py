@@ -143,10 +143,13 @@ class RobotNode:
             if self._shut_down:  # a callback that was already running when we shut down
                 return
             try:
-                if self._handle_command(payload, rx_ns):
+                verdict = self._handle_command(payload, rx_ns)
+                if verdict.accepted:
                     now = self._clock()
                     self._poll_driver(now)
                     self._cycle(now)
+                    if verdict.latency_ns is not None and self._stats is not None:
+                        self._stats.on_latency(verdict.latency_ns)  # after the base command
             except Exception as exc:
                 self._fail_safe(exc)
 
@@ -261,21 +264,18 @@ class RobotNode:
         except Exception as send_exc:
             log.error("could not stop the base: %s", send_exc)
 
-    def _handle_command(self, payload: bytes, rx_ns: int) -> bool:
-        """Vet one command; True if it came from the operator in control and was accepted."""
+    def _handle_command(self, payload: bytes, rx_ns: int) -> CommandVerdict:
+        """Vet one command (accepted: it came from the operator in control and passed)."""
         controller = self._controller
         verdict = controller.on_command(payload, rx_ns)
         if self._recorder is not None:
             reason = None if verdict.rejection is None else str(verdict.rejection)
             self._recorder.on_command(payload, verdict.accepted, reason, rx_ns)
-        if not verdict.accepted:
+        if verdict.rejection is not None:
             self._rejections.log(verdict, controller.counters.rejected_total, rx_ns)
-            return False
-        if verdict.took_control:
+        elif verdict.took_control:
             log.info("operator %s took control", controller.operator)
-        if verdict.latency_ns is not None and self._stats is not None:
-            self._stats.on_latency(verdict.latency_ns)
-        return True
+        return verdict
 
     def _poll_driver(self, now: int) -> None:
         update = self._driver.poll(now)

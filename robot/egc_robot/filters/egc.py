@@ -44,6 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from egc_common.frozen import fast_init
 from egc_common.scan import MAX_ABS_COORD_M, ObstaclePoints, PointIndex, obstacle_points
 
 FloatArray = npt.NDArray[np.float64]
@@ -106,6 +107,7 @@ class EgcParams:
         return EgcParams(r_min_m, r_max_m, r_max_m / v_max_mps if horizon_s is None else horizon_s)
 
 
+@fast_init
 @dataclass(frozen=True, slots=True)
 class EgcResult:
     """The filtered command (paper equations only, before DESIGN 5.10) and all intermediates."""
@@ -321,7 +323,7 @@ def egc_filter(
 
     obstacles = obstacle_points(points)
     p_igc = predicted_position(v_mps, w_radps, params.horizon_s)  # eq. 6
-    if obstacles.x.size == 0:
+    if obstacles.count == 0:
         return no_points(v_mps, w_radps, p_igc, params)
     return guide_circles(
         v_mps,
@@ -378,8 +380,9 @@ def guide_circles(
     r_min, r_max = params.r_min_m, params.r_max_m
     r_rc = math.hypot(*p_igc)  # eq. 7
 
+    some = index.x if index is not None else px.size  # any point at all (the index: no numpy)
     d_igc, i_igc = (  # eq. 8
-        _nearest_to(px, py, index, p_igc, r_max, exact=True) if px.size else (math.inf, -1)
+        _nearest_to(px, py, index, p_igc, r_max, exact=True) if some else (math.inf, -1)
     )
     r_igc = _clamp(d_igc, r_max)  # eq. 9
     if d_igc >= r_max:  # Table 1, lines 4-6

@@ -19,6 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Final
 
+from egc_common.frozen import fast_init
 from egc_common.messages import FILTER_NAMES
 from egc_common.profiles import RobotProfile
 from egc_common.scan import ObstaclePoints
@@ -61,6 +62,7 @@ class FilterInput:
     now_ns: int = 0
 
 
+@fast_init
 @dataclass(frozen=True, slots=True)
 class FilterResult:
     """A filter's answer: the command, what changed and why, and its intermediates."""
@@ -139,8 +141,16 @@ def _run_none(inp: FilterInput, settings: FilterSettings, memory: object | None)
     return FilterResult("none", inp.v_ref_mps, inp.w_ref_radps, False, "direct")
 
 
+def run_egc(
+    v_ref_mps: float, w_ref_radps: float, obstacles: ObstaclePoints, settings: FilterSettings
+) -> FilterResult:
+    """``run_filter("egc", ...)`` from the only inputs EGC reads (the robot's command path
+    calls it without building a ``FilterInput``)."""
+    return _from_egc("egc", egc_filter(v_ref_mps, w_ref_radps, obstacles, settings.egc))
+
+
 def _run_egc(inp: FilterInput, settings: FilterSettings, memory: object | None) -> FilterResult:
-    return _from_egc("egc", egc_filter(inp.v_ref_mps, inp.w_ref_radps, inp.obstacles, settings.egc))
+    return run_egc(inp.v_ref_mps, inp.w_ref_radps, inp.obstacles, settings)
 
 
 def _run_ek_egc(inp: FilterInput, settings: FilterSettings, memory: object | None) -> FilterResult:
