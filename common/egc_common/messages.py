@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import enum
 import math
-import struct
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Final, TypeVar
@@ -664,59 +663,7 @@ class BaseCommand:
     angular_radps: float
 
     def encode(self) -> bytes:
-        # The robot encodes one per cycle, between computing it and sending it (bench link):
-        # the constant parts are laid out once, and the bytes are the ones msgpack gives
-        # (tested), which it still does for values of other types.
-        stamp, seq, v, w = self.stamp_ns, self.seq, self.linear_mps, self.angular_radps
-        if (
-            type(stamp) is int
-            and type(seq) is int
-            and type(v) is float
-            and type(w) is float
-            and 0 <= stamp <= _MAX_UINT64
-            and 0 <= seq <= _MAX_UINT64
-        ):
-            return b"".join(
-                (
-                    _BASE_HEAD,
-                    _pack_uint(stamp),
-                    _BASE_SEQ,
-                    _pack_uint(seq),
-                    _BASE_LINEAR,
-                    _pack_f64(v),
-                    _BASE_ANGULAR,
-                    _pack_f64(w),
-                )
-            )
         return _pack({"v": SCHEMA_VERSION, **_shallow_fields(self)})
-
-
-# BaseCommand's map as msgpack lays it out: 5 entries, "v": 1, "stamp_ns", "seq", then the two
-# velocities as float 64 (marker 0xcb).
-_BASE_HEAD: Final = b"\x85\xa1v\x01\xa8stamp_ns"
-_BASE_SEQ: Final = b"\xa3seq"
-_BASE_LINEAR: Final = b"\xaalinear_mps\xcb"
-_BASE_ANGULAR: Final = b"\xadangular_radps\xcb"
-_MAX_UINT64: Final = 2**64 - 1
-_pack_f64 = struct.Struct(">d").pack
-_FIXINTS: Final = tuple(bytes((i,)) for i in range(0x80))
-_pack_u8 = struct.Struct(">BB").pack
-_pack_u16 = struct.Struct(">BH").pack
-_pack_u32 = struct.Struct(">BI").pack
-_pack_u64 = struct.Struct(">BQ").pack
-
-
-def _pack_uint(n: int) -> bytes:
-    """A non-negative int as msgpack packs it: the shortest of fixint, uint 8/16/32/64."""
-    if n < 0x80:
-        return _FIXINTS[n]
-    if n < 0x100:
-        return _pack_u8(0xCC, n)
-    if n < 0x10000:
-        return _pack_u16(0xCD, n)
-    if n < 0x100000000:
-        return _pack_u32(0xCE, n)
-    return _pack_u64(0xCF, n)
 
 
 def _build_base_cmd(m: Mapping[Any, Any]) -> BaseCommand:

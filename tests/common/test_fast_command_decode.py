@@ -114,29 +114,3 @@ def test_nan_and_edges():
     for x in (math.nan, math.inf, -1.0, 1.0, -0.0, 1, True):
         payload = msgpack.packb(GOOD | {"x": x})
         assert same(decode_command(payload), full(payload))
-
-
-# BaseCommand.encode lays its bytes out itself (issue 9): exactly msgpack's bytes.
-
-edge_ints = st.sampled_from(
-    [0, 1, 0x7F, 0x80, 0xFF, 0x100, 0xFFFF, 0x10000, 2**32 - 1, 2**32, 2**63 - 1, 2**64 - 1]
-)
-any_floats = st.floats(allow_nan=True, allow_infinity=True) | st.sampled_from([0.0, -0.0])
-
-
-@settings(max_examples=2000)
-@given(
-    st.integers(0, 2**64 - 1) | edge_ints | st.integers(-(2**63), -1),
-    st.integers(0, 2**64 - 1) | edge_ints,
-    any_floats | st.integers(-5, 5),
-    any_floats,
-)
-def test_base_command_bytes_are_msgpacks(stamp, seq, v, w):
-    from egc_common.messages import SCHEMA_VERSION, BaseCommand
-
-    command = BaseCommand(stamp, seq, v, w)
-    expected = msgpack.packb(
-        {"v": SCHEMA_VERSION, "stamp_ns": stamp, "seq": seq, "linear_mps": v, "angular_radps": w},
-        use_bin_type=True,
-    )
-    assert command.encode() == expected
