@@ -19,8 +19,6 @@ import msgpack
 import numpy as np
 import numpy.typing as npt
 
-from egc_common.frozen import fast_init
-
 SCHEMA_VERSION: Final = 1
 MAX_COMMAND_BYTES: Final = 512
 MAX_TELEMETRY_BYTES: Final = 4 * 1024 * 1024
@@ -652,7 +650,6 @@ def decode_scan(payload: object) -> ScanMessage | Rejection:
     return _decode(payload, MAX_SCAN_BYTES, _build_scan)
 
 
-@fast_init
 @dataclass(frozen=True, slots=True)
 class BaseCommand:
     """Velocity sent to the base (robot -> driver)."""

@@ -44,7 +44,6 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from egc_common.frozen import fast_init
 from egc_common.messages import (
     BaseCommand,
     GoalMessage,
@@ -147,7 +146,6 @@ class ControllerConfig:
         return self.blind_time_filtered_s if self.filtered(mode) else self.blind_time_direct_s
 
 
-@fast_init
 @dataclass(frozen=True, slots=True)
 class CommandVerdict:
     """What happened to one received command payload."""
@@ -162,7 +160,6 @@ class CommandVerdict:
         return self.rejection is None
 
 
-@fast_init
 @dataclass(frozen=True, slots=True)
 class CycleOutput:
     """One cycle's base command, with its telemetry built on first use.

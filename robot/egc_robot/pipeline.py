@@ -16,7 +16,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy.typing as npt
-from egc_common.frozen import fast_init
 from egc_common.joystick import JoystickMapping, deflection_to_velocity
 from egc_common.profiles import RobotProfile
 from egc_common.scan import ObstaclePoints, obstacle_points
@@ -99,7 +98,6 @@ class PipelineConfig:
         object.__setattr__(self, "settings", FilterSettings(p, params, self.dwa, self.assist))
 
 
-@fast_init
 @dataclass(frozen=True, slots=True)
 class PipelineResult:
     v_ref_mps: float

@@ -36,8 +36,6 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
-from egc_common.frozen import fast_init
-
 COMMAND_TIMEOUT = "command timeout"
 STALE_COMMANDS = "stale commands"
 LINK_REASONS = (COMMAND_TIMEOUT, STALE_COMMANDS)
@@ -51,7 +49,6 @@ class State(enum.Enum):
     ESTOP = "ESTOP"
 
 
-@fast_init
 @dataclass(frozen=True, slots=True)
 class Inputs:
     """What the state machine looks at in one control cycle."""
@@ -74,7 +71,6 @@ class Inputs:
     resume_allowed: bool = False
 
 
-@fast_init
 @dataclass(frozen=True, slots=True)
 class Transition:
     state: State

@@ -44,7 +44,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from egc_common.frozen import fast_init
 from egc_common.scan import MAX_ABS_COORD_M, ObstaclePoints, PointIndex, obstacle_points
 
 FloatArray = npt.NDArray[np.float64]
@@ -107,7 +106,6 @@ class EgcParams:
         return EgcParams(r_min_m, r_max_m, r_max_m / v_max_mps if horizon_s is None else horizon_s)
 
 
-@fast_init
 @dataclass(frozen=True, slots=True)
 class EgcResult:
     """The filtered command (paper equations only, before DESIGN 5.10) and all intermediates."""

@@ -19,7 +19,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Final
 
-from egc_common.frozen import fast_init
 from egc_common.messages import FILTER_NAMES
 from egc_common.profiles import RobotProfile
 from egc_common.scan import ObstaclePoints
@@ -62,7 +61,6 @@ class FilterInput:
     now_ns: int = 0
 
 
-@fast_init
 @dataclass(frozen=True, slots=True)
 class FilterResult:
     """A filter's answer: the command, what changed and why, and its intermediates."""
