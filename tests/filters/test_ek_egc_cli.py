@@ -10,16 +10,11 @@ import numpy as np
 import pytest
 
 from tests.filters.reference_ek_egc import reference_ek_egc
-from tests.filters.test_filter_cli import PINNED_KEYS, random_cases, run_filter
+from tests.filters.test_filter_cli import PINNED_KEYS, PROFILE_CASES, random_cases, run_filter
 
 
 @pytest.mark.parametrize(
-    ("profile", "v_max", "w_max", "r_min", "r_max", "spread", "horizon"),
-    [
-        ("pioneer3dx", 0.14, 0.5, 0.455, 0.595, 1.5, None),
-        ("jackal", 2.0, 2.0, 0.508, 2.508, 5.0, None),
-        ("pioneer3dx", 0.14, 0.5, 0.455, 0.595, 1.5, 3.0),
-    ],
+    ("profile", "v_max", "w_max", "r_min", "r_max", "spread", "horizon"), PROFILE_CASES
 )
 def test_agrees_with_reference_to_1e9(profile, v_max, w_max, r_min, r_max, spread, horizon):
     rng = np.random.default_rng(zlib.crc32(f"ek{profile}{horizon}".encode()))
