@@ -49,11 +49,13 @@ from egc_common.messages import Telemetry
 from egc_common.profiles import get_profile
 from egc_common.transport import ZenohOptions, open_session
 from egc_operator.operator_node import OperatorNode
+from egc_operator.prediction import CommandHistory
 from egc_sim.bridge import parse_pose
 from egc_sim.observation import Observation
 from egc_sim.operators import make_operator
 from egc_sim.worlds import load_world
 
+from egc_experiments.predictive_view import ghost_observation
 from egc_experiments.simulated import OperatorSide
 
 log = logging.getLogger("egc.operator_model")
@@ -72,7 +74,9 @@ class ModelDriver:
         self.side = side
         self._intent = intent
         self._lock = threading.Lock()
-        self._pending: list[tuple[int, Observation]] = []
+        self._pending: list[tuple[int, Observation, bool]] = []  # (arrival, frame, ghost?)
+        self._newest: tuple[Observation, Telemetry] | None = None
+        self._rtt_ms: float | None = None
         self._t0_ns: int | None = None
         self._last_obs_s = 0.0
         self._wants: bool | None = None
@@ -89,18 +93,30 @@ class ModelDriver:
             t.reason or "",
         )
         with self._lock:
-            self._pending.append((time.monotonic_ns(), obs))
+            self._pending.append((time.monotonic_ns(), obs, False))
+            if self._newest is None or t.stamp_ns >= self._newest[1].stamp_ns:
+                self._newest = (obs, t)
 
-    def on_commands(self, *args: Any, **kwargs: Any) -> None:
-        pass
+    def on_commands(self, history: CommandHistory, robot_now_ns: int) -> None:
+        """The node sent a command: the predictive display's ghost, for a model that uses it."""
+        if not self.side.predictive:
+            return
+        with self._lock:
+            newest, rtt_ms = self._newest, self._rtt_ms
+        if newest is None:
+            return
+        ghost = ghost_observation(newest[0], newest[1], history, robot_now_ns, rtt_ms)
+        with self._lock:
+            self._pending.append((time.monotonic_ns(), ghost, True))
+
+    def on_link(self, rtt_ms: float, offset_ns: int) -> None:
+        with self._lock:
+            self._rtt_ms = rtt_ms
 
     def on_state(self, *args: Any, **kwargs: Any) -> None:
         pass
 
     def on_text(self, *args: Any, **kwargs: Any) -> None:
-        pass
-
-    def on_link(self, *args: Any, **kwargs: Any) -> None:
         pass
 
     def set_world(self, *args: Any, **kwargs: Any) -> None:
@@ -118,10 +134,13 @@ class ModelDriver:
                 self._t0_ns = now
                 self._write({"t0": now})
             t0 = self._t0_ns
-            for arrived_ns, obs in self._pending:
+            for arrived_ns, obs, ghost in self._pending:
                 # Observations that came before t = 0 are seen at t = 0; arrivals never go back.
                 self._last_obs_s = max(self._last_obs_s, (arrived_ns - t0) / NS_PER_S)
-                self.side.on_telemetry(self._last_obs_s, obs)
+                if ghost:
+                    self.side.on_ghost(self._last_obs_s, obs)
+                else:
+                    self.side.on_telemetry(self._last_obs_s, obs)
             self._pending.clear()
             model_t = (now - t0) / NS_PER_S
             stick = self.side.stick(model_t)

@@ -60,8 +60,10 @@ from egc_common.messages import (
     Odometry,
     OperatorCommand,
     RejectReason,
+    Telemetry,
 )
 from egc_common.profiles import get_profile
+from egc_operator.prediction import CommandHistory, SentCommand
 from egc_robot.controller import ControllerConfig, RobotController
 from egc_robot.pipeline import INTERVENING, Limiter, PipelineConfig
 from egc_sim.grid_world import Pose
@@ -71,6 +73,7 @@ from egc_sim.simulator import Simulator
 from egc_sim.worlds import load_world
 
 from egc_experiments.link_model import LinkModel, derive_seed, parse_spec
+from egc_experiments.predictive_view import ghost_observation
 from egc_experiments.run_point import RESULT_KEYS, RunPoint
 
 NS_PER_S: Final = 1_000_000_000
@@ -93,24 +96,41 @@ _DOWN, _OPERATOR, _UP, _GOAL, _ROBOT = 0, 1, 2, 3, 4
 
 
 class OperatorSide:
-    """The operator process around an operator model: the view, centring, commands."""
+    """The operator process around an operator model: the view, centring, commands.
+
+    A model that drives by the predictive display (``sighted:predictive=1``) is fed the ghost
+    frames (``predictive_view``) instead of the telemetry: ``on_ghost``; in this mode
+    ``command`` records the commands sent and shows the model the ghost after each one, as
+    the operator process's view redraws it after each send.
+    """
 
     def __init__(self, model: Operator, mode: str, start: Pose) -> None:
         self.model = model
         self.mode = mode
         self.observing = hasattr(model, "observe")
         params = getattr(model, "params", None)
+        self.predictive = self.observing and bool(getattr(params, "predictive", False))
         self.view = ViewBuffer(float(getattr(params, "reaction_s", 0.0)))
         self.newest: Observation | None = None  # newest arrived telemetry (view_age_ms)
+        self.newest_telemetry: Telemetry | None = None
+        self.history = CommandHistory()  # the commands sent (the predictive display's)
         self.start = start
         self.seq = 0
         self.wants_move = False
 
-    def on_telemetry(self, t_s: float, obs: Observation) -> None:
+    def on_telemetry(
+        self, t_s: float, obs: Observation, telemetry: Telemetry | None = None
+    ) -> None:
         if self.newest is None or obs.stamp_s >= self.newest.stamp_s:
             self.newest = obs
+            self.newest_telemetry = telemetry
         self.view.observe(t_s, obs)
-        if self.observing:
+        if self.observing and not self.predictive:
+            self.model.observe(t_s, obs)  # type: ignore[attr-defined]
+
+    def on_ghost(self, t_s: float, obs: Observation) -> None:
+        """The predictive display's frame at ``t_s`` (the model sees it after its reaction)."""
+        if self.predictive:
             self.model.observe(t_s, obs)  # type: ignore[attr-defined]
 
     def stick(self, t_s: float) -> Stick:
@@ -131,7 +151,7 @@ class OperatorSide:
         view_age = None
         if self.newest is not None:
             view_age = min(max(round((t_s - self.newest.stamp_s) * 1000), 0), MAX_VIEW_AGE_MS)
-        return OperatorCommand(
+        command = OperatorCommand(
             seq=self.seq,
             stamp_ns=CLOCK0_NS + t_ns,
             x=s.x_o,
@@ -143,6 +163,16 @@ class OperatorSide:
             op=OPERATOR_ID,
             view_age_ms=view_age,
         )
+        if self.predictive:
+            self.history.add(
+                SentCommand(command.stamp_ns, s.x_o, s.y_o, s.mode, s.deadman, s.estop)
+            )
+            if self.newest is not None and self.newest_telemetry is not None:
+                ghost = ghost_observation(
+                    self.newest, self.newest_telemetry, self.history, command.stamp_ns
+                )
+                self.on_ghost(t_s, ghost)
+        return command
 
 
 def _needs_centring(obs: Observation) -> bool:
@@ -220,7 +250,7 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
         t_ns, kind, _, data = heapq.heappop(events)
         t_s = t_ns / NS_PER_S
         if kind == _DOWN:
-            operator.on_telemetry(t_s, data)
+            operator.on_telemetry(t_s, *data)
         elif kind == _OPERATOR:
             cmd = operator.command(t_ns)
             payload = cmd.encode()
@@ -300,7 +330,7 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
                     tel.state,
                     tel.reason or "",
                 )
-                push(max(round(arrival * NS_PER_S), t_ns), _DOWN, obs)
+                push(max(round(arrival * NS_PER_S), t_ns), _DOWN, (obs, tel))
             push(t_ns + ROBOT_PERIOD_NS, _ROBOT, None)
 
     elapsed = last_robot_ns / NS_PER_S

@@ -171,6 +171,9 @@ def make_operator(
         ) from None
 
 
+_BOOLEANS = {"1": True, "true": True, "yes": True, "0": False, "false": False, "no": False}
+
+
 def _options(name: str, text: str) -> dict[str, str]:
     out: dict[str, str] = {}
     for item in filter(None, (i.strip() for i in text.split(","))):
@@ -212,12 +215,17 @@ def _make_observing(
     defaults: SightedParams | RouteParams = (
         SightedParams(corridor_m=half_width_m + 0.1) if name == "sighted" else RouteParams()
     )
-    changes: dict[str, float | int] = {}
+    changes: dict[str, float | int | bool] = {}
     for key, value in opts.items():
         if key not in names:
             raise ValueError(
                 f"operator {name}: unknown option {key!r} (known: {', '.join(sorted(names))})"
             )
+        if names[key] in (bool, "bool"):
+            if value.lower() not in _BOOLEANS:
+                raise ValueError(f"operator {name}: {key} must be 1 or 0, got {value!r}")
+            changes[key] = _BOOLEANS[value.lower()]
+            continue
         try:
             changes[key] = int(value) if key == "bins" else float(value)
         except ValueError:

@@ -32,6 +32,12 @@ Each command:
 
 All of it uses the *observed* pose and scan, i.e. the past: with a delayed view the operator
 keeps turning after the robot already points the right way, as a real one does.
+
+``predictive=1``: the operator drives by the predictive display's ghost (DESIGN 9) instead,
+where the robot will be when the command now sent takes effect, with the scan drawn around it.
+This model is the same; what it is shown changes, and the experiments build that
+(``egc_experiments.predictive_view``, fed through ``observe``). In a plain episode (no link)
+there is nothing to predict and the option changes nothing.
 """
 
 from __future__ import annotations
@@ -62,6 +68,7 @@ class SightedParams:
     look_m: float = 1.5
     slow_m: float = 0.8
     min_forward: float = 0.3
+    predictive: bool = False  # shown the predictive display's ghost (module docstring)
     bins: int = 72
     switch_cost: float = 1.0
     stuck_s: float = 2.0
