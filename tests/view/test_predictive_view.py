@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from egc_common.profiles import PIONEER3DX
 from egc_operator import view_blueprint as paths
-from egc_operator.prediction import CommandHistory, SentCommand
+from egc_operator.prediction import CommandHistory, Prediction, SentCommand
 from egc_operator.view import PREDICTION_PERIOD_NS, OperatorView, record_episode
 from egc_operator.view_scene import (
     PREDICTED_LABEL,
@@ -159,7 +159,7 @@ def test_the_link_figures_in_plain_numbers(recorded) -> None:  # type: ignore[no
     texts = [row[0] for row in rec[_e(paths.LINK_TEXT)].column("TextDocument:text")]
     assert texts[0].startswith("uplink -- (rtt/2)") or texts[0].startswith("uplink --")
     last = texts[-1]
-    first_line, second, ghost = last.splitlines()
+    first_line, second, ghost, hint = last.splitlines()
     assert first_line == (
         "uplink 200 ms, downlink ~200 ms, view age 240 ms, loop delay 0.76 s, gap max 40 ms,"
         " loss 0.0 %"
@@ -169,6 +169,7 @@ def test_the_link_figures_in_plain_numbers(recorded) -> None:  # type: ignore[no
         "ghost (dashed magenta): predicted (not measured), +0.44 s: where the command sent now"
         " takes effect"
     )
+    assert hint == "the robot drawn solid is 0.4 s behind: steer by the ghost"
 
 
 def test_a_holding_robot_is_predicted_to_stop(tmp_path: Path) -> None:
@@ -177,7 +178,7 @@ def test_a_holding_robot_is_predicted_to_stop(tmp_path: Path) -> None:
     view.close()
     rec = read_recording(tmp_path / "hold.rrd")
     texts = [row[0] for row in rec[_e(paths.LINK_TEXT)].column("TextDocument:text")]
-    assert texts[-1].endswith("where the command sent now takes effect, the robot stops")
+    assert "where the command sent now takes effect, the robot stops" in texts[-1]
     origin = rec[_e(paths.PREDICTED_HEADING)].column("Arrows2D:origins")[-1][0]
     newest_x = V * (2.0 - 0.2 - 0.01) // (V * 0.05) * (V * 0.05)  # last shown cycle's pose
     braking = V * V / (2 * PIONEER3DX.decel_max_mps2)
@@ -279,3 +280,26 @@ def test_status_text_says_why_the_robot_is_not_driving() -> None:
     t = telemetry(1, state="HOLD", reason="command timeout", limiter="watchdog")
     assert status_text(t).startswith("HOLD (command timeout) · shared · limit: watchdog")
     assert status_text(telemetry(1, reason="fresh centred command")).startswith("DRIVING · ")
+
+
+def test_link_text_tells_the_operator_to_steer_by_a_ghost_far_ahead() -> None:
+    t = telemetry(1)
+    near = _prediction_ahead(0.1)
+    far = _prediction_ahead(0.6)
+    assert "steer by the ghost" not in link_text(50.0, False, 50.0, 50.0, t, near)
+    text = link_text(250.0, False, 250.0, 350.0, t, far)
+    assert text.endswith("the robot drawn solid is 0.6 s behind: steer by the ghost")
+
+
+def _prediction_ahead(seconds: float) -> Prediction:
+    start = 1_000_000_000
+    return Prediction(
+        pose=(0.0, 0.0, 0.0),
+        path=((0.0, 0.0, 0.0),),
+        start_ns=start,
+        end_ns=start + round(seconds * 1e9),
+        uplink_ns=0,
+        velocity=(0.0, 0.0),
+        stopping=False,
+        clamped=False,
+    )
