@@ -6,7 +6,7 @@ ghost footprint where the robot will be when the command now being sent takes ef
 (``sighted:predictive=1``) acts on what the ghost shows: the ghost's pose, and the scan of the
 newest telemetry drawn around it (the obstacles stay where they were measured in the world; the
 ghost moves among them). ``ghost_observation`` builds that frame from the same telemetry, the
-same command history and the same ``predict_from_telemetry`` as the operator process's view.
+same command history and the same ``predict_from_history`` as the operator process's view.
 
 The frame's ``stamp_s`` is the ghost's time (when the command takes effect), on the clock of the
 telemetry's own ``stamp_s``: a newer ghost of the same telemetry is a newer frame. Pure: the time
@@ -20,11 +20,7 @@ from dataclasses import replace
 
 import numpy as np
 from egc_common.messages import Telemetry
-from egc_operator.prediction import (
-    CommandHistory,
-    predict_from_telemetry,
-    uplink_estimate_ms,
-)
+from egc_operator.prediction import CommandHistory, predict_from_history
 from egc_sim.observation import Observation
 
 NS_PER_S = 1_000_000_000
@@ -43,9 +39,7 @@ def ghost_observation(
     Without a prediction (no pose, unknown profile) the observation is returned unchanged: the
     view then shows only the measured robot.
     """
-    uplink_ms = uplink_estimate_ms(telemetry.cmd_age_p50_ms, rtt_ms) or 0.0
-    first_ns = telemetry.stamp_ns - round(uplink_ms * 1e6)
-    prediction = predict_from_telemetry(telemetry, history.since(first_ns), now_ns, rtt_ms)
+    prediction = predict_from_history(telemetry, history, now_ns, rtt_ms)
     if prediction is None or observation.pose is None:
         return observation
     return replace(

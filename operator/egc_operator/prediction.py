@@ -244,3 +244,13 @@ def predict_from_telemetry(
         v_lim=t.v_lim_latency,
         step_s=step_s,
     )
+
+
+def predict_from_history(
+    t: Telemetry, history: CommandHistory, now_ns: int, rtt_ms: float | None
+) -> Prediction | None:
+    """``predict_from_telemetry`` with the commands of ``history`` that can still act after
+    ``t``'s stamp (sent at most one uplink before it): what the view draws as the ghost."""
+    uplink_ms = uplink_estimate_ms(t.cmd_age_p50_ms, rtt_ms) or 0.0
+    first_ns = t.stamp_ns - round(uplink_ms * NS_PER_MS)
+    return predict_from_telemetry(t, history.since(first_ns), now_ns, rtt_ms)

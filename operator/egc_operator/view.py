@@ -46,7 +46,7 @@ from egc_operator import view_blueprint as paths
 from egc_operator.prediction import (
     CommandHistory,
     Prediction,
-    predict_from_telemetry,
+    predict_from_history,
     uplink_estimate_ms,
 )
 from egc_operator.view_blueprint import operator_blueprint
@@ -340,10 +340,7 @@ class OperatorView:
             uplink_ms = None
             if t is not None:
                 uplink_ms = uplink_estimate_ms(t.cmd_age_p50_ms, self._rtt_ms)
-                first = t.stamp_ns - round((uplink_ms or 0.0) * 1e6)
-                prediction = predict_from_telemetry(
-                    t, history.since(first), robot_now_ns, self._rtt_ms
-                )
+                prediction = predict_from_history(t, history, robot_now_ns, self._rtt_ms)
             # At the robot time of the telemetry it starts from: a replay then shows the ghost
             # next to the measured pose it was predicted from, as the operator saw them.
             _set_time(rec, robot_now_ns if t is None else t.stamp_ns, self._cycle)
