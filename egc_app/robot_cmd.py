@@ -14,7 +14,8 @@ flags. Tables and keys (units in the names):
     [safety]   max_command_age_s (direct mode), max_command_age_filtered_s, command_timeout_s,
                scan_timeout_s, release_timeout_s, centre_tolerance, require_clock_sync
     [link]     link_aware, resume_window_s, reaction_time_s, blind_time_direct_s,
-               blind_time_filtered_s (DESIGN 8 short-gap resume, DESIGN 9 latency governor)
+               blind_time_filtered_s, latency_turn_cap (DESIGN 8 short-gap resume, DESIGN 9
+               latency governor; latency_turn_cap = false caps the speed alone)
     [pipeline] horizon_s, gamma_v, gamma_w, no_return_is_free
     [sim]      scan_hz, beams, seed
     [ros2]     scan, odom, cmd, cmd_type, namespace, laser_pose ("X,Y,YAW" or [x, y, yaw]),
@@ -80,6 +81,7 @@ SECTIONS: dict[str, tuple[str, ...]] = {
         "reaction_time_s",
         "blind_time_direct_s",
         "blind_time_filtered_s",
+        "latency_turn_cap",
     ),
     "pipeline": ("horizon_s", "gamma_v", "gamma_w", "no_return_is_free"),
     "sim": ("scan_hz", "beams", "seed"),
@@ -242,6 +244,7 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
             blind_time_filtered_s=_number(
                 link, "blind_time_filtered_s", defaults.blind_time_filtered_s
             ),
+            latency_turn_cap=_flag(link, "latency_turn_cap", defaults.latency_turn_cap),
             command_timeout_s=_number(safety, "command_timeout_s", defaults.command_timeout_s),
             scan_timeout_s=_number(safety, "scan_timeout_s", defaults.scan_timeout_s),
             release_timeout_s=_number(safety, "release_timeout_s", defaults.release_timeout_s),

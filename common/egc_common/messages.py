@@ -398,6 +398,7 @@ class Telemetry:
     link_loss: float | None = None  # fraction of seq missing over the last second
     view_age_ms: float | None = None  # the controlling operator's latest report
     v_lim_latency: float | None = None  # the latency governor's cap, m/s
+    w_lim_latency: float | None = None  # its cap on the turn rate, rad/s (None: not capped)
     # Via points (DESIGN 7 goal): the active one in its frame, how many remain after it, and
     # the direction the filter suggests in {R} (rad; assist), for the view.
     goal: tuple[float, float] | None = None
@@ -472,6 +473,7 @@ def _build_telemetry(m: Mapping[Any, Any]) -> Telemetry:
         "link_loss": None if m.get("link_loss") is None else _float(m, "link_loss", 0.0, 1.0),
         "view_age_ms": _opt_float(m, "view_age_ms"),
         "v_lim_latency": _opt_float(m, "v_lim_latency"),
+        "w_lim_latency": _opt_float(m, "w_lim_latency"),
         "goal": _opt_tuple(m, "goal", 2),
         "goal_frame": _opt_str(m, "goal_frame", GOAL_FRAMES),
         "goals_left": _int(m, "goals_left", 0, MAX_GOAL_POINTS) if "goals_left" in m else 0,

@@ -420,6 +420,8 @@ def run_emulated(point: RunPoint, workdir: Path, use_netns: bool | None = None) 
         robot += ["--set", f"sim.seed={point.seed}", "--set", "pipeline.no_return_is_free=true"]
         if not point.link_aware:
             robot.append("--no-link-aware")
+        if not point.latency_turn_cap:
+            robot += ["--set", "link.latency_turn_cap=false"]
         h.start("robot", "rb", _cli(*robot))
         watch = ["--robot", ROBOT_ID, "--connect", watch_ep, "--out", str(files["watch.jsonl"])]
         h.start("watch", "rb", _module("egc_experiments.watch", *watch))
@@ -473,6 +475,7 @@ def run_emulated(point: RunPoint, workdir: Path, use_netns: bool | None = None) 
         "cmd_age_p99_ms": _round(latency.get("p99_ms")),
         "stale_rejected": int(summary.get("rejected", {}).get("stale", 0)),
         "link_aware": point.link_aware,
+        "latency_turn_cap": point.latency_turn_cap,
         "outages": [list(o) for o in point.outages],
         "dist": point.dist,
         "max_speed_mps": round(figures["max_speed_mps"], 4),

@@ -6,7 +6,8 @@ collisions with link-aware driving (and so the governor, DESIGN 9) on and off, a
 them happened while the robot was moving (``contact_speed_mps`` above ``MOVING_MPS``; a contact
 at v = 0 is a turn in place, which no speed cap can prevent). The totals over the delayed runs
 (delay > 0) come with a one-sided Fisher exact test (scipy) of "fewer collisions with the
-governor", so that a difference of a few runs is not read as an effect::
+governor", so that a difference of a few runs is not read as an effect. Runs with
+``latency_turn_cap`` false (the governor's speed cap alone) are a third arm, compared with both::
 
     python -m egc_experiments.governor_check DIR/runs.jsonl
 """
@@ -23,14 +24,17 @@ from typing import Any, Final
 
 from scipy.stats import fisher_exact
 
+from egc_experiments.report import link_aware
+
 MOVING_MPS: Final = 0.05
 
 
-def _count(runs: Iterable[dict[str, Any]]) -> dict[tuple[str, float, bool], list[int]]:
-    """(operator, delay, link_aware) -> [runs, collided, collided while moving]."""
-    table: dict[tuple[str, float, bool], list[int]] = defaultdict(lambda: [0, 0, 0])
+def _count(runs: Iterable[dict[str, Any]]) -> dict[tuple[str, float, str], list[int]]:
+    """(operator, delay, arm) -> [runs, collided, collided while moving]; the arm is
+    ``report.link_aware``: on, ``speed cap`` (on without the turn-rate cap) or off."""
+    table: dict[tuple[str, float, str], list[int]] = defaultdict(lambda: [0, 0, 0])
     for run in runs:
-        cell = table[(run["operator"], float(run["delay_ms"]), bool(run["link_aware"]))]
+        cell = table[(run["operator"], float(run["delay_ms"]), link_aware(run))]
         cell[0] += 1
         if run["collided"]:
             cell[1] += 1
@@ -48,46 +52,56 @@ def _fisher_less(on: list[int], off: list[int], column: int) -> float:
     return float(p)
 
 
-def report(runs: list[dict[str, Any]]) -> str:
-    """The markdown tables (module docstring)."""
-    table = _count(runs)
+def _compare(table: dict[tuple[str, float, str], list[int]], arm: str, other: str) -> str:
+    """Per operator and delay, ``arm`` against ``other``; totals over delay > 0 with Fisher."""
     operators = sorted({key[0] for key in table})
     delays = sorted({key[1] for key in table})
     lines = [
-        "| operator | one-way delay ms | runs | collided, governor on / off "
-        "| of them moving, on / off |",
+        f"| operator | one-way delay ms | runs | collided, {arm} / {other} "
+        f"| of them moving, {arm} / {other} |",
         "|---|---:|---:|---:|---:|",
     ]
     totals: dict[str, tuple[list[int], list[int]]] = {}
     for op in operators:
-        on_total, off_total = [0, 0, 0], [0, 0, 0]
+        a_total, b_total = [0, 0, 0], [0, 0, 0]
         for delay in delays:
-            on, off = table.get((op, delay, True)), table.get((op, delay, False))
-            if on is None or off is None:
+            a, b = table.get((op, delay, arm)), table.get((op, delay, other))
+            if a is None or b is None:
                 continue
-            lines.append(
-                f"| `{op}` | {delay:g} | {on[0]} | {on[1]} / {off[1]} | {on[2]} / {off[2]} |"
-            )
+            lines.append(f"| `{op}` | {delay:g} | {a[0]} | {a[1]} / {b[1]} | {a[2]} / {b[2]} |")
             if delay > 0:
-                on_total = [a + b for a, b in zip(on_total, on, strict=True)]
-                off_total = [a + b for a, b in zip(off_total, off, strict=True)]
-        totals[op] = (on_total, off_total)
+                a_total = [x + y for x, y in zip(a_total, a, strict=True)]
+                b_total = [x + y for x, y in zip(b_total, b, strict=True)]
+        totals[op] = (a_total, b_total)
     lines += [
         "",
-        "Delayed runs (delay > 0) in total, with the one-sided Fisher exact p of 'fewer with the "
-        "governor':",
+        "Delayed runs (delay > 0) in total, with the one-sided Fisher exact p of 'fewer with "
+        f"{arm} than {other}':",
         "",
-        "| operator | runs per setting | collided, on / off | p | moving contacts, on / off | p |",
+        f"| operator | runs per setting | collided, {arm} / {other} | p "
+        f"| moving contacts, {arm} / {other} | p |",
         "|---|---:|---:|---:|---:|---:|",
     ]
-    for op, (on, off) in totals.items():
-        if on[0] == 0 or off[0] == 0:
+    for op, (a, b) in totals.items():
+        if a[0] == 0 or b[0] == 0:
             continue
         lines.append(
-            f"| `{op}` | {on[0]} | {on[1]} / {off[1]} | {_fisher_less(on, off, 1):.3f} "
-            f"| {on[2]} / {off[2]} | {_fisher_less(on, off, 2):.3f} |"
+            f"| `{op}` | {a[0]} | {a[1]} / {b[1]} | {_fisher_less(a, b, 1):.3f} "
+            f"| {a[2]} / {b[2]} | {_fisher_less(a, b, 2):.3f} |"
         )
     return "\n".join(lines) + "\n"
+
+
+def report(runs: list[dict[str, Any]]) -> str:
+    """The markdown tables (module docstring): the governor on against off and, when the runs
+    have them, the speed cap alone against off and the full governor against the speed cap."""
+    table = _count(runs)
+    arms = {key[2] for key in table}
+    parts = [_compare(table, "on", "off")]
+    if "speed cap" in arms:
+        parts.append(_compare(table, "speed cap", "off"))
+        parts.append(_compare(table, "on", "speed cap"))
+    return "\n".join(parts)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -56,6 +56,8 @@ Axes (every one takes a value or a list; a sweep is the product of its lists):
 - ``outage_s``: one outage of that many seconds in both directions (0: none), starting at
   ``outage_start_s`` (default 10 s, when the robot is well under way).
 - ``link_aware``: the robot's link-aware driving (DESIGN 8, 9) on or off.
+- ``latency_turn_cap``: false leaves out the latency governor's cap on the turn rate (our
+  addition to DESIGN 9, ``egc_robot.latency_governor``), so that a grid can compare the two.
 - ``seeds``; ``profile``; ``max_time_s`` (default 150); ``stall_time_s`` (default 30: a robot
   that has not moved 0.1 m for that long ends the run as ``stalled``).
 
@@ -91,6 +93,7 @@ AXES: Final = (
     "outage_s",
     "outage_start_s",
     "link_aware",
+    "latency_turn_cap",
     "seeds",
     "profile",
     "max_time_s",
@@ -106,6 +109,7 @@ DEFAULTS: Final[dict[str, Any]] = {
     "outage_s": 0.0,
     "outage_start_s": 10.0,
     "link_aware": True,
+    "latency_turn_cap": True,
     "seeds": [0],
     "profile": "pioneer3dx",
     "max_time_s": 150.0,
@@ -205,9 +209,9 @@ def _check_values(where: str, key: str, values: list[Any]) -> list[Any]:
         if key == "transport" and (bad := [v for v in values if v not in TRANSPORTS]):
             raise GridError(f"{where}: transport {bad[0]!r} is not one of {', '.join(TRANSPORTS)}")
         return [v.strip() for v in values]
-    if key == "link_aware":
+    if key in ("link_aware", "latency_turn_cap"):
         if not all(isinstance(v, bool) for v in values):
-            raise GridError(f"{where}: link_aware values must be true or false")
+            raise GridError(f"{where}: {key} values must be true or false")
         return values
     if key == "loss":
         return [number(v, 0.0, 100.0) for v in values]
@@ -275,6 +279,7 @@ def _sweep_points(
                 outages=outages,
                 seed=int(v["seeds"]),
                 link_aware=bool(v["link_aware"]),
+                latency_turn_cap=bool(v["latency_turn_cap"]),
                 profile=v["profile"],
                 start=entry.start,
                 goal=entry.goal,

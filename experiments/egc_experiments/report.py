@@ -87,7 +87,10 @@ def setting(row: Row) -> str:
 
 
 def link_aware(row: Row) -> str:
-    return "on" if row.get("link_aware", True) else "off"
+    """``on``, ``off``, or ``speed cap`` (on, without the governor's turn-rate cap)."""
+    if not row.get("link_aware", True):
+        return "off"
+    return "on" if row.get("latency_turn_cap", True) else "speed cap"
 
 
 def outage_s(row: Row) -> float:
@@ -198,7 +201,7 @@ def key_numbers(rows: Sequence[Row]) -> str:
     for op in sorted({r["operator"] for r in plain}):
         for delay in (200.0, 500.0):
             for mode in sorted({setting(r) for r in plain}):
-                for aware in ("on", "off"):
+                for aware in ("on", "speed cap", "off"):
                     group = [
                         r
                         for r in plain

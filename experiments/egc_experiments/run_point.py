@@ -49,7 +49,8 @@ class RunPoint:
     ``loss`` is a percentage (0-100) of packets lost; ``burst`` the mean burst length of
     Gilbert-Elliott loss (0 or 1: independent losses). ``outages`` are (start_s, duration_s).
     ``link_aware`` switches the robot's link-aware driving (DESIGN 8 resume, DESIGN 9 governor,
-    per-mode command age) on or off, so that the sweep can compare both.
+    per-mode command age) on or off, so that the sweep can compare both;
+    ``latency_turn_cap`` false leaves the governor's turn-rate cap out (the speed cap alone).
     """
 
     world: str
@@ -65,6 +66,7 @@ class RunPoint:
     outages: tuple[tuple[float, float], ...] = ()
     seed: int = 0
     link_aware: bool = True
+    latency_turn_cap: bool = True
     profile: str = "pioneer3dx"
     start: tuple[float, float, float] | None = None
     goal: tuple[float, float] | None = None
@@ -90,6 +92,8 @@ class RunPoint:
         """A stable identity of the run (the resume key)."""
         d = asdict(self)
         d.pop("extra")
+        if d["latency_turn_cap"]:  # the default: keys of runs made before it existed still match
+            d.pop("latency_turn_cap")
         return repr(sorted(d.items()))
 
     def identity(self) -> dict[str, Any]:

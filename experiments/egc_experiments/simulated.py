@@ -197,7 +197,12 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
     tolerance = world.goal_tolerance_m or DEFAULT_GOAL_TOLERANCE_M
     sim = Simulator(world, profile, start, seed=point.seed)
     pipeline = PipelineConfig(profile, filter=point.filter, no_return_is_free=True)
-    controller = RobotController(ControllerConfig(pipeline, link_aware=point.link_aware), CLOCK0_NS)
+    controller = RobotController(
+        ControllerConfig(
+            pipeline, link_aware=point.link_aware, latency_turn_cap=point.latency_turn_cap
+        ),
+        CLOCK0_NS,
+    )
     model = make_operator(
         point.operator,
         goal,
@@ -352,6 +357,7 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
         "cmd_age_p99_ms": _percentile(ages_ms, 99),
         "stale_rejected": counters.rejected.get(RejectReason.STALE.value, 0),
         "link_aware": point.link_aware,
+        "latency_turn_cap": point.latency_turn_cap,
         "outages": [list(o) for o in point.outages],
         "dist": point.dist,
         "max_speed_mps": round(max_speed, 4),

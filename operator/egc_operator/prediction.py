@@ -10,7 +10,7 @@ them open loop from the newest measured pose:
   (``v_ref``, ``w_ref``) is in effect.
 - A command becomes a velocity by eq. 4 (v = x v_max, w = y w_max; the deadzone was applied
   before the command was sent), scaled as a whole by the latency governor's cap
-  ``v_lim_latency`` when the robot reports one (DESIGN 9).
+  ``v_lim_latency`` and on the turn rate ``w_lim_latency`` when the robot reports them (DESIGN 9).
 - The velocity ramps toward it at the profile's acceleration limits (braking at the
   deceleration limit), starting from the telemetry's ``v_cmd``, ``w_cmd``, and the unicycle is
   integrated on exact arcs over steps of at most ``step_s``, split where a command takes effect.
@@ -121,18 +121,26 @@ def uplink_estimate_ms(cmd_age_p50_ms: float | None, rtt_ms: float | None) -> fl
 
 
 def command_velocity(
-    command: SentCommand, profile: RobotProfile, v_lim: float | None
+    command: SentCommand,
+    profile: RobotProfile,
+    v_lim: float | None,
+    w_lim: float | None = None,
 ) -> tuple[float, float]:
-    """Eq. 4 (v = x v_max, w = y w_max), capped as a whole at ``v_lim`` (same curvature)."""
+    """Eq. 4 (v = x v_max, w = y w_max), capped as a whole at ``v_lim`` and ``w_lim`` (same
+    curvature), as the robot's latency governor does."""
     v = max(-1.0, min(1.0, command.x)) * profile.v_max_mps
     w = max(-1.0, min(1.0, command.y)) * profile.w_max_radps
-    return _govern(v, w, v_lim)
+    return _govern(v, w, v_lim, w_lim)
 
 
-def _govern(v: float, w: float, v_lim: float | None) -> tuple[float, float]:
-    if v_lim is None or not math.isfinite(v_lim) or abs(v) <= v_lim:
-        return v, w
-    scale = max(v_lim, 0.0) / abs(v)
+def _govern(
+    v: float, w: float, v_lim: float | None, w_lim: float | None = None
+) -> tuple[float, float]:
+    scale = 1.0
+    if v_lim is not None and math.isfinite(v_lim) and abs(v) > v_lim:
+        scale = max(v_lim, 0.0) / abs(v)
+    if w_lim is not None and math.isfinite(w_lim) and abs(w) > w_lim:
+        scale = min(scale, max(w_lim, 0.0) / abs(w))
     return v * scale, w * scale
 
 
@@ -148,6 +156,7 @@ def predict(
     profile: RobotProfile,
     v_lim: float | None = None,
     step_s: float = DEFAULT_STEP_S,
+    w_lim: float | None = None,
 ) -> Prediction:
     """Advance ``pose`` (measured at ``stamp_ns``) to ``now_ns + uplink_ns``; see the module doc.
 
@@ -165,7 +174,7 @@ def predict(
     stopping = state != "DRIVING"
     latched_estop = False
     released = False
-    target = (0.0, 0.0) if stopping else _govern(*reference, v_lim)
+    target = (0.0, 0.0) if stopping else _govern(*reference, v_lim, w_lim)
     # The commands that take effect within (stamp_ns, end_ns], with their effect times.
     changes = [
         (c.stamp_ns + uplink_ns, c) for c in commands if stamp_ns < c.stamp_ns + uplink_ns <= end_ns
@@ -194,7 +203,7 @@ def predict(
             if latched_estop or released:
                 target = (0.0, 0.0)
             else:
-                target = command_velocity(command, profile, v_lim)
+                target = command_velocity(command, profile, v_lim, w_lim)
         next_change = changes[index][0] if index < len(changes) else end_ns
         dt_ns = min(max_step_ns, next_change - t, end_ns - t)
         dt = dt_ns / NS_PER_S
@@ -243,6 +252,7 @@ def predict_from_telemetry(
         profile=profile,
         v_lim=t.v_lim_latency,
         step_s=step_s,
+        w_lim=t.w_lim_latency,
     )
 
 

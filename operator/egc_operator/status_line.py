@@ -45,6 +45,7 @@ class Status:
     limiter: str | None = None
     filter: str | None = None
     v_lim_latency: float | None = None  # m/s
+    w_lim_latency: float | None = None  # rad/s
     loop_delay_ms: float | None = None  # tau
     cmd_age_ms: float | None = None  # age of the robot's newest command
     cmd_age_p50_ms: float | None = None
@@ -97,6 +98,8 @@ def _driving(s: Status, reason: str) -> str:
     if limiter == "latency":
         delay = "" if s.loop_delay_ms is None else f" {_seconds(s.loop_delay_ms)}"
         cap = "" if s.v_lim_latency is None else f" at {s.v_lim_latency:.2f} m/s"
+        if s.w_lim_latency is not None:
+            cap += f", turn at {s.w_lim_latency:.2f} rad/s"
         return f"SLOWED: link delay{delay} -> speed capped{cap}"
     if limiter in FILTER_LIMITERS:
         return f"SLOWED: obstacle (filter {limiter})"
@@ -227,6 +230,7 @@ def status_of(
         limiter=None if t is None else t.limiter,
         filter=None if t is None else t.filter or None,
         v_lim_latency=None if t is None else t.v_lim_latency,
+        w_lim_latency=None if t is None else t.w_lim_latency,
         loop_delay_ms=None if t is None else t.loop_delay_ms,
         cmd_age_ms=None if t is None else t.cmd_age_ms,
         cmd_age_p50_ms=None if t is None else t.cmd_age_p50_ms,

@@ -133,6 +133,8 @@ def status_text(t: Telemetry) -> str:
     limiter = LIMITER_TEXT.get(t.limiter, t.limiter)
     if t.limiter == "latency" and t.v_lim_latency is not None:
         limiter += f" <= {t.v_lim_latency:.2f} m/s"
+        if t.w_lim_latency is not None:
+            limiter += f", {t.w_lim_latency:.2f} rad/s"
     state = t.state if t.state == "DRIVING" or not t.reason else f"{t.state} ({t.reason})"
     mode = t.mode if t.filter in ("", "none") else f"{t.mode} ({t.filter})"
     text = f"{state} · {mode} · limit: {limiter} · {t.region} · w_SI {t.w_si:.2f}"
@@ -206,6 +208,8 @@ def time_series(t: Telemetry) -> dict[str, float]:
             series[f"latency/{name}"] = value
     if t.v_lim_latency is not None:
         series["v/lim_latency"] = t.v_lim_latency
+    if t.w_lim_latency is not None:
+        series["w/lim_latency"] = t.w_lim_latency
     return series
 
 
@@ -488,6 +492,8 @@ def link_text(
         )
     if t is not None and t.limiter == "latency":
         cap = "" if t.v_lim_latency is None else f" at {t.v_lim_latency:.2f} m/s"
+        if t.w_lim_latency is not None:
+            cap += f", turn at {t.w_lim_latency:.2f} rad/s"
         lines.append(f"limit: latency - speed capped{cap}")
     if prediction is None:
         lines.append("ghost: no prediction (no pose, unknown profile or clock not synced)")

@@ -58,7 +58,7 @@ from egc_common.messages import (
 )
 from egc_common.scan import ObstaclePoints, Scan
 
-from egc_robot.latency_governor import govern, latency_speed_limit
+from egc_robot.latency_governor import govern, latency_speed_limit, latency_turn_limit
 from egc_robot.link_stats import LinkStats
 from egc_robot.pipeline import FILTERS, MODES, Limiter, PipelineConfig, PipelineResult, step_command
 from egc_robot.safety import decelerate
@@ -98,6 +98,7 @@ class ControllerConfig:
     reaction_time_s: float = 0.25  # DESIGN 9: part of the loop delay tau
     blind_time_direct_s: float = 0.5  # DESIGN 9: D = v_max * blind_time
     blind_time_filtered_s: float = 1.0
+    latency_turn_cap: bool = True  # the governor caps the turn rate too (latency_governor)
     scan_timeout_s: float = 0.2
     release_timeout_s: float = 2.0
     centre_tolerance: float = 0.05
@@ -488,14 +489,16 @@ class RobotController:
         state = self._transition.state
         self._driving_epoch = self._control_epoch if state is State.DRIVING else -1
         v_lim: float | None = None
+        w_lim: float | None = None
         if cfg.link_aware:
             profile = cfg.pipeline.profile
-            v_lim = latency_speed_limit(
-                self._link.loop_delay_s(now_ns),
-                profile.v_max_mps,
-                profile.decel_max_mps2,
-                self._blind_time_s[cmd.mode if cmd is not None else "shared"],
-            )
+            tau_s = self._link.loop_delay_s(now_ns)
+            blind_s = self._blind_time_s[cmd.mode if cmd is not None else "shared"]
+            v_lim = latency_speed_limit(tau_s, profile.v_max_mps, profile.decel_max_mps2, blind_s)
+            if cfg.latency_turn_cap:
+                w_lim = latency_turn_limit(
+                    tau_s, profile.w_max_radps, profile.angular_accel_max_radps2, blind_s
+                )
         filter_name = self._filter_for(cmd)
         if state is State.DRIVING and cmd is not None and scan is not None:
             self._last_drive_epoch = self._control_epoch
@@ -518,7 +521,7 @@ class RobotController:
             self._filter_memory = result.memory
             v, w, limiter = result.v_cmd_mps, result.w_cmd_radps, result.limiter
             if v_lim is not None:
-                v, w, capped = govern(v, w, v_lim)
+                v, w, capped = govern(v, w, v_lim, math.inf if w_lim is None else w_lim)
                 if capped:
                     limiter = Limiter.LATENCY
         elif state is State.ESTOP:
@@ -541,7 +544,7 @@ class RobotController:
             self.state_message(now_ns) if changed else None,
             result,
             self._telemetry,
-            (now_ns, cmd, fresh, v, w, limiter, result, v_lim, shown_filter),
+            (now_ns, cmd, fresh, v, w, limiter, result, v_lim, w_lim, shown_filter),
         )
         # Nothing the telemetry reports changes before it is built: every input and the next
         # cycle build it first (``_report``) when nobody has asked for it.
@@ -590,6 +593,7 @@ class RobotController:
         limiter: Limiter,
         result: PipelineResult | None,
         v_lim: float | None,
+        w_lim: float | None,
         shown_filter: str,
     ) -> Telemetry:
         """The telemetry of the cycle at ``now_ns``, from the state that cycle left (which stays
@@ -648,6 +652,7 @@ class RobotController:
             link_loss=link.link_loss,
             view_age_ms=link.view_age_ms,
             v_lim_latency=v_lim,
+            w_lim_latency=w_lim,
             goal=route.active,
             goal_frame=route.frame if route.active is not None else None,
             goals_left=route.remaining_after_active,

@@ -172,3 +172,26 @@ def test_run_point_key_tells_points_apart():
     assert a.key() == RunPoint("hallway", "sighted", link_aware=True).key()
     assert a.key() != RunPoint("hallway", "sighted", link_aware=False).key()
     assert a.key() != RunPoint("hallway", "sighted", stall_time_s=10).key()
+    # The turn cap, added later, is on by default and leaves the keys of earlier runs alone.
+    assert "latency_turn_cap" not in a.key()
+    assert a.key() != RunPoint("hallway", "sighted", latency_turn_cap=False).key()
+
+
+def test_latency_turn_cap_is_an_axis_and_the_report_labels_it():
+    from egc_experiments.report import link_aware
+
+    g = grid(
+        """
+        world = "hallway"
+        operator = "sighted"
+        filter = "none"
+        [[sweep]]
+        latency_turn_cap = [true, false]
+        """
+    )
+    assert sorted(p.latency_turn_cap for p in g.points) == [False, True]
+    with pytest.raises(GridError, match="latency_turn_cap values must be true or false"):
+        grid("[[sweep]]\nworld='hallway'\noperator='goal'\nlatency_turn_cap=1\n")
+    assert link_aware({"link_aware": True}) == "on"  # rows written before the option
+    assert link_aware({"link_aware": True, "latency_turn_cap": False}) == "speed cap"
+    assert link_aware({"link_aware": False, "latency_turn_cap": False}) == "off"

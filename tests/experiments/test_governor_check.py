@@ -44,3 +44,14 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
     assert main([str(bad)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and all(line.startswith("governor_check: ") for line in err)
+
+
+def test_the_speed_cap_alone_is_a_third_arm_compared_with_both():
+    runs = [run("a", 200, True, i < 2, 1.0) for i in range(20)]
+    runs += [run("a", 200, False, i < 10, 1.0) for i in range(20)]
+    capped = [run("a", 200, True, i < 12, 1.0) | {"latency_turn_cap": False} for i in range(20)]
+    text = report(runs + capped)
+    assert "| `a` | 200 | 20 | 2 / 10 | 2 / 10 |" in text  # on / off: the speed cap is not pooled
+    assert "collided, speed cap / off" in text and "| `a` | 200 | 20 | 12 / 10 | 12 / 10 |" in text
+    assert "collided, on / speed cap" in text and "| `a` | 200 | 20 | 2 / 12 | 2 / 12 |" in text
+    assert "speed cap" not in report(runs)

@@ -8,9 +8,11 @@ from pathlib import Path
 
 import pytest
 from egc_common import config as config_mod
+from egc_common.errors import UsageError
 from egc_common.transport import ZenohOptions, build_config
 from egc_operator.cli import JOYSTICK_KEYS, OPERATOR_KEYS
 from egc_operator.joystick_evdev import ButtonMap
+from egc_robot.controller import ControllerConfig
 
 from egc_app.robot_cmd import build_controller_config
 
@@ -30,6 +32,20 @@ def test_robot_toml_matches_the_defaults():
     c = build_controller_config(args, cfg)
     assert (c.max_command_age_s, c.command_timeout_s, c.scan_timeout_s) == (0.3, 0.25, 0.2)
     assert c.nominal_period_s == pytest.approx(0.05)
+    defaults = ControllerConfig(c.pipeline)
+    for name in ("link_aware", "resume_window_s", "reaction_time_s", "latency_turn_cap"):
+        assert getattr(c, name) == getattr(defaults, name)
+    assert (c.blind_time_direct_s, c.blind_time_filtered_s) == (0.5, 1.0)
+
+
+def test_robot_config_switches_the_turn_cap_off(tmp_path):
+    path = tmp_path / "robot.toml"
+    path.write_text("[link]\nlatency_turn_cap = false\n")
+    args = argparse.Namespace(profile="jackal", filter="none", rate_hz=None)
+    assert build_controller_config(args, config_mod.load(path)).latency_turn_cap is False
+    path.write_text("[link]\nlatency_turn_cap = 0\n")
+    with pytest.raises(UsageError, match="latency_turn_cap must be true or false"):
+        build_controller_config(args, config_mod.load(path))
 
 
 def test_operator_toml_is_the_default_mapping():

@@ -118,6 +118,18 @@ def test_latency_cap_scales_the_command_as_a_whole() -> None:
     assert pred.pose[0] == pytest.approx(1.0 + 0.07 * 0.5, abs=1e-9)
 
 
+def test_turn_cap_scales_the_command_as_the_robot_does() -> None:
+    # The robot's governor caps the turn rate too (w_lim_latency): the ghost follows it.
+    assert command_velocity(SentCommand(0, 1.0, 1.0), P, 1.0, 0.1) == pytest.approx((0.028, 0.1))
+    assert command_velocity(SentCommand(0, 0.0, -1.0), P, 0.07, 0.1) == pytest.approx((0.0, -0.1))
+    assert command_velocity(SentCommand(0, 1.0, 0.2), P, 0.07, 0.5) == pytest.approx((0.07, 0.05))
+    spin = stream(0.0, 1.0, T0 - 400 * MS, T0 + 300 * MS)
+    free = run(spin, velocity=(0.0, 0.1))
+    capped = run(spin, velocity=(0.0, 0.1), w_lim=0.1)
+    assert capped.pose[2] == pytest.approx(0.1 * 0.5, abs=1e-9)
+    assert free.pose[2] > 2 * capped.pose[2]
+
+
 def test_empty_history_keeps_the_reference_the_telemetry_reports() -> None:
     pred = run([], velocity=(0.0, 0.0), reference=(V, 0.0))
     assert pred.velocity == pytest.approx((V, 0.0))  # reached after 0.47 s at 0.3 m/s^2

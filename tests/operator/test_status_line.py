@@ -31,6 +31,13 @@ CASES = [
         {"loop_delay_ms": 1310.0, "v_lim_latency": 0.1},
         "SLOWED: link delay 1.3 s -> speed capped at 0.10 m/s",
     ),
+    (
+        "DRIVING",
+        "fresh centred command",
+        "latency",
+        {"loop_delay_ms": 830.0, "v_lim_latency": 0.99, "w_lim_latency": 1.06},
+        "SLOWED: link delay 0.8 s -> speed capped at 0.99 m/s, turn at 1.06 rad/s",
+    ),
     ("DRIVING", "x", "latency", {}, "SLOWED: link delay -> speed capped"),
     ("DRIVING", "x", "egc", {"filter": "egc"}, "SLOWED: obstacle (filter egc)"),
     ("DRIVING", "x", "egc", {"filter": None}, "SLOWED: obstacle (filter egc)"),

@@ -5,12 +5,13 @@ from __future__ import annotations
 import math
 
 import pytest
-from egc_robot.latency_governor import govern, latency_speed_limit
+from egc_robot.latency_governor import govern, latency_speed_limit, latency_turn_limit
 from egc_robot.link_stats import LinkStats
 
 from tests.robot.test_controller import MS, PROFILE, driving_rig
 
 V_MAX, A_DEC = PROFILE.v_max_mps, PROFILE.decel_max_mps2
+W_MAX, ALPHA = PROFILE.w_max_radps, PROFILE.angular_accel_max_radps2
 
 
 def test_formula_covers_distance_during_tau_plus_braking_exactly_D():
@@ -110,3 +111,67 @@ def test_link_aware_off_has_no_governor():
         out = rig.cycle()
     assert out.telemetry.v_lim_latency is None
     assert out.base.linear_mps == pytest.approx(V_MAX)
+
+
+def test_turn_limit_covers_the_angle_turned_during_tau_plus_stopping_exactly_theta():
+    for tau in (0.0, 0.1, 0.75, 1.35, 3.0):
+        for blind in (0.5, 1.0):
+            w = latency_turn_limit(tau, W_MAX, ALPHA, blind)
+            assert w * tau + w * w / (2 * ALPHA) == pytest.approx(W_MAX * blind, rel=1e-12)
+
+
+@pytest.mark.parametrize("blind", [0.5, 1.0])
+def test_a_cap_is_off_exactly_when_blind_time_covers_tau_plus_half_the_stopping_time(blind):
+    # v_lim >= v_max  <=>  blind_time >= tau + v_max / (2 a_dec); the same for the turn rate.
+    for rate, decel, limit in (
+        (V_MAX, A_DEC, latency_speed_limit),
+        (W_MAX, ALPHA, latency_turn_limit),
+    ):
+        edge = blind - rate / (2 * decel)
+        assert limit(edge - 0.01, rate, decel, blind) > rate
+        assert limit(edge + 0.01, rate, decel, blind) < rate
+
+
+def test_turn_cap_keeps_design_9_examples_for_the_pioneer_in_a_filtered_mode():
+    assert latency_turn_limit(0.75, W_MAX, ALPHA, 1.0) > W_MAX  # no cap on 200 ms links
+    assert 0.6 < latency_turn_limit(1.35, W_MAX, ALPHA, 1.0) / W_MAX < 0.75
+
+
+@pytest.mark.parametrize(
+    "args", [(-0.1, W_MAX, ALPHA, 1.0), (0.5, math.inf, ALPHA, 1.0), (0.5, W_MAX, 0.0, 1.0)]
+)
+def test_bad_turn_arguments_raise_naming_them(args):
+    with pytest.raises(ValueError, match=r"tau_s|w_max_radps|alpha_dec_radps2"):
+        latency_turn_limit(*args)
+
+
+def test_govern_scales_by_the_tighter_cap_and_keeps_the_curvature():
+    v, w, acted = govern(0.14, 0.5, 0.10, 0.25)  # speed wants 0.71, turn 0.5: turn wins
+    assert acted and w == pytest.approx(0.25) and v == pytest.approx(0.07)
+    v, w, acted = govern(0.14, -0.1, 0.07, 0.25)  # speed wins
+    assert acted and v == pytest.approx(0.07) and w == pytest.approx(-0.05)
+    v, w, acted = govern(0.0, -0.5, 0.07, 0.25)  # a turn in place: only the turn cap acts
+    assert acted and (v, w) == (0.0, pytest.approx(-0.25))
+    assert govern(0.05, 0.2, 0.07, 0.25) == (0.05, 0.2, False)
+
+
+def test_controller_caps_a_turn_in_place_in_direct_mode_at_its_own_tau():
+    rig = driving_rig()
+    for _ in range(60):
+        rig.send(x=0.0, y=1.0, delay_ms=280, mode="direct", view_age_ms=300)
+        out = rig.cycle()
+    t = out.telemetry
+    tau = t.loop_delay_ms / 1e3
+    w_lim = latency_turn_limit(tau, W_MAX, ALPHA, 0.5)
+    assert t.w_lim_latency == pytest.approx(w_lim) and w_lim < 0.6 * W_MAX
+    assert t.limiter == "latency"
+    assert out.base.linear_mps == 0.0 and out.base.angular_radps == pytest.approx(w_lim)
+
+
+def test_latency_turn_cap_off_leaves_the_turn_rate_alone():
+    rig = driving_rig(latency_turn_cap=False)
+    for _ in range(60):
+        rig.send(x=0.0, y=1.0, delay_ms=280, mode="direct", view_age_ms=300)
+        out = rig.cycle()
+    assert out.telemetry.w_lim_latency is None and out.telemetry.v_lim_latency is not None
+    assert out.base.angular_radps == pytest.approx(W_MAX)
