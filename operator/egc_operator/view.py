@@ -108,6 +108,7 @@ SERIES_STYLE = (
     ("latency/scan_age_ms", "scan age", (120, 120, 120)),
     ("latency/link_rtt_ms", "link round trip", (0, 130, 160)),
     ("v/lim_latency", "v cap (latency governor)", LATENCY_BROWN),
+    ("w/lim_latency", "w cap (latency governor)", LATENCY_BROWN),
     *(
         (f"latency/{name}", label, colour)
         for name, label, colour in zip(

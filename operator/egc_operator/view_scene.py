@@ -189,7 +189,7 @@ def time_series(t: Telemetry) -> dict[str, float]:
     """Scalar plots of one cycle, keyed by the series' name under ``plots/`` (paper Fig. 11).
 
     Ages and link figures are only present when the robot measured them this cycle; the
-    latency governor's cap is drawn with the speeds (``v/lim_latency``).
+    latency governor's caps are drawn with the speeds (``v/lim_latency``, ``w/lim_latency``).
     """
     series = {
         "v/ref": t.v_ref,

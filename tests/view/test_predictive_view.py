@@ -274,6 +274,12 @@ def test_latency_limiter_is_shown_with_its_cap() -> None:
     assert time_series(t)["v/lim_latency"] == 0.1
     assert time_series(t)["latency/loop_delay_ms"] == 1310.0
     assert "v/lim_latency" not in time_series(telemetry(1))
+    turn = telemetry(1, limiter="latency", v_lim_latency=0.1, w_lim_latency=0.27)
+    assert "limit: latency <= 0.10 m/s, 0.27 rad/s" in status_text(turn)
+    assert "speed capped at 0.10 m/s, turn at 0.27 rad/s" in link_text(
+        None, False, None, None, turn, None
+    )
+    assert time_series(turn)["w/lim_latency"] == 0.27
 
 
 def test_status_text_says_why_the_robot_is_not_driving() -> None:
