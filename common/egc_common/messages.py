@@ -398,7 +398,7 @@ class Telemetry:
     link_loss: float | None = None  # fraction of seq missing over the last second
     view_age_ms: float | None = None  # the controlling operator's latest report
     v_lim_latency: float | None = None  # the latency governor's cap, m/s
-    w_lim_latency: float | None = None  # its cap on the turn rate, rad/s (None: not capped)
+    w_lim_latency: float | None = None  # its cap on the turn rate, rad/s, when below w_max
     # Via points (DESIGN 7 goal): the active one in its frame, how many remain after it, and
     # the direction the filter suggests in {R} (rad; assist), for the view.
     goal: tuple[float, float] | None = None

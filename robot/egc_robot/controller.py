@@ -652,7 +652,10 @@ class RobotController:
             link_loss=link.link_loss,
             view_age_ms=link.view_age_ms,
             v_lim_latency=v_lim,
-            w_lim_latency=w_lim,
+            # Only a turn cap that can bind (below w_max) is reported, so the view stays quiet.
+            w_lim_latency=w_lim
+            if w_lim is not None and w_lim < self.config.pipeline.profile.w_max_radps
+            else None,
             goal=route.active,
             goal_frame=route.frame if route.active is not None else None,
             goals_left=route.remaining_after_active,

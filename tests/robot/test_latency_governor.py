@@ -93,6 +93,7 @@ def test_controller_does_not_cap_a_filtered_mode_on_a_200_ms_link():
         out = rig.cycle()
     assert out.telemetry.limiter == "none"
     assert out.base.linear_mps == pytest.approx(V_MAX)
+    assert out.telemetry.w_lim_latency is None  # the turn cap lies above w_max: not reported
 
 
 def test_controller_caps_a_filtered_mode_on_a_500_ms_link():
