@@ -57,6 +57,24 @@ def ramp_toward(target: float, current: float, up: float, down: float) -> float:
     return current + max(-step, min(step, target - current))
 
 
+def scale_as_whole(
+    v_mps: float, w_radps: float, v_lim_mps: float, w_lim_radps: float = math.inf
+) -> tuple[float, float, bool]:
+    """(v, w) scaled by one factor so that |v| <= v_lim and |w| <= w_lim (the tighter cap
+    wins): the curvature w / v stays, so the path keeps its shape. The flag says whether it
+    scaled. The latency governor (DESIGN 9) on the robot and its prediction in the view share
+    it, so that the view predicts what the robot does."""
+    scale = 1.0
+    speed, turn = abs(v_mps), abs(w_radps)
+    if speed > v_lim_mps:
+        scale = max(v_lim_mps, 0.0) / speed
+    if turn > w_lim_radps:
+        scale = min(scale, max(w_lim_radps, 0.0) / turn)
+    if scale >= 1.0:
+        return v_mps, w_radps, False
+    return v_mps * scale, w_radps * scale, True
+
+
 def wheel_speeds(v_mps: float, w_radps: float, wheel_base_m: float) -> tuple[float, float]:
     """(left, right) wheel rim speeds for a body twist (inverse of eq. 2)."""
     half = 0.5 * wheel_base_m * w_radps

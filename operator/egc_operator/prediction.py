@@ -30,7 +30,7 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from egc_common.kinematics import integrate_arc, ramp_toward
+from egc_common.kinematics import integrate_arc, ramp_toward, scale_as_whole
 from egc_common.messages import Telemetry
 from egc_common.profiles import PROFILES, RobotProfile
 
@@ -136,12 +136,13 @@ def command_velocity(
 def _govern(
     v: float, w: float, v_lim: float | None, w_lim: float | None = None
 ) -> tuple[float, float]:
-    scale = 1.0
-    if v_lim is not None and math.isfinite(v_lim) and abs(v) > v_lim:
-        scale = max(v_lim, 0.0) / abs(v)
-    if w_lim is not None and math.isfinite(w_lim) and abs(w) > w_lim:
-        scale = min(scale, max(w_lim, 0.0) / abs(w))
-    return v * scale, w * scale
+    """The robot's latency governor (the same ``scale_as_whole``); an unknown cap is none."""
+    v, w, _ = scale_as_whole(v, w, _cap(v_lim), _cap(w_lim))
+    return v, w
+
+
+def _cap(limit: float | None) -> float:
+    return limit if limit is not None and math.isfinite(limit) else math.inf
 
 
 def predict(

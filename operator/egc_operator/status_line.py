@@ -62,6 +62,15 @@ def _seconds(ms: float) -> str:
     return f"{ms / 1000.0:.1f} s"
 
 
+def latency_cap_text(v_lim: float | None, w_lim: float | None) -> str:
+    """The latency governor's caps as the status line and the view's link panel say them:
+    `` at 0.99 m/s, turn at 1.06 rad/s`` (each part only when the robot reports it)."""
+    cap = "" if v_lim is None else f" at {v_lim:.2f} m/s"
+    if w_lim is not None:
+        cap += f", turn at {w_lim:.2f} rad/s"
+    return cap
+
+
 def _hold(s: Status, reason: str) -> str:
     r = reason.lower()
     if r == "command timeout":
@@ -97,9 +106,7 @@ def _driving(s: Status, reason: str) -> str:
     limiter = s.limiter or "none"
     if limiter == "latency":
         delay = "" if s.loop_delay_ms is None else f" {_seconds(s.loop_delay_ms)}"
-        cap = "" if s.v_lim_latency is None else f" at {s.v_lim_latency:.2f} m/s"
-        if s.w_lim_latency is not None:
-            cap += f", turn at {s.w_lim_latency:.2f} rad/s"
+        cap = latency_cap_text(s.v_lim_latency, s.w_lim_latency)
         return f"SLOWED: link delay{delay} -> speed capped{cap}"
     if limiter in FILTER_LIMITERS:
         return f"SLOWED: obstacle (filter {limiter})"

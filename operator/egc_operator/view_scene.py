@@ -26,6 +26,7 @@ from egc_common.messages import Circle, Telemetry
 from egc_common.profiles import PROFILES, RobotProfile
 
 from egc_operator.prediction import Prediction
+from egc_operator.status_line import latency_cap_text
 from egc_operator.via_route import Route, active_index
 
 F32 = npt.NDArray[np.float32]
@@ -491,9 +492,7 @@ def link_text(
             f"command age on arrival p50 {_ms(t.cmd_age_p50_ms)}, p90 {_ms(t.cmd_age_p90_ms)}"
         )
     if t is not None and t.limiter == "latency":
-        cap = "" if t.v_lim_latency is None else f" at {t.v_lim_latency:.2f} m/s"
-        if t.w_lim_latency is not None:
-            cap += f", turn at {t.w_lim_latency:.2f} rad/s"
+        cap = latency_cap_text(t.v_lim_latency, t.w_lim_latency)
         lines.append(f"limit: latency - speed capped{cap}")
     if prediction is None:
         lines.append("ghost: no prediction (no pose, unknown profile or clock not synced)")

@@ -26,6 +26,11 @@ from __future__ import annotations
 
 import math
 
+# govern: the command scaled as a whole by the tighter cap, shared with the view's prediction.
+from egc_common.kinematics import scale_as_whole as govern
+
+__all__ = ["govern", "latency_speed_limit", "latency_turn_limit"]
+
 
 def _latency_limit(
     tau_s: float, rate_max: float, decel: float, blind_time_s: float, names: tuple[str, str]
@@ -58,19 +63,3 @@ def latency_turn_limit(
     return _latency_limit(
         tau_s, w_max_radps, alpha_dec_radps2, blind_time_s, ("w_max_radps", "alpha_dec_radps2")
     )
-
-
-def govern(
-    v_mps: float, w_radps: float, v_lim_mps: float, w_lim_radps: float = math.inf
-) -> tuple[float, float, bool]:
-    """(v, w) scaled as a whole so that |v| <= v_lim and |w| <= w_lim; the flag says whether it
-    acted."""
-    scale = 1.0
-    speed, turn = abs(v_mps), abs(w_radps)
-    if speed > v_lim_mps:
-        scale = max(v_lim_mps, 0.0) / speed
-    if turn > w_lim_radps:
-        scale = min(scale, max(w_lim_radps, 0.0) / turn)
-    if scale >= 1.0:
-        return v_mps, w_radps, False
-    return v_mps * scale, w_radps * scale, True
