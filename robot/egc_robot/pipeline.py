@@ -34,9 +34,11 @@ from egc_robot.filters.family import (
 )
 from egc_robot.safety import (
     SweepParams,
+    brake_along,
     increases_clearance,
     limit_acceleration,
     limit_velocity,
+    reachable,
     sweep_scale,
 )
 
@@ -187,6 +189,10 @@ def filter_velocity(
     scale = sweep_scale(v, w, obstacles, profile, config.sweep) if shared else 1.0
     if scale < 1.0:
         v, w = scale * v, scale * w
+        if previous_cmd is not None and not reachable(v, w, previous_cmd, dt_s, profile):
+            # More braking than the base can do: it would still be faster than the sweep
+            # assumed. Brake as hard as it can on the arc the previous cycle checked.
+            v, w = brake_along(previous_cmd, dt_s, profile)
         limiter = Limiter.SWEEP
     elif (
         family is not None

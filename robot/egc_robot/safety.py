@@ -7,6 +7,12 @@ sweep is clear. "Clear" means the footprint's signed clearance to every point ne
 ``min(margin, clearance now)``: far from obstacles the margin is kept; already closer than the
 margin, motion may only keep or increase the clearance. This is what lets a robot next to a
 wall turn in place or back away (no dead-lock) while never driving into it.
+
+The sweep assumes the base is at the scaled command within one period. A base brakes no harder
+than its deceleration limit, though: when the scaled command asks for more braking than that,
+the base would still be faster than the sweep assumed (a robot at 1.7 m/s meeting a new
+obstacle on a new arc). ``brake_along`` is the pipeline's answer then: brake as hard as the base
+can, on the arc of the previous command, whose stop the previous cycle's sweep checked.
 """
 
 from __future__ import annotations
@@ -179,6 +185,36 @@ def limit_acceleration(
         ramp_toward(v_mps, previous[0], dv_up, dv_down),
         ramp_toward(w_radps, previous[1], dw, dw),
     )
+
+
+def reachable(
+    v_mps: float,
+    w_radps: float,
+    previous: tuple[float, float],
+    dt_s: float,
+    profile: RobotProfile,
+) -> bool:
+    """Whether the base can be at (v, w) one period after ``previous`` (acceleration limits)."""
+    lv, lw = limit_acceleration(v_mps, w_radps, previous, dt_s, profile)
+    return abs(lv - v_mps) <= _EPS and abs(lw - w_radps) <= _EPS
+
+
+def brake_along(
+    previous: tuple[float, float], dt_s: float, profile: RobotProfile
+) -> tuple[float, float]:
+    """The hardest braking the base can do on the previous command's arc (same curvature).
+
+    The previous cycle's sweep checked this stop (one period at the previous command, then the
+    ramp down on its arc), so it stays clear where a sharper command could not be reached in
+    time. On a straight line or a turn in place a zero command keeps the arc (and lets a base
+    that brakes harder than the profile stop sooner); on a curve only the pair braking at the
+    limits together keeps it.
+    """
+    v_prev, w_prev = previous
+    if v_prev == 0.0 or w_prev == 0.0:
+        return 0.0, 0.0
+    v = ramp_toward(0.0, v_prev, 0.0, profile.decel_max_mps2 * dt_s)
+    return limit_acceleration(v, w_prev * v / v_prev, previous, dt_s, profile)
 
 
 def decelerate(

@@ -23,6 +23,7 @@ from egc_robot.filters.assist import (
     AssistParams,
     AssistResult,
     assist_step,
+    corridor_clear,
     stick_cell,
 )
 from egc_robot.safety import SweepParams, limit_acceleration, limit_velocity, sweep_scale
@@ -348,22 +349,91 @@ def test_no_via_point_is_joystick_plus_avoidance():
     assert near.v_mps > 0.0  # speed from the stick's forward deflection
 
 
-# -- wall following -------------------------------------------------------------------------------
+# -- detours ------------------------------------------------------------------------------------
 
 # A wall across the way to a via point 3 m ahead; its left end is nearer the via point's line.
 WALL_OPEN_LEFT = line(0.9, -1.5, 0.9, 0.2)
 WALL_OPEN_RIGHT = line(0.9, -0.2, 0.9, 1.5)
 
 
-def test_rule_wall_follow_right():
+def _clear(points: np.ndarray, heading: float) -> bool:
+    return corridor_clear(
+        obstacle_points(points), heading, PARAMS.block_m, PARAMS.detour_half_width_m
+    )
+
+
+def test_rule_detour():
+    """Something across the way to the via point: steer for the nearest heading whose way is
+    clear at the footprint's width plus margin, on the open side."""
     r = run(1.0, 0.0, WALL_OPEN_LEFT, goal=(3.0, 0.0))
+    assert r.rule == "detour"
+    assert math.radians(20) < r.heading_rad < math.radians(60) and r.w_radps > 0.0
+    assert _clear(WALL_OPEN_LEFT, r.heading_rad)
+    nearer = r.heading_rad - PARAMS.detour_step_rad
+    assert not _clear(WALL_OPEN_LEFT, nearer) and not _clear(WALL_OPEN_LEFT, -nearer)
+    assert r.memory.detour == 1.0 and r.memory.wall_side is None
+    right = run(1.0, 0.0, WALL_OPEN_RIGHT, goal=(3.0, 0.0))
+    assert right.rule == "detour" and right.heading_rad < 0.0 and right.memory.detour == -1.0
+
+
+def test_a_detour_keeps_its_side_in_front_of_a_symmetric_obstacle():
+    block = line(0.9, -0.5, 0.9, 0.5)
+    for side in (1.0, -1.0):
+        memory = replace(AssistMemory.initial(), detour=side)
+        r = run(1.0, 0.0, block, goal=(3.0, 0.0), memory=memory)
+        assert r.rule == "detour" and math.copysign(1.0, r.heading_rad) == side
+
+
+def test_a_detour_ends_once_the_way_to_the_via_point_is_clear():
+    detouring = run(1.0, 0.0, WALL_OPEN_LEFT, goal=(3.0, 0.0)).memory
+    past = line(-0.5, -1.0, 0.2, -1.0)  # the wall now behind, on the right
+    r = run(1.0, 0.0, past, goal=(2.5, -0.3), memory=detouring, t0_ms=1000)
+    assert r.rule == "goal" and r.heading_rad == pytest.approx(math.atan2(-0.3, 2.5))
+
+
+# -- wall following -------------------------------------------------------------------------------
+
+# Wall following on its own: the scenes above have a detour, so these tests turn detours off.
+NO_DETOUR = replace(PARAMS, detour_max_rad=0.0)
+# A pocket: a wall across the way and walls on both sides. No heading within 90 degrees of the
+# via point is clear, so even with detours on the robot follows a wall out of it.
+POCKET = np.vstack(
+    [line(0.9, -1.5, 0.9, 1.5), line(-0.5, 0.6, 0.9, 0.6), line(-0.5, -0.6, 0.9, -0.6)]
+)
+
+
+def test_wall_following_begins_where_no_detour_is_clear():
+    r = run(1.0, 0.0, POCKET, goal=(3.0, 0.2))
+    assert r.rule.startswith("wall-follow") and r.memory.wall_side is not None
+
+
+def test_wall_following_gives_up_when_the_via_point_falls_behind():
+    following = run(1.0, 0.0, WALL_OPEN_LEFT, goal=(3.0, 0.0), params=NO_DETOUR).memory
+    assert following.wall_side == "right" and following.wall_entry_m == pytest.approx(3.0)
+    wall = line(-0.5, -PARAMS.wall_distance_m, 0.6, -PARAMS.wall_distance_m, 80)
+    # Closer than entry + wall_retreat_m: still following.
+    near = 3.0 + 0.8 * PARAMS.wall_retreat_m
+    stay = run(
+        1.0, 0.0, wall, goal=(near, 0.0), memory=following, t0_ms=1000, cycles=1, params=NO_DETOUR
+    )
+    assert stay.rule == "wall-follow-right"
+    far = 3.0 + 1.2 * PARAMS.wall_retreat_m
+    gone = run(
+        1.0, 0.0, wall, goal=(far, 0.0), memory=following, t0_ms=1000, cycles=1, params=NO_DETOUR
+    )
+    assert gone.memory.wall_side is None and not gone.rule.startswith("wall-follow")
+    assert gone.memory.last_wall_side == "left"  # gave up: the other side next time
+
+
+def test_rule_wall_follow_right():
+    r = run(1.0, 0.0, WALL_OPEN_LEFT, goal=(3.0, 0.0), params=NO_DETOUR)
     assert r.rule == "wall-follow-right"  # goes round by the left: the wall on its right
     assert r.memory.wall_side == "right" and r.memory.wall_entry_m == pytest.approx(3.0)
     assert r.heading_rad > math.radians(45) and r.w_radps > 0.0
 
 
 def test_rule_wall_follow_left():
-    r = run(1.0, 0.0, WALL_OPEN_RIGHT, goal=(3.0, 0.0))
+    r = run(1.0, 0.0, WALL_OPEN_RIGHT, goal=(3.0, 0.0), params=NO_DETOUR)
     assert r.rule == "wall-follow-left"
     assert r.heading_rad < -math.radians(45) and r.w_radps < 0.0
 
@@ -377,9 +447,11 @@ def test_wall_following_is_entered_only_on_the_way_to_the_via_point():
 
 def test_wall_following_parallel_to_a_wall_on_the_right():
     """Following with the wall at the follow distance on the right: drive straight along it."""
-    following = run(1.0, 0.0, WALL_OPEN_LEFT, goal=(3.0, 0.0)).memory
+    following = run(1.0, 0.0, WALL_OPEN_LEFT, goal=(3.0, 0.0), params=NO_DETOUR).memory
     wall = line(-0.5, -PARAMS.wall_distance_m, 0.6, -PARAMS.wall_distance_m, 80)
-    r = run(1.0, 0.0, wall, goal=(3.0, -0.3), memory=following, t0_ms=1000, cycles=1)
+    r = run(
+        1.0, 0.0, wall, goal=(3.0, -0.3), memory=following, t0_ms=1000, cycles=1, params=NO_DETOUR
+    )
     assert r.rule == "wall-follow-right"
     assert r.heading_rad == pytest.approx(0.0, abs=0.05)
     assert r.v_mps > 0.9 * P.v_max_mps
@@ -387,27 +459,37 @@ def test_wall_following_parallel_to_a_wall_on_the_right():
 
 def test_wall_following_turns_in_place_with_something_right_ahead():
     """FRONT CLOSE and a sharp turn: turning on an arc there is what the sweep would stop."""
-    r = run(1.0, 0.0, line(0.45, -0.8, 0.45, 0.2, 40), goal=(3.0, 0.0))
+    r = run(1.0, 0.0, line(0.45, -0.8, 0.45, 0.2, 40), goal=(3.0, 0.0), params=NO_DETOUR)
     assert r.rule == "wall-follow-right" and r.levels[FRONT] == CLOSE
     assert r.v_mps == 0.0 and r.w_radps == pytest.approx(P.w_max_radps)
 
 
 def test_wall_following_leaves_when_the_way_is_clear_and_closer():
-    following = run(1.0, 0.0, WALL_OPEN_LEFT, goal=(3.0, 0.0)).memory  # entered 3.0 m away
+    following = run(1.0, 0.0, WALL_OPEN_LEFT, goal=(3.0, 0.0), params=NO_DETOUR).memory
     beside = line(-0.5, -0.6, 0.4, -0.6, 20)  # the obstacle now on the right, way ahead clear
-    # Farther from the via point than where following began: keep following (Bug2 rule).
-    stay = run(1.0, 0.0, beside, goal=(3.5, 0.0), memory=following, t0_ms=1000, cycles=6)
+    # Farther from the via point than where following began (within wall_retreat_m): keep
+    # following (Bug2 rule).
+    kw = {"memory": following, "t0_ms": 1000, "params": NO_DETOUR}
+    stay = run(1.0, 0.0, beside, goal=(3.3, 0.0), cycles=6, **kw)
     assert stay.rule == "wall-follow-right"
     # Closer and the way clear: leave, and steer at the via point at once (the footprint's way
     # to it is clear, so the wall still counted ahead in the histogram does not hold it back).
-    leave = run(1.0, 0.0, beside, goal=(2.0, 0.1), memory=following, t0_ms=1000, cycles=1)
+    leave = run(1.0, 0.0, beside, goal=(2.0, 0.1), cycles=1, **kw)
     assert leave.memory.wall_side is None and leave.rule == "goal"
     assert leave.levels[FRONT] is not None
-    leave = run(1.0, 0.0, beside, goal=(2.0, 0.1), memory=following, t0_ms=1000, cycles=6)
+    leave = run(1.0, 0.0, beside, goal=(2.0, 0.1), cycles=6, **kw)
     assert leave.rule == "goal" and leave.memory.wall_side is None
     assert leave.memory.last_wall_side == "right"
     # Blocked again soon after: the same side again (no swapping round one obstacle).
-    again = run(1.0, 0.0, WALL_OPEN_RIGHT, goal=(3.0, 0.0), memory=leave.memory, t0_ms=2000)
+    again = run(
+        1.0,
+        0.0,
+        WALL_OPEN_RIGHT,
+        goal=(3.0, 0.0),
+        memory=leave.memory,
+        t0_ms=2000,
+        params=NO_DETOUR,
+    )
     assert again.rule == "wall-follow-right"
 
 
@@ -450,7 +532,7 @@ def test_a_stick_in_line_with_the_via_point_is_not_an_override():
     for t in range(0, 3001, DT_MS):
         r = assist_step(mem, 1.0, 0.0, WALL_OPEN_LEFT, (3.0, 0.0), t * MS, PARAMS, P)
         mem = r.memory
-        assert r.rule == "wall-follow-right" or t < 100
+        assert r.rule == "detour" or t < 100
     assert r.confidence == 1.0
 
 
@@ -528,8 +610,8 @@ def test_closed_loop_goal_behind_a_single_obstacle_is_reached():
     reached, rules = drive(sim, goal, PARAMS, 120.0, 0.3)
     assert reached and not sim.collided
     assert sim.min_clearance_m > 0.0
-    follow = [i for i, r in enumerate(rules) if r.startswith("wall-follow")]
-    assert follow, "the block ahead on the way to the via point starts wall following"
-    assert "goal" in rules[follow[-1] :], "and the robot leaves it once the way is clear"
+    around = [i for i, r in enumerate(rules) if r == "detour"]
+    assert around, "the block ahead on the way to the via point is passed by a detour"
+    assert "goal" in rules[around[-1] :], "and the robot heads for the via point once clear"
     # The straight line costs 4 m at 0.14 m/s (29 s); round the block well within 2x that.
     assert sim.time_s < 60.0

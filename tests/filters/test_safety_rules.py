@@ -12,7 +12,9 @@ from egc_robot.filters.egc import EgcCase
 from egc_robot.pipeline import Limiter, PipelineConfig, filter_velocity, step_command
 from egc_robot.safety import (
     SweepParams,
+    brake_along,
     footprint_clearance,
+    reachable,
     stopping_time_s,
     sweep_min_clearance,
     sweep_scale,
@@ -137,3 +139,16 @@ def test_no_scan_in_shared_mode_stops():
     out = step_command(P3DX_CFG, 1.0, 0.0, "shared", np.empty((0, 2)), (0.14, 0.0), 0.05)
     assert out.filtered.case is EgcCase.NO_POINTS_UNKNOWN
     assert out.v_cmd_mps < 0.14  # decelerating toward the filter's stop
+
+
+def test_brake_along_keeps_the_previous_arc_at_the_braking_limit():
+    v, w = brake_along((1.7, 0.55), 0.05, JACKAL)
+    assert v == pytest.approx(1.7 - JACKAL.decel_max_mps2 * 0.05)
+    assert w / v == pytest.approx(0.55 / 1.7)  # same curvature
+    assert reachable(v, w, (1.7, 0.55), 0.05, JACKAL)
+    assert not reachable(0.6, 0.2, (1.7, 0.55), 0.05, JACKAL)  # more braking than the base has
+    back = brake_along((-0.5, 0.3), 0.05, JACKAL)
+    assert back[0] == pytest.approx(-0.5 + 0.15) and back[1] / back[0] == pytest.approx(-0.6)
+    # A straight line or a turn in place: a zero command keeps the arc.
+    assert brake_along((1.7, 0.0), 0.05, JACKAL) == (0.0, 0.0)
+    assert brake_along((0.0, 1.5), 0.05, JACKAL) == (0.0, 0.0)

@@ -67,11 +67,25 @@ How each part maps to the paper
   requested by the joystick" (rule ``blend``); without a via point the heading is the one whose
   turn rate is the stick's eq. 4 turn rate (theta = w_ref / gain), so with nothing active the
   stick passes unchanged (rule ``free``): joystick plus avoidance.
+- **Detour** (deviation, issue 11): when heading for the via point (rule ``goal``) with FRONT
+  active at CLOSE or INTERMEDIATE and the corridor towards the via point blocked within
+  ``block_m``, the robot first looks for the heading nearest the via point, within
+  ``detour_max_rad`` (90 deg) either side in ``detour_step_rad`` steps, whose way is clear for
+  ``block_m`` at ``detour_half_width_m`` (the footprint's width W: half a width of margin either
+  side, so the sweep does not stop it beside the obstacle) and steers there (rule ``detour``;
+  a tie keeps the side of the last detour, so the robot does not swap sides in front of a
+  symmetric obstacle). Every cycle starts again from the via point, so the robot turns back to
+  it as soon as its way is clear. Only when no such heading exists (a pocket, a wall across
+  everything ahead) does wall following begin. Measured on the seeded random worlds (pioneer3dx,
+  `goal` operator, 500 worlds never used for tuning before, seeds 0-399 and 1000-1099): 447/500
+  reached with detours and the retreat limit below, 408/500 without; no contact either way. The
+  tangent follower alone wandered round obstacle clusters and along the room's walls until the
+  time ran out. ``detour_max_rad`` = 0 turns detours off.
 - **Wall following** (sec. V: "an obstacle in front while moving toward a target destination ...
   rotate to align with and then move parallel to the wall"). Entered when heading for the via
-  point (rule ``goal``) with FRONT active at CLOSE or INTERMEDIATE and the corridor towards the
-  via point blocked within ``block_m``. The side is the one on which a free corridor opens
-  nearest to the via point's direction (a tangent-bug choice; the side just used is kept for
+  point (rule ``goal``) with FRONT active at CLOSE or INTERMEDIATE, the corridor towards the
+  via point blocked within ``block_m`` and no detour. The side is the one on which a free
+  corridor opens nearest to the via point's direction (a tangent-bug choice; the side just used is kept for
   ``rejoin_s`` so the robot does not swap sides around one obstacle). The paper gives no
   formula; ours is a tangent follower: with m the nearest scan point on the wall's side (or
   ahead) within ``wall_range_m``, at angle alpha and distance d, theta = alpha -+ pi/2 (parallel
@@ -87,9 +101,11 @@ How each part maps to the paper
   to the via point at the footprint's width plus 5 cm (``way_half_width_m``), not the FRONT
   sector's 0.75 W: MRPB's corridors are about 1 m wide and the route keeps the robot's centre
   only 0.29 m off the walls, so the wider strip saw walls beside the route as "blocked". After
-  ``wall_max_s`` of following without getting closer than where it began, it gives up and the
-  next entry takes the other side (issue 11: in a pocket with the via point behind its wall the
-  tangent follower went round the pocket for ever).
+  ``wall_max_s`` of following without getting closer than where it began, or as soon as the via
+  point is ``wall_retreat_m`` (the footprint's length) farther than where it began, it gives up
+  and the next entry takes the other side (issue 11: in a pocket with the via point behind its
+  wall the tangent follower went round the pocket for ever, and a follower that reached the
+  room's wall followed it away from the via point).
 - **Operator's override** (sec. V: "if the joystick remained fixed (roughly) in a particular
   position then that input was integrated over time and the wishes of the tele-operator overrode
   that behaviour"; avoidance "initially overrode other behaviours"): the memory integrates, like
@@ -104,8 +120,8 @@ Rules (names reported in ``AssistResult.rule``), in the order they are tried
 does not declare no-return as free, DESIGN 5.9 NO_POINTS_UNKNOWN: nothing seen is not free: stop),
 ``idle`` (stick centred: stop), ``reverse`` (x_o < 0: the stick's eq. 4 command; the rules look
 ahead only, the sweep guards the reverse), ``override``, ``wall-follow-left`` /
-``wall-follow-right``, ``avoid-front``, ``gap``, ``avoid-left`` / ``avoid-right``, and with
-nothing active ``goal``, ``blend`` or ``free``.
+``wall-follow-right``, ``detour``, ``avoid-front``, ``gap``, ``avoid-left`` / ``avoid-right``,
+and with nothing active ``goal``, ``blend`` or ``free``.
 """
 
 from __future__ import annotations
@@ -136,6 +152,7 @@ RULES = (
     "override",
     "wall-follow-left",
     "wall-follow-right",
+    "detour",
     "avoid-front",
     "gap",
     "avoid-left",
@@ -193,6 +210,16 @@ class AssistParams:
     progress_m: float = 0.05
     rejoin_s: float = 5.0
     wall_max_s: float = 30.0
+    # Wall following gives up when the via point is this much farther (m) than where it began:
+    # the wall leads away (a room's wall is followed for ever otherwise).
+    wall_retreat_m: float = 0.455
+    # Detour (rule ``detour``): the free heading nearest the via point, searched this far (rad)
+    # either side of it in steps of ``detour_step_rad`` (0: no detours).
+    detour_max_rad: float = math.radians(90.0)
+    detour_step_rad: float = math.radians(5.0)
+    # Half width (m) of the way a detour must find clear: the footprint's width W, so half a
+    # width of margin either side (a detour that grazes obstacles ends where the sweep stops it).
+    detour_half_width_m: float = 0.381
     # Half width (m) of the way to the via point that wall following checks (entry, leave).
     way_half_width_m: float = 0.2405
     # A via point closer than this (m) gives no direction: joystick plus avoidance.
@@ -231,6 +258,7 @@ class AssistParams:
             "block_m",
             "leave_clear_m",
             "wall_max_s",
+            "detour_step_rad",
             "way_half_width_m",
             "max_dt_s",
         )
@@ -272,6 +300,8 @@ class AssistParams:
             "wall_range_m": r_max + length,
             "block_m": r_max + length,
             "leave_clear_m": r_max + 2.0 * length,
+            "detour_half_width_m": profile.width_m,
+            "wall_retreat_m": length,
         }
         derived.update(overrides)
         return AssistParams(**derived)
@@ -315,7 +345,8 @@ class AssistMemory:
     "left" / "right" while wall following (the side the wall is on), ``wall_entry_m``: the via
     point's distance when following began; ``last_wall_side`` / ``wall_left_ns``: the side used
     last and when following ended; ``front_turn``: the way (+1 left, -1 right) ``avoid-front``
-    is turning, kept while it keeps firing (0: it did not fire last cycle).
+    is turning, kept while it keeps firing (0: it did not fire last cycle); ``detour``: the side
+    (+1 left, -1 right) of the last detour, preferred on a tie (0: none yet).
     """
 
     counts: Grid = _ZERO_GRID
@@ -330,6 +361,7 @@ class AssistMemory:
     wall_left_ns: int | None = None
     front_turn: float = 0.0
     wall_start_ns: int | None = None
+    detour: float = 0.0
 
     @staticmethod
     def initial() -> AssistMemory:
@@ -521,6 +553,21 @@ def _way_is_free(
     return corridor_clear(obstacles, bearing, params.block_m, params.way_half_width_m)
 
 
+def _free_heading(
+    obstacles: ObstaclePoints, bearing: float, params: AssistParams, prefer: float
+) -> float | None:
+    """The heading nearest ``bearing`` (within ``detour_max_rad``) whose footprint-wide way is
+    clear for ``block_m``; on a tie of the two sides, ``prefer`` (+1 left, -1 right, 0 none)."""
+    n = int(params.detour_max_rad / params.detour_step_rad)
+    order = (1.0, -1.0) if prefer >= 0.0 else (-1.0, 1.0)
+    for k in range(1, n + 1):
+        for sign in order:
+            h = bearing + sign * k * params.detour_step_rad
+            if corridor_clear(obstacles, h, params.block_m, params.detour_half_width_m):
+                return _wrap(h)
+    return None
+
+
 def _avoid(
     theta: float,
     levels: tuple[int | None, int | None, int | None],
@@ -607,6 +654,7 @@ def assist_step(
         wall: tuple[str | None, float] = (None, math.inf),
         bearing: float | None = None,
         gave_up: bool = False,
+        detour: float = 0.0,
     ) -> AssistResult:
         turning = rule == "avoid-front" and heading is not None and v == 0.0
         turn = math.copysign(1.0, heading) if turning and heading is not None else 0.0
@@ -633,6 +681,7 @@ def assist_step(
             left_ns,
             turn,
             start_ns,
+            detour,
         )
         modified = abs(v - v_ref) > _SAME or abs(w - w_ref) > _SAME
         return AssistResult(
@@ -675,6 +724,8 @@ def assist_step(
 
     rule: str
     theta: float
+    detour_heading: float | None = None
+    detour_turn = memory.detour
     if source == "goal" and bearing is not None:
         side = memory.wall_side
         front = levels[FRONT]
@@ -683,8 +734,10 @@ def assist_step(
                 obs, bearing, min(distance, params.block_m), params.way_half_width_m
             )
             if front is not None and front <= INTERMEDIATE and blocked and abs(bearing) < _HALF_PI:
-                side = _choose_wall_side(obs, bearing, params, memory, now_ns)
-                wall = (side, distance)
+                detour_heading = _free_heading(obs, bearing, params, memory.detour)
+                if detour_heading is None:
+                    side = _choose_wall_side(obs, bearing, params, memory, now_ns)
+                    wall = (side, distance)
         else:
             clear = corridor_clear(
                 obs, bearing, min(distance, params.leave_clear_m), params.way_half_width_m
@@ -697,11 +750,18 @@ def assist_step(
                 or distance <= params.leave_clear_m
             ):
                 side = None
-            elif following_s > params.wall_max_s and distance > memory.wall_entry_m:
+            elif (following_s > params.wall_max_s and distance > memory.wall_entry_m) or (
+                distance > memory.wall_entry_m + params.wall_retreat_m
+            ):
                 side, gave_up = None, True
             else:
                 wall = (side, memory.wall_entry_m)
-        if side is not None:
+        if side is None and detour_heading is not None:
+            theta, rule = detour_heading, "detour"
+            detour_turn = math.copysign(1.0, _wrap(detour_heading - bearing))
+            if front == CLOSE and abs(theta) >= params.front_turn_rad:
+                speed_scale = 0.0
+        elif side is not None:
             theta, found = _wall_heading(obs, side, params, profile)
             rule = f"wall-follow-{side}"
             if front == CLOSE and abs(theta) >= params.front_turn_rad:
@@ -736,4 +796,4 @@ def assist_step(
         contest = 0.0
     if contest >= params.override_confidence and conf >= params.override_confidence:
         return result(v_ref, w_ref, "override", phi, contest, (None, math.inf), bearing)
-    return result(v, w, rule, theta, contest, wall, bearing, gave_up)
+    return result(v, w, rule, theta, contest, wall, bearing, gave_up, detour_turn)
