@@ -23,6 +23,7 @@ from egc_robot.filters.assist import (
     AssistParams,
     AssistResult,
     assist_step,
+    at_speed,
     corridor_clear,
     stick_cell,
 )
@@ -615,3 +616,69 @@ def test_closed_loop_goal_behind_a_single_obstacle_is_reached():
     assert "goal" in rules[around[-1] :], "and the robot heads for the via point once clear"
     # The straight line costs 4 m at 0.14 m/s (29 s); round the block well within 2x that.
     assert sim.time_s < 60.0
+
+
+# -- the bands at the robot's speed ---------------------------------------------------------------
+
+
+def test_bands_shrink_to_the_speed_for_a_fast_robot_and_not_for_the_pioneer():
+    jackal = AssistParams.from_profile(JACKAL)
+    full = at_speed(jackal, JACKAL, JACKAL.v_max_mps)
+    assert full == jackal  # at v_max: d_safe = v_max * 1 s, the profile's bands
+    half = at_speed(jackal, JACKAL, 1.0)  # d_safe(1 m/s) = 1 m: every distance moves by 1 m
+    assert half.close_m == pytest.approx(jackal.close_m - 1.0)
+    assert half.faraway_m - half.close_m == pytest.approx(jackal.faraway_m - jackal.close_m)
+    assert half.block_m == pytest.approx(jackal.block_m - 1.0)
+    assert half.wall_distance_m == pytest.approx(jackal.wall_distance_m - 0.5)
+    still = at_speed(jackal, JACKAL, 0.0)  # floored at d_safe_min_m
+    assert still.close_m == pytest.approx(JACKAL.d_robot_m + jackal.d_safe_min_m)
+    assert at_speed(jackal, JACKAL, -1.0) == half  # reversing: the same speed
+    assert at_speed(jackal, JACKAL, math.nan) == jackal
+    for v in (0.0, 0.07, P.v_max_mps):  # the Pioneer's d_safe is the floor: nothing moves
+        assert at_speed(PARAMS, P, v) == PARAMS
+
+
+def test_a_fast_robot_sees_a_box_as_close_only_at_speed():
+    jackal = AssistParams.from_profile(JACKAL)
+    box = line(1.5, -0.2, 1.5, 0.2, 20)
+    fast = assist_step(
+        AssistMemory.initial(), 1.0, 0.0, box, None, 0, jackal, JACKAL, (JACKAL.v_max_mps, 0.0)
+    )
+    slow = assist_step(AssistMemory.initial(), 1.0, 0.0, box, None, 0, jackal, JACKAL, (0.3, 0.0))
+    assert fast.levels == slow.levels == (None, None, None)  # one cycle: nothing active yet
+    mem_fast, mem_slow = fast.memory, slow.memory
+    for k in range(1, 4):
+        fast = assist_step(mem_fast, 1.0, 0.0, box, None, k * 50 * MS, jackal, JACKAL, (2.0, 0.0))
+        slow = assist_step(mem_slow, 1.0, 0.0, box, None, k * 50 * MS, jackal, JACKAL, (0.3, 0.0))
+        mem_fast, mem_slow = fast.memory, slow.memory
+    assert fast.levels[FRONT] == CLOSE and slow.levels[FRONT] == FARAWAY
+
+
+# -- unblocking -----------------------------------------------------------------------------------
+
+
+def _blocked(blocked_s: float, sent=(0.0, 0.0)) -> AssistResult:
+    """Wall following (3 cycles up to t = 100 ms) asked for a turn last cycle; at t = 150 ms the
+    base had been sent ``sent`` and the motion had been refused for ``blocked_s`` before."""
+    following = run(1.0, 0.0, WALL_OPEN_LEFT, goal=(3.0, 0.0), params=NO_DETOUR).memory
+    memory = replace(following, asked=(0.0, 0.5), blocked_s=blocked_s)
+    return assist_step(memory, 1.0, 0.0, WALL_OPEN_LEFT, (3.0, 0.0), 150 * MS, NO_DETOUR, P, sent)
+
+
+def test_rule_unblock():
+    """The sweep refused the rules' motion for unblock_after_s: ahead slowly, then a turn in
+    place the other way, then back, unblock_try_s each, until the base moves."""
+    first = _blocked(0.0)
+    assert first.rule == "wall-follow-right"  # refused for one cycle only
+    assert first.memory.blocked_s == pytest.approx(0.05)
+    ahead = _blocked(PARAMS.unblock_after_s)
+    assert ahead.rule == "unblock"
+    assert (ahead.v_mps, ahead.w_radps) == (PARAMS.unblock_speed * P.v_max_mps, 0.0)
+    turn = _blocked(PARAMS.unblock_after_s + PARAMS.unblock_try_s)
+    assert turn.rule == "unblock" and turn.v_mps == 0.0
+    assert turn.w_radps == pytest.approx(-0.5 * P.w_max_radps)  # the rules turned left
+    back = _blocked(PARAMS.unblock_after_s + 2 * PARAMS.unblock_try_s)
+    assert back.rule == "unblock" and back.v_mps == -PARAMS.unblock_speed * P.v_max_mps
+    moving = _blocked(PARAMS.unblock_after_s, sent=(0.05, 0.0))
+    assert moving.rule == "wall-follow-right" and moving.memory.blocked_s == 0.0
+    assert _blocked(5.0, sent=None).rule == "wall-follow-right"  # no feedback, no unblocking

@@ -24,6 +24,15 @@ How each part maps to the paper
   Band edges from the profile (``AssistParams.from_profile``): CLOSE = r_max (the outer circle of
   the safety index, d_robot + d_safe), INTERMEDIATE = r_max + L, FARAWAY = r_max + 2 L, with L the
   footprint length; the FRONT corridor's half width is 0.75 W (the footprint plus a margin).
+  Deviation (issue 11): d_safe is the distance covered in 1 s at v_max (DESIGN 3), so the bands
+  are those of a robot at full speed. Each cycle they are shrunk to the robot's current speed
+  (``at_speed``, from the velocity last sent): d_safe(v) = max(0.14 m, d_safe |v| / v_max), and
+  every distance built on d_safe (the bands, the wall distances, ``block_m``, ``leave_clear_m``)
+  moves by the same amount. For the Pioneer (d_safe 0.14 m) nothing changes. For the Jackal
+  (d_safe 2 m) the full bands reach 2.5-3.5 m, so in a 7 x 4.5 m room everything was CLOSE
+  and the blind operator with ``assist`` reached 0 of 100 random worlds; with the bands at its
+  speed it slows where it is cluttered, the bands shrink, and it gets through (numbers in
+  ``docs/assist.md``).
 - **Joystick in polar form** (sec. II.C, eq. 1): J = min(sqrt(x_o^2 + y_o^2), 1), angle
   phi = atan2(y_o, x_o). **Confidence histogram** (JoystickArray): ``confidence_bins`` cells over
   the stick angle; the occupied cell builds at 1 / ``confidence_build_s`` per second (full in
@@ -106,6 +115,14 @@ How each part maps to the paper
   and the next entry takes the other side (issue 11: in a pocket with the via point behind its
   wall the tangent follower went round the pocket for ever, and a follower that reached the
   room's wall followed it away from the via point).
+- **Unblocking** (deviation, issue 11): the footprint sweep after the rules may refuse their
+  command outright (a turn in place that would swing a corner into a box beside the robot).
+  Rules that do not know it ask for the same motion for ever: the robot stalled. The pipeline
+  hands the assistant the (v, w) the base was last sent; when the rules asked for motion and
+  none was sent for ``unblock_after_s``, rule ``unblock`` tries, ``unblock_try_s`` each, ahead
+  at ``unblock_speed`` of v_max, a turn in place the other way, and back at that speed, until
+  the base moves (the sweep still judges each try). On the Jackal's random worlds it turned the
+  blind operator's 27 stalls out of 100 into 6 more arrivals and timeouts.
 - **Operator's override** (sec. V: "if the joystick remained fixed (roughly) in a particular
   position then that input was integrated over time and the wishes of the tele-operator overrode
   that behaviour"; avoidance "initially overrode other behaviours"): the memory integrates, like
@@ -121,7 +138,8 @@ does not declare no-return as free, DESIGN 5.9 NO_POINTS_UNKNOWN: nothing seen i
 ``idle`` (stick centred: stop), ``reverse`` (x_o < 0: the stick's eq. 4 command; the rules look
 ahead only, the sweep guards the reverse), ``override``, ``wall-follow-left`` /
 ``wall-follow-right``, ``detour``, ``avoid-front``, ``gap``, ``avoid-left`` / ``avoid-right``,
-and with nothing active ``goal``, ``blend`` or ``free``.
+and with nothing active ``goal``, ``blend`` or ``free``; then ``unblock`` in place of any of
+them that the base was refused.
 """
 
 from __future__ import annotations
@@ -157,6 +175,7 @@ RULES = (
     "gap",
     "avoid-left",
     "avoid-right",
+    "unblock",
     "goal",
     "blend",
     "free",
@@ -213,6 +232,15 @@ class AssistParams:
     # Wall following gives up when the via point is this much farther (m) than where it began:
     # the wall leads away (a room's wall is followed for ever otherwise).
     wall_retreat_m: float = 0.455
+    # Unblocking (rule ``unblock``): after ``unblock_after_s`` of asking for motion while the
+    # base was sent none (the sweep refused it), try in turn for ``unblock_try_s`` each: ahead
+    # at ``unblock_speed`` of v_max, a turn in place the other way, back at that speed.
+    unblock_after_s: float = 0.25
+    unblock_try_s: float = 0.5
+    unblock_speed: float = 0.25
+    # The floor (m) of d_safe scaled to the current speed (``at_speed``): the paper's Pioneer's
+    # d_safe, so a robot that slow or slower keeps the profile's bands.
+    d_safe_min_m: float = 0.14
     # Detour (rule ``detour``): the free heading nearest the via point, searched this far (rad)
     # either side of it in steps of ``detour_step_rad`` (0: no detours).
     detour_max_rad: float = math.radians(90.0)
@@ -346,7 +374,8 @@ class AssistMemory:
     point's distance when following began; ``last_wall_side`` / ``wall_left_ns``: the side used
     last and when following ended; ``front_turn``: the way (+1 left, -1 right) ``avoid-front``
     is turning, kept while it keeps firing (0: it did not fire last cycle); ``detour``: the side
-    (+1 left, -1 right) of the last detour, preferred on a tie (0: none yet).
+    (+1 left, -1 right) of the last detour, preferred on a tie (0: none yet); ``asked``: the
+    (v, w) this step returned; ``blocked_s``: how long motion was asked for and none sent.
     """
 
     counts: Grid = _ZERO_GRID
@@ -362,6 +391,8 @@ class AssistMemory:
     front_turn: float = 0.0
     wall_start_ns: int | None = None
     detour: float = 0.0
+    asked: tuple[float, float] = (0.0, 0.0)
+    blocked_s: float = 0.0
 
     @staticmethod
     def initial() -> AssistMemory:
@@ -609,6 +640,27 @@ def _avoid(
     return theta, 1.0, None
 
 
+def at_speed(params: AssistParams, profile: RobotProfile, speed_mps: float) -> AssistParams:
+    """The params with every distance built on d_safe shrunk to the current speed's (module
+    docstring): d_safe(v) = max(``d_safe_min_m``, d_safe |v| / v_max), never above d_safe."""
+    d_safe = profile.d_safe_m
+    floor = min(d_safe, params.d_safe_min_m)
+    reach = max(floor, min(d_safe, abs(speed_mps) * d_safe / profile.v_max_mps))
+    offset = d_safe - reach
+    if not offset > 0.0:  # also a NaN speed: the full bands
+        return params
+    return replace(
+        params,
+        close_m=params.close_m - offset,
+        intermediate_m=params.intermediate_m - offset,
+        faraway_m=params.faraway_m - offset,
+        wall_distance_m=params.wall_distance_m - 0.5 * offset,
+        wall_range_m=params.wall_range_m - offset,
+        block_m=params.block_m - offset,
+        leave_clear_m=params.leave_clear_m - offset,
+    )
+
+
 # -- the step ---------------------------------------------------------------------------------
 
 
@@ -621,8 +673,13 @@ def assist_step(
     now_ns: int,
     params: AssistParams,
     profile: RobotProfile,
+    sent: tuple[float, float] | None = None,
 ) -> AssistResult:
-    """One cycle of the assistant (module docstring)."""
+    """One cycle of the assistant (module docstring). ``sent`` is the (v, w) the base was sent
+    last cycle: its speed shrinks the bands (``at_speed``), and a motion asked for but not sent
+    is what ``unblock`` answers (None: the profile's bands, no unblocking)."""
+    if sent is not None:
+        params = at_speed(params, profile, sent[0])
     obs = obstacle_points(obstacles)
     if memory.last_ns is None or now_ns <= memory.last_ns:
         dt = 0.0
@@ -655,6 +712,7 @@ def assist_step(
         bearing: float | None = None,
         gave_up: bool = False,
         detour: float = 0.0,
+        blocked_s: float = 0.0,
     ) -> AssistResult:
         turning = rule == "avoid-front" and heading is not None and v == 0.0
         turn = math.copysign(1.0, heading) if turning and heading is not None else 0.0
@@ -682,6 +740,8 @@ def assist_step(
             turn,
             start_ns,
             detour,
+            (v, w),
+            blocked_s,
         )
         modified = abs(v - v_ref) > _SAME or abs(w - w_ref) > _SAME
         return AssistResult(
@@ -796,4 +856,18 @@ def assist_step(
         contest = 0.0
     if contest >= params.override_confidence and conf >= params.override_confidence:
         return result(v_ref, w_ref, "override", phi, contest, (None, math.inf), bearing)
-    return result(v, w, rule, theta, contest, wall, bearing, gave_up, detour_turn)
+    blocked_s = 0.0
+    asked_before = memory.asked != (0.0, 0.0)
+    if sent is not None and asked_before and abs(sent[0]) <= _SAME and abs(sent[1]) <= _SAME:
+        blocked_s = memory.blocked_s + dt
+    if blocked_s >= params.unblock_after_s and (abs(v) > _SAME or abs(w) > _SAME):
+        attempt = int((blocked_s - params.unblock_after_s) / params.unblock_try_s) % 3
+        if attempt == 0:
+            v, w = params.unblock_speed * profile.v_max_mps, 0.0
+        elif attempt == 1:
+            turn_way = w if abs(w) > _SAME else theta
+            v, w = 0.0, -math.copysign(0.5 * profile.w_max_radps, turn_way)
+        else:
+            v, w = -params.unblock_speed * profile.v_max_mps, 0.0
+        rule = "unblock"
+    return result(v, w, rule, theta, contest, wall, bearing, gave_up, detour_turn, blocked_s)

@@ -196,7 +196,17 @@ def _run_assist(inp: FilterInput, settings: FilterSettings, memory: object | Non
     # The stick, back from eq. 4 (the pipeline hands every filter the same velocity reference).
     x_o = inp.v_ref_mps / p.v_max_mps
     y_o = inp.w_ref_radps / p.w_max_radps
-    res = assist_step(mem, x_o, y_o, inp.obstacles, inp.goal_xy_m, inp.now_ns, settings.assist, p)
+    res = assist_step(
+        mem,
+        x_o,
+        y_o,
+        inp.obstacles,
+        inp.goal_xy_m,
+        inp.now_ns,
+        settings.assist,
+        p,
+        (inp.state.v_mps, inp.state.w_radps),
+    )
     stopped = abs(res.v_mps) <= _SAME and abs(res.w_radps) <= _SAME
     moving = abs(inp.v_ref_mps) > _SAME or abs(inp.w_ref_radps) > _SAME
     return FilterResult(
