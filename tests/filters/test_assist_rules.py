@@ -657,28 +657,42 @@ def test_a_fast_robot_sees_a_box_as_close_only_at_speed():
 # -- unblocking -----------------------------------------------------------------------------------
 
 
-def _blocked(blocked_s: float, sent=(0.0, 0.0)) -> AssistResult:
-    """Wall following (3 cycles up to t = 100 ms) asked for a turn last cycle; at t = 150 ms the
-    base had been sent ``sent`` and the motion had been refused for ``blocked_s`` before."""
+def _blocked(memory_changes: dict, sent=(0.0, 0.0)) -> AssistResult:
+    """Wall following (3 cycles up to t = 100 ms), then one step at t = 150 ms with the memory
+    changed as given and the base having been sent ``sent`` last cycle."""
     following = run(1.0, 0.0, WALL_OPEN_LEFT, goal=(3.0, 0.0), params=NO_DETOUR).memory
-    memory = replace(following, asked=(0.0, 0.5), blocked_s=blocked_s)
+    memory = replace(following, **memory_changes)
     return assist_step(memory, 1.0, 0.0, WALL_OPEN_LEFT, (3.0, 0.0), 150 * MS, NO_DETOUR, P, sent)
 
 
 def test_rule_unblock():
-    """The sweep refused the rules' motion for unblock_after_s: ahead slowly, then a turn in
-    place the other way, then back, unblock_try_s each, until the base moves."""
-    first = _blocked(0.0)
+    """The sweep refused the rules' motion for unblock_after_s: escape ahead slowly; when the
+    sweep refuses that too, a turn in place the other way, then back; a try that moves runs for
+    unblock_try_s, then the rules take over again."""
+    asked = {"asked": (0.0, 0.5)}  # the rules turned left in place last cycle
+    first = _blocked({**asked, "blocked_s": 0.0})
     assert first.rule == "wall-follow-right"  # refused for one cycle only
     assert first.memory.blocked_s == pytest.approx(0.05)
-    ahead = _blocked(PARAMS.unblock_after_s)
-    assert ahead.rule == "unblock"
+    ahead = _blocked({**asked, "blocked_s": PARAMS.unblock_after_s})
+    assert ahead.rule == "unblock" and ahead.memory.escape == 0
     assert (ahead.v_mps, ahead.w_radps) == (PARAMS.unblock_speed * P.v_max_mps, 0.0)
-    turn = _blocked(PARAMS.unblock_after_s + PARAMS.unblock_try_s)
-    assert turn.rule == "unblock" and turn.v_mps == 0.0
-    assert turn.w_radps == pytest.approx(-0.5 * P.w_max_radps)  # the rules turned left
-    back = _blocked(PARAMS.unblock_after_s + 2 * PARAMS.unblock_try_s)
-    assert back.rule == "unblock" and back.v_mps == -PARAMS.unblock_speed * P.v_max_mps
-    moving = _blocked(PARAMS.unblock_after_s, sent=(0.05, 0.0))
+    assert ahead.memory.escape_turn > 0.0  # remembers the way the rules wanted to turn
+    # Ahead refused as well: turn in place the other way (right).
+    escaping = {"asked": (ahead.v_mps, 0.0), "escape": 0, "escape_turn": 0.5}
+    turn = _blocked(escaping)
+    assert turn.rule == "unblock" and turn.memory.escape == 1 and turn.v_mps == 0.0
+    assert turn.w_radps == pytest.approx(-0.5 * P.w_max_radps)
+    # The turn refused too: back.
+    back = _blocked({"asked": (0.0, turn.w_radps), "escape": 1, "escape_turn": 0.5})
+    assert back.rule == "unblock" and back.memory.escape == 2
+    assert back.v_mps == -PARAMS.unblock_speed * P.v_max_mps
+    # A try that moves keeps going until unblock_try_s, then the rules again.
+    going = _blocked({**escaping, "escape_s": 0.1}, sent=(ahead.v_mps, 0.0))
+    assert going.rule == "unblock" and going.memory.escape == 0
+    assert going.memory.escape_s == pytest.approx(0.15)
+    done = _blocked({**escaping, "escape_s": PARAMS.unblock_try_s}, sent=(ahead.v_mps, 0.0))
+    assert done.rule == "wall-follow-right" and done.memory.escape == -1
+    # Motion sent: nothing refused, no escape; no feedback at all: no escape either.
+    moving = _blocked({**asked, "blocked_s": PARAMS.unblock_after_s}, sent=(0.05, 0.3))
     assert moving.rule == "wall-follow-right" and moving.memory.blocked_s == 0.0
-    assert _blocked(5.0, sent=None).rule == "wall-follow-right"  # no feedback, no unblocking
+    assert _blocked({**asked, "blocked_s": 5.0}, sent=None).rule == "wall-follow-right"

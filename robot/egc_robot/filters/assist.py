@@ -119,10 +119,12 @@ How each part maps to the paper
   command outright (a turn in place that would swing a corner into a box beside the robot).
   Rules that do not know it ask for the same motion for ever: the robot stalled. The pipeline
   hands the assistant the (v, w) the base was last sent; when the rules asked for motion and
-  none was sent for ``unblock_after_s``, rule ``unblock`` tries, ``unblock_try_s`` each, ahead
-  at ``unblock_speed`` of v_max, a turn in place the other way, and back at that speed, until
-  the base moves (the sweep still judges each try). On the Jackal's random worlds it turned the
-  blind operator's 27 stalls out of 100 into 6 more arrivals and timeouts.
+  (almost) none was sent for ``unblock_after_s``, rule ``unblock`` escapes: ahead at
+  ``unblock_speed`` of v_max; if the sweep refuses that too, a turn in place away from the turn
+  the rules wanted; then back at that speed. A try that moves the base runs for
+  ``unblock_try_s`` and hands back to the rules; the sweep judges every try. On the Jackal's
+  random worlds it turned the blind operator's 27 stalls out of 100 into 8 more arrivals and
+  timeouts.
 - **Operator's override** (sec. V: "if the joystick remained fixed (roughly) in a particular
   position then that input was integrated over time and the wishes of the tele-operator overrode
   that behaviour"; avoidance "initially overrode other behaviours"): the memory integrates, like
@@ -233,11 +235,13 @@ class AssistParams:
     # the wall leads away (a room's wall is followed for ever otherwise).
     wall_retreat_m: float = 0.455
     # Unblocking (rule ``unblock``): after ``unblock_after_s`` of asking for motion while the
-    # base was sent none (the sweep refused it), try in turn for ``unblock_try_s`` each: ahead
-    # at ``unblock_speed`` of v_max, a turn in place the other way, back at that speed.
+    # base was sent none (the sweep refused it), try in turn ahead at ``unblock_speed`` of
+    # v_max, a turn in place the other way, back at that speed; each try runs for
+    # ``unblock_try_s`` once the base moves, the next one when the sweep refuses it too.
     unblock_after_s: float = 0.25
     unblock_try_s: float = 0.5
     unblock_speed: float = 0.25
+    unblock_below: float = 0.1  # (1) "none sent": less than this share of the motion asked for
     # The floor (m) of d_safe scaled to the current speed (``at_speed``): the paper's Pioneer's
     # d_safe, so a robot that slow or slower keeps the profile's bands.
     d_safe_min_m: float = 0.14
@@ -375,7 +379,9 @@ class AssistMemory:
     last and when following ended; ``front_turn``: the way (+1 left, -1 right) ``avoid-front``
     is turning, kept while it keeps firing (0: it did not fire last cycle); ``detour``: the side
     (+1 left, -1 right) of the last detour, preferred on a tie (0: none yet); ``asked``: the
-    (v, w) this step returned; ``blocked_s``: how long motion was asked for and none sent.
+    (v, w) this step returned; ``blocked_s``: how long motion was asked for and none sent;
+    ``escape``: the unblocking try under way (0 ahead, 1 turn, 2 back; -1 none), ``escape_s``
+    how long it has run, ``escape_turn`` the turn the rules wanted when it began.
     """
 
     counts: Grid = _ZERO_GRID
@@ -393,6 +399,9 @@ class AssistMemory:
     detour: float = 0.0
     asked: tuple[float, float] = (0.0, 0.0)
     blocked_s: float = 0.0
+    escape: int = -1
+    escape_s: float = 0.0
+    escape_turn: float = 0.0
 
     @staticmethod
     def initial() -> AssistMemory:
@@ -661,6 +670,11 @@ def at_speed(params: AssistParams, profile: RobotProfile, speed_mps: float) -> A
     )
 
 
+def _motion(command: tuple[float, float], profile: RobotProfile) -> float:
+    """How much a (v, w) moves, as fractions of the profile's limits."""
+    return abs(command[0]) / profile.v_max_mps + abs(command[1]) / profile.w_max_radps
+
+
 # -- the step ---------------------------------------------------------------------------------
 
 
@@ -712,7 +726,7 @@ def assist_step(
         bearing: float | None = None,
         gave_up: bool = False,
         detour: float = 0.0,
-        blocked_s: float = 0.0,
+        unblock: tuple[float, int, float, float] = (0.0, -1, 0.0, 0.0),
     ) -> AssistResult:
         turning = rule == "avoid-front" and heading is not None and v == 0.0
         turn = math.copysign(1.0, heading) if turning and heading is not None else 0.0
@@ -741,7 +755,7 @@ def assist_step(
             start_ns,
             detour,
             (v, w),
-            blocked_s,
+            *unblock,
         )
         modified = abs(v - v_ref) > _SAME or abs(w - w_ref) > _SAME
         return AssistResult(
@@ -856,18 +870,41 @@ def assist_step(
         contest = 0.0
     if contest >= params.override_confidence and conf >= params.override_confidence:
         return result(v_ref, w_ref, "override", phi, contest, (None, math.inf), bearing)
-    blocked_s = 0.0
-    asked_before = memory.asked != (0.0, 0.0)
-    if sent is not None and asked_before and abs(sent[0]) <= _SAME and abs(sent[1]) <= _SAME:
+    refused = sent is not None and _motion(sent, profile) < params.unblock_below * _motion(
+        memory.asked, profile
+    )
+    blocked_s, escape, escape_s = 0.0, -1, 0.0
+    if memory.escape >= 0:  # an escape under way: its try runs out, or the sweep refuses it
+        escape, escape_s = memory.escape, memory.escape_s + dt
+        if refused:
+            escape, escape_s = (escape + 1) % 3, 0.0
+        elif escape_s >= params.unblock_try_s:
+            escape = -1
+    elif refused:
         blocked_s = memory.blocked_s + dt
-    if blocked_s >= params.unblock_after_s and (abs(v) > _SAME or abs(w) > _SAME):
-        attempt = int((blocked_s - params.unblock_after_s) / params.unblock_try_s) % 3
-        if attempt == 0:
+        if blocked_s >= params.unblock_after_s and (abs(v) > _SAME or abs(w) > _SAME):
+            escape = 0
+    escape_turn = 0.0
+    if escape >= 0:
+        # The turn the rules wanted when the escape began: the escape turns the other way.
+        wanted = w if abs(w) > _SAME else theta
+        escape_turn = memory.escape_turn if memory.escape >= 0 else wanted
+        if escape == 0:
             v, w = params.unblock_speed * profile.v_max_mps, 0.0
-        elif attempt == 1:
-            turn_way = w if abs(w) > _SAME else theta
-            v, w = 0.0, -math.copysign(0.5 * profile.w_max_radps, turn_way)
+        elif escape == 1:
+            v, w = 0.0, -math.copysign(0.5 * profile.w_max_radps, escape_turn or 1.0)
         else:
             v, w = -params.unblock_speed * profile.v_max_mps, 0.0
         rule = "unblock"
-    return result(v, w, rule, theta, contest, wall, bearing, gave_up, detour_turn, blocked_s)
+    return result(
+        v,
+        w,
+        rule,
+        theta,
+        contest,
+        wall,
+        bearing,
+        gave_up,
+        detour_turn,
+        (blocked_s, escape, escape_s, escape_turn),
+    )
