@@ -138,6 +138,7 @@ def build_cases(
     mrpb_dir: Path = MRPB_DIR,
     mrpb_limit: int | None = None,
     random_profile: str | None = None,
+    first_world: int = 0,
 ) -> list[Case]:
     cases: list[Case] = []
     for suite in suites:
@@ -157,7 +158,7 @@ def build_cases(
                 )
                 cases.append(_case(suite, name, s))
         elif suite == "random":
-            for seed in range(worlds):
+            for seed in range(first_world, first_world + worlds):
                 s = EpisodeSettings(map=f"random:{seed}", seed=seed, profile=profile)
                 cases.append(_case(suite, f"random:{seed}", s))
         else:
@@ -399,7 +400,8 @@ SETUP_TEXT = [
     "mode; every other filter runs in shared mode. Suites: `hallway` ({hallway}, via point at "
     "the goal), `mrpb` (the 19 tests of the MRPB maps, {mrpb}, via points at the corners of "
     "a route planned on the map, `--via route`) and `random` (seeded random obstacle fields "
-    "`random:0..N-1`, {random}, via point at the goal). Every filter gets the same via points; "
+    "`random:S..S+N-1`, S `--first-world` (0 unless given), N `--worlds`, {random}, via point "
+    "at the goal). Every filter gets the same via points; "
     "only `assist` and `dwa` use them. Operators: `goal` steers straight at the active via "
     "point (the robot echoes it in its telemetry and the operator view draws it; the goal once "
     "the via points are done) and cannot see the obstacles; `sighted` sees what the operator "
@@ -790,6 +792,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--out", required=True, help="directory for runs.jsonl (and figures)")
     p.add_argument("--report", help="Markdown report to write (default DIR/report.md)")
     p.add_argument("--worlds", type=int, help="random worlds (arena 50, assist 100)")
+    p.add_argument(
+        "--first-world",
+        type=int,
+        default=0,
+        help="seed of the first random world (worlds never used for tuning: e.g. 1000)",
+    )
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     p.add_argument("--filters", help="comma list (arena: all five; assist: none,egc,assist)")
     p.add_argument("--operators", default=",".join(OPERATORS))
@@ -816,14 +824,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         operators = _names(args.operators, ("goal", "forward", "sighted", "route"), "operators")
         suites = _names(args.suites, SUITES, "suites")
         worlds = args.worlds if args.worlds is not None else (100 if assist else 50)
-        if worlds < 0 or args.jobs < 1:
-            raise UsageError("--worlds must be >= 0 and --jobs >= 1")
+        if worlds < 0 or args.jobs < 1 or args.first_world < 0:
+            raise UsageError("--worlds and --first-world must be >= 0 and --jobs >= 1")
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
         report = Path(args.report) if args.report else out / "report.md"
         t0 = time.perf_counter()
         cases = build_cases(
-            suites, worlds, Path(args.mrpb_dir), args.mrpb_limit, args.random_profile
+            suites,
+            worlds,
+            Path(args.mrpb_dir),
+            args.mrpb_limit,
+            args.random_profile,
+            args.first_world,
         )
         todo = episodes(cases, filters, operators)
         reuse = load_runs(args.reuse)
@@ -840,8 +853,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         if assist:
             figures: list[str] = []
             if not args.no_figures:
+                first = args.first_world
                 names = write_assist_figures(
-                    report.parent, records, filters, operators, suites, stem=report.stem
+                    report.parent,
+                    records,
+                    filters,
+                    operators,
+                    suites,
+                    stem=report.stem,
+                    path_worlds=range(first, first + min(4, worlds)),
                 )
                 figures = [os.path.relpath(report.parent / n, report.parent) for n in names]
             write_assist_report(

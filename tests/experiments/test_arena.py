@@ -64,3 +64,11 @@ def test_mrpb_tests_are_the_nineteen_start_goal_pairs():
     assert len(tests) == 19
     _name, path, start, goal = next(t for t in tests if t[0] == "office02#1")
     assert path.name == "map.yaml" and start == (-12.547, 8.542, 0.0) and goal == (13.059, 1.702)
+
+
+def test_first_world_picks_the_seeds_of_the_random_worlds(capsys):
+    cases = arena.build_cases(["random"], 2, first_world=1000)
+    assert [c.name for c in cases] == ["random:1000", "random:1001"]
+    assert [c.settings.seed for c in cases] == [1000, 1001]
+    assert arena.main(["--out", "/nonexistent-never", "--first-world", "-1"]) == 2
+    assert "--first-world must be >= 0" in capsys.readouterr().err
