@@ -85,11 +85,11 @@ How each part maps to the paper
   a tie keeps the side of the last detour, so the robot does not swap sides in front of a
   symmetric obstacle). Every cycle starts again from the via point, so the robot turns back to
   it as soon as its way is clear. Only when no such heading exists (a pocket, a wall across
-  everything ahead) does wall following begin. Measured on the seeded random worlds (pioneer3dx,
-  `goal` operator, 500 worlds never used for tuning before, seeds 0-399 and 1000-1099): 447/500
-  reached with detours and the retreat limit below, 408/500 without; no contact either way. The
-  tangent follower alone wandered round obstacle clusters and along the room's walls until the
-  time ran out. ``detour_max_rad`` = 0 turns detours off.
+  everything ahead) does wall following begin. On the seeded random worlds these changes were
+  tried on (pioneer3dx, `goal` operator, seeds 0-399 and 1000-1099): 447/500 reached with
+  detours and the retreat limit below, 408/500 without; no contact either way. The tangent
+  follower alone wandered round obstacle clusters and along the room's walls until the time ran
+  out. ``detour_max_rad`` = 0 turns detours off.
 - **Wall following** (sec. V: "an obstacle in front while moving toward a target destination ...
   rotate to align with and then move parallel to the wall"). Entered when heading for the via
   point (rule ``goal``) with FRONT active at CLOSE or INTERMEDIATE, the corridor towards the
