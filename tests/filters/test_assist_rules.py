@@ -696,3 +696,20 @@ def test_rule_unblock():
     moving = _blocked({**asked, "blocked_s": PARAMS.unblock_after_s}, sent=(0.05, 0.3))
     assert moving.rule == "wall-follow-right" and moving.memory.blocked_s == 0.0
     assert _blocked({**asked, "blocked_s": 5.0}, sent=None).rule == "wall-follow-right"
+
+
+def test_unblock_blocked_again_soon_after_an_escape_tries_the_next_one():
+    """The turn the other way freed the robot, then the rules turned it straight back into the
+    wedge: within unblock_repeat_s the next escape starts with the try after that one."""
+    asked = {"asked": (0.0, 0.5), "blocked_s": PARAMS.unblock_after_s, "freed_by": 1}
+    soon = _blocked({**asked, "freed_ns": 150 * MS - int(0.5 * PARAMS.unblock_repeat_s * 1e9)})
+    assert soon.rule == "unblock" and soon.memory.escape == 2 and soon.v_mps < 0.0
+    late = _blocked({**asked, "freed_ns": 150 * MS - int(2.0 * PARAMS.unblock_repeat_s * 1e9)})
+    assert late.rule == "unblock" and late.memory.escape == 0 and late.v_mps > 0.0
+    # A try that runs its full time is remembered as the one that freed the robot.
+    freed = _blocked(
+        {"asked": (0.0, -0.5), "escape": 1, "escape_s": PARAMS.unblock_try_s, "escape_turn": 0.5},
+        sent=(0.0, -0.5),
+    )
+    assert freed.memory.escape == -1 and freed.memory.freed_by == 1
+    assert freed.memory.freed_ns == 150 * MS

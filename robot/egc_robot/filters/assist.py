@@ -122,9 +122,11 @@ How each part maps to the paper
   (almost) none was sent for ``unblock_after_s``, rule ``unblock`` escapes: ahead at
   ``unblock_speed`` of v_max; if the sweep refuses that too, a turn in place away from the turn
   the rules wanted; then back at that speed. A try that moves the base runs for
-  ``unblock_try_s`` and hands back to the rules; the sweep judges every try. On the Jackal's
-  random worlds it turned the blind operator's 27 stalls out of 100 into 8 more arrivals and
-  timeouts.
+  ``unblock_try_s`` and hands back to the rules; the sweep judges every try. Blocked again
+  within ``unblock_repeat_s`` of an escape (the rules steered straight back into the wedge), the
+  next escape starts with the try after the one that freed it, so a wedge is not escaped the
+  same way for ever. On the Jackal's random worlds (seeds 0-99) the blind operator went from 27
+  stalls to 76/100 reached with the escapes, and to 83/100 with the escalation.
 - **Operator's override** (sec. V: "if the joystick remained fixed (roughly) in a particular
   position then that input was integrated over time and the wishes of the tele-operator overrode
   that behaviour"; avoidance "initially overrode other behaviours"): the memory integrates, like
@@ -241,6 +243,7 @@ class AssistParams:
     unblock_after_s: float = 0.25
     unblock_try_s: float = 0.5
     unblock_speed: float = 0.25
+    unblock_repeat_s: float = 2.0  # blocked again within this after an escape: the next try
     unblock_below: float = 0.1  # (1) "none sent": less than this share of the motion asked for
     # The floor (m) of d_safe scaled to the current speed (``at_speed``): the paper's Pioneer's
     # d_safe, so a robot that slow or slower keeps the profile's bands.
@@ -381,7 +384,8 @@ class AssistMemory:
     (+1 left, -1 right) of the last detour, preferred on a tie (0: none yet); ``asked``: the
     (v, w) this step returned; ``blocked_s``: how long motion was asked for and none sent;
     ``escape``: the unblocking try under way (0 ahead, 1 turn, 2 back; -1 none), ``escape_s``
-    how long it has run, ``escape_turn`` the turn the rules wanted when it began.
+    how long it has run, ``escape_turn`` the turn the rules wanted when it began; ``freed_by``
+    / ``freed_ns``: the try that last freed the robot, and when.
     """
 
     counts: Grid = _ZERO_GRID
@@ -402,6 +406,8 @@ class AssistMemory:
     escape: int = -1
     escape_s: float = 0.0
     escape_turn: float = 0.0
+    freed_by: int = -1
+    freed_ns: int | None = None
 
     @staticmethod
     def initial() -> AssistMemory:
@@ -726,7 +732,7 @@ def assist_step(
         bearing: float | None = None,
         gave_up: bool = False,
         detour: float = 0.0,
-        unblock: tuple[float, int, float, float] = (0.0, -1, 0.0, 0.0),
+        unblock: tuple[float, int, float, float, int, int | None] = (0.0, -1, 0.0, 0.0, -1, None),
     ) -> AssistResult:
         turning = rule == "avoid-front" and heading is not None and v == 0.0
         turn = math.copysign(1.0, heading) if turning and heading is not None else 0.0
@@ -874,16 +880,19 @@ def assist_step(
         memory.asked, profile
     )
     blocked_s, escape, escape_s = 0.0, -1, 0.0
+    freed_by, freed_ns = memory.freed_by, memory.freed_ns
     if memory.escape >= 0:  # an escape under way: its try runs out, or the sweep refuses it
         escape, escape_s = memory.escape, memory.escape_s + dt
         if refused:
             escape, escape_s = (escape + 1) % 3, 0.0
         elif escape_s >= params.unblock_try_s:
-            escape = -1
+            escape, freed_by, freed_ns = -1, escape, now_ns
     elif refused:
         blocked_s = memory.blocked_s + dt
         if blocked_s >= params.unblock_after_s and (abs(v) > _SAME or abs(w) > _SAME):
-            escape = 0
+            # Blocked again soon after an escape: the rules undid it, so try the next one.
+            again = freed_ns is not None and (now_ns - freed_ns) * 1e-9 <= params.unblock_repeat_s
+            escape = (freed_by + 1) % 3 if again else 0
     escape_turn = 0.0
     if escape >= 0:
         # The turn the rules wanted when the escape began: the escape turns the other way.
@@ -906,5 +915,5 @@ def assist_step(
         bearing,
         gave_up,
         detour_turn,
-        (blocked_s, escape, escape_s, escape_turn),
+        (blocked_s, escape, escape_s, escape_turn, freed_by, freed_ns),
     )
