@@ -99,6 +99,12 @@ def test_params_from_mapping_validates():
         AssistParams.from_mapping({"no_return_is_free": 1})
     with pytest.raises(ValueError, match="must be a number"):
         AssistParams.from_mapping({"wall_distance_m": "far"})
+    with pytest.raises(ValueError, match="unblock_speed must be in"):
+        AssistParams.from_mapping({"unblock_speed": 1.5})
+    with pytest.raises(ValueError, match="unblock_try_s must be positive"):
+        AssistParams.from_mapping({"unblock_try_s": 0})
+    with pytest.raises(ValueError, match="detour_step_rad must be positive"):
+        AssistParams.from_mapping({"detour_step_rad": 0.0})
 
 
 # -- the obstacle histogram (paper sec. II.B) ---------------------------------------------------

@@ -92,29 +92,29 @@ How each part maps to the paper
   out. ``detour_max_rad`` = 0 turns detours off.
 - **Wall following** (sec. V: "an obstacle in front while moving toward a target destination ...
   rotate to align with and then move parallel to the wall"). Entered when heading for the via
-  point (rule ``goal``) with FRONT active at CLOSE or INTERMEDIATE, the corridor towards the
-  via point blocked within ``block_m`` and no detour. The side is the one on which a free
-  corridor opens nearest to the via point's direction (a tangent-bug choice; the side just used is kept for
-  ``rejoin_s`` so the robot does not swap sides around one obstacle). The paper gives no
-  formula; ours is a tangent follower: with m the nearest scan point on the wall's side (or
-  ahead) within ``wall_range_m``, at angle alpha and distance d, theta = alpha -+ pi/2 (parallel
-  to the wall), corrected by ``wall_gain_rad_per_m`` (``wall_distance_m`` - d) away from it; no
-  such point (a corner passed) -> turn towards the wall side by ``wall_lost_turn_rad`` at
+  point (rule ``goal``) with FRONT active at CLOSE or INTERMEDIATE, the corridor towards the via
+  point blocked within ``block_m`` and no detour. The side is the one on which a free corridor
+  opens nearest to the via point's direction (a tangent-bug choice; the side just used is kept for
+  ``rejoin_s`` so the robot does not swap sides around one obstacle). The paper gives no formula;
+  ours is a tangent follower: with m the nearest scan point on the wall's side (or ahead) within
+  ``wall_range_m``, at angle alpha and distance d, theta = alpha -+ pi/2 (parallel to the wall),
+  corrected by ``wall_gain_rad_per_m`` (``wall_distance_m`` - d) away from it; no such point (a
+  corner passed) -> turn towards the wall side by ``wall_lost_turn_rad`` at
   ``front_intermediate_speed``. With FRONT CLOSE and a turn of at least ``front_turn_rad`` it
   turns in place (a sharp arc in a tight spot is what the sweep stops, for good). Rule
   ``wall-follow-right`` keeps the wall on the robot's right, ``wall-follow-left`` on its left.
   Left when the corridor towards the via point is clear for min(distance, ``leave_clear_m``) and
-  the robot is at least ``progress_m`` closer to it than where it started following (Bug2's
-  leave condition, so it never leaves into the obstacle it is going round), or the via point is
-  itself within ``leave_clear_m`` (the clear corridor reaches it). Entry and leave check the way
-  to the via point at the footprint's width plus 5 cm (``way_half_width_m``), not the FRONT
-  sector's 0.75 W: MRPB's corridors are about 1 m wide and the route keeps the robot's centre
-  only 0.29 m off the walls, so the wider strip saw walls beside the route as "blocked". After
-  ``wall_max_s`` of following without getting closer than where it began, or as soon as the via
-  point is ``wall_retreat_m`` (the footprint's length) farther than where it began, it gives up
-  and the next entry takes the other side (issue 11: in a pocket with the via point behind its
-  wall the tangent follower went round the pocket for ever, and a follower that reached the
-  room's wall followed it away from the via point).
+  the robot is at least ``progress_m`` closer to it than where it started following (Bug2's leave
+  condition, so it never leaves into the obstacle it is going round), or the via point is itself
+  within ``leave_clear_m`` (the clear corridor reaches it). Entry and leave check the way to the
+  via point at the footprint's width plus 5 cm (``way_half_width_m``), not the FRONT sector's 0.75
+  W: MRPB's corridors are about 1 m wide and the route keeps the robot's centre only 0.29 m off
+  the walls, so the wider strip saw walls beside the route as "blocked". After ``wall_max_s`` of
+  following without getting closer than where it began, or as soon as the via point is
+  ``wall_retreat_m`` (the footprint's length) farther than where it began, it gives up and the
+  next entry takes the other side (issue 11: in a pocket with the via point behind its wall the
+  tangent follower went round the pocket for ever, and a follower that reached the room's wall
+  followed it away from the via point).
 - **Unblocking** (deviation, issue 11): the footprint sweep after the rules may refuse their
   command outright (a turn in place that would swing a corner into a box beside the robot).
   Rules that do not know it ask for the same motion for ever: the robot stalled. The pipeline
@@ -294,6 +294,7 @@ class AssistParams:
             "leave_clear_m",
             "wall_max_s",
             "detour_step_rad",
+            "unblock_try_s",
             "way_half_width_m",
             "max_dt_s",
         )
@@ -306,7 +307,7 @@ class AssistParams:
             raise ValueError("assist.override_confidence must be in (0, 1]")
         if self.stick_deadzone >= 1.0:
             raise ValueError("assist.stick_deadzone must be below 1")
-        for name in ("gap_speed", "front_intermediate_speed"):
+        for name in ("gap_speed", "front_intermediate_speed", "unblock_speed", "unblock_below"):
             if getattr(self, name) > 1.0:
                 raise ValueError(f"assist.{name} must be in [0, 1]")
         for name in (
