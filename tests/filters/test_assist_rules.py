@@ -644,6 +644,18 @@ def test_bands_shrink_to_the_speed_for_a_fast_robot_and_not_for_the_pioneer():
         assert at_speed(PARAMS, P, v) == PARAMS
 
 
+def test_bands_set_below_d_safe_in_the_robot_toml_stay_valid_at_any_speed():
+    """A Jackal TOML with close_m = 1.0 (less than its 2 m d_safe) used to raise in the
+    control cycle once the robot slowed: CLOSE went below zero."""
+    small = AssistParams.from_mapping({"close_m": 1.0, "wall_distance_m": 0.6}, JACKAL)
+    for v in (0.0, 0.5, 1.0, JACKAL.v_max_mps):
+        shrunk = at_speed(small, JACKAL, v)
+        assert JACKAL.d_robot_m <= shrunk.close_m <= small.close_m
+        assert shrunk.faraway_m - shrunk.close_m == pytest.approx(small.faraway_m - small.close_m)
+        assert 0.0 < shrunk.wall_distance_m <= small.wall_distance_m
+    assert at_speed(small, JACKAL, 0.0).close_m == pytest.approx(JACKAL.d_robot_m)
+
+
 def test_a_fast_robot_sees_a_box_as_close_only_at_speed():
     jackal = AssistParams.from_profile(JACKAL)
     box = line(1.5, -0.2, 1.5, 0.2, 20)

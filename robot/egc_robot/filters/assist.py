@@ -658,22 +658,32 @@ def _avoid(
 
 def at_speed(params: AssistParams, profile: RobotProfile, speed_mps: float) -> AssistParams:
     """The params with every distance built on d_safe shrunk to the current speed's (module
-    docstring): d_safe(v) = max(``d_safe_min_m``, d_safe |v| / v_max), never above d_safe."""
-    d_safe = profile.d_safe_m
+    docstring): d_safe(v) = max(``d_safe_min_m``, d_safe |v| / v_max), never above d_safe.
+
+    With the profile's own distances nothing shrinks below the footprint length d_robot. A
+    robot TOML that sets some of them smaller than d_safe keeps them valid: the bands shrink no
+    further than CLOSE = d_robot (all three together, so their order stays) and no other
+    distance below d_robot or its configured value, whichever is smaller.
+    """
+    d_safe, d_robot = profile.d_safe_m, profile.d_robot_m
     floor = min(d_safe, params.d_safe_min_m)
     reach = max(floor, min(d_safe, abs(speed_mps) * d_safe / profile.v_max_mps))
-    offset = d_safe - reach
+    offset = min(d_safe - reach, params.close_m - d_robot)
     if not offset > 0.0:  # also a NaN speed: the full bands
         return params
+
+    def shrunk(value: float, by: float) -> float:
+        return max(value - by, min(value, d_robot))
+
     return replace(
         params,
         close_m=params.close_m - offset,
         intermediate_m=params.intermediate_m - offset,
         faraway_m=params.faraway_m - offset,
-        wall_distance_m=params.wall_distance_m - 0.5 * offset,
-        wall_range_m=params.wall_range_m - offset,
-        block_m=params.block_m - offset,
-        leave_clear_m=params.leave_clear_m - offset,
+        wall_distance_m=shrunk(params.wall_distance_m, 0.5 * offset),
+        wall_range_m=shrunk(params.wall_range_m, offset),
+        block_m=shrunk(params.block_m, offset),
+        leave_clear_m=shrunk(params.leave_clear_m, offset),
     )
 
 
