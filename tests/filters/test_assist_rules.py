@@ -5,7 +5,7 @@ simulator (assist, then the profile limits and the footprint sweep, as the pipel
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import fields, replace
 
 import numpy as np
 import pytest
@@ -655,6 +655,26 @@ def test_bands_set_below_d_safe_in_the_robot_toml_stay_valid_at_any_speed():
         assert shrunk.faraway_m - shrunk.close_m == pytest.approx(small.faraway_m - small.close_m)
         assert 0.0 < shrunk.wall_distance_m <= small.wall_distance_m
     assert at_speed(small, JACKAL, 0.0).close_m == pytest.approx(JACKAL.d_robot_m)
+
+
+@pytest.mark.parametrize("profile", [P, JACKAL], ids=lambda p: p.name)
+@pytest.mark.parametrize(
+    "toml",
+    [
+        {},
+        {"close_m": 1.0, "wall_distance_m": 0.6},
+        {"close_m": 0.5, "block_m": 0.3},
+        {"leave_clear_m": 0.2},
+    ],
+)
+def test_bands_at_any_speed_pass_the_params_own_validation(profile, toml):
+    """at_speed skips __post_init__ (it runs every cycle): its output must pass it anyway."""
+    params = AssistParams.from_mapping(toml, profile)
+    for v in np.linspace(-profile.v_max_mps, profile.v_max_mps, 41):
+        shrunk = at_speed(params, profile, float(v))
+        revalidated = AssistParams(**{f.name: getattr(shrunk, f.name) for f in fields(shrunk)})
+        assert revalidated == shrunk
+        assert shrunk.close_m <= params.close_m and shrunk.block_m <= params.block_m
 
 
 def test_a_fast_robot_sees_a_box_as_close_only_at_speed():
