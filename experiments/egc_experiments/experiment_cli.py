@@ -63,7 +63,7 @@ from egc_sim.simulator import Simulator
 from egc_sim.worlds import WorldError, load_world
 
 from egc_experiments.grid import Grid, GridError, load_grid
-from egc_experiments.report import write_plots, write_report
+from egc_experiments.report import PLOT_FILES, write_plots, write_report
 from egc_experiments.run_point import RunPoint
 
 RUN_MODES: Final = ("simulated", "emulated")
@@ -151,9 +151,13 @@ def _check_out_dir(out: Path) -> None:
             pass
     except OSError as exc:
         raise UsageError(f"cannot write to --out {out}: {exc.strerror or exc}") from None
-    for name in (RUNS, REPORT, ERRORS):
+    outputs = (RUNS, REPORT, ERRORS, *PLOT_FILES)
+    temporaries = (REPORT + ".tmp", *(Path(n).stem + ".tmp.png" for n in PLOT_FILES))
+    for name in outputs + temporaries:
         path = out / name
-        if path.exists() and not os.access(path, os.W_OK):
+        if path.is_dir():
+            raise UsageError(f"cannot write {path}: it is a directory")
+        if name in outputs and path.exists() and not os.access(path, os.W_OK):
             raise UsageError(f"cannot write to {path}: permission denied")
 
 
@@ -266,6 +270,8 @@ def run(args: argparse.Namespace) -> int:
         grid = load_grid(args.grid, check_point=check_point)
     except GridError as exc:
         raise UsageError(str(exc)) from None
+    if not args.out.strip():  # Path("") would be the current directory
+        raise UsageError("--out needs a directory name, got an empty one")
     out = Path(args.out)
     _check_out_dir(out)
     t0 = time.perf_counter()

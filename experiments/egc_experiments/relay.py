@@ -425,12 +425,14 @@ class _TcpPipe:
         transport = self.server.transport
         if transport is None:
             self._pending.append(data)
-        else:
+        elif not transport.is_closing():  # an end that went away: its bytes have nowhere to go
             transport.write(data)
 
     def _to_client(self, data: bytes) -> None:
-        assert self.client.transport is not None
-        self.client.transport.write(data)
+        transport = self.client.transport
+        assert transport is not None
+        if not transport.is_closing():
+            transport.write(data)
 
     def side_closed(self, side: _Side) -> None:
         """An end closed or sent EOF: the other end closes once the bytes before it arrived."""

@@ -387,6 +387,16 @@ def _rate(outcome: str) -> Callable[[Sequence[Row]], float]:
     return lambda g: _pct(g, outcome)
 
 
+# Every file write_plots may write (and the temporary it writes each through).
+PLOT_FILES = (
+    "outcome_vs_delay.png",
+    "time_vs_delay.png",
+    "hold_vs_delay.png",
+    "outcome_vs_loss.png",
+    "hold_vs_outage.png",
+)
+
+
 def write_plots(rows: Sequence[Row], out_dir: Path) -> list[str]:
     """The plots of the module docstring; returns the file names written."""
     written: list[str] = []
@@ -457,6 +467,7 @@ def write_plots(rows: Sequence[Row], out_dir: Path) -> list[str]:
             continue
         if name == "outcome_vs_loss.png" and not any(r["loss"] for r in subset):
             continue
+        assert name in PLOT_FILES, name
         facet = facets.get(name, COLUMNS["operator"][1])
         if _figure(subset, x, xlabel, panels, out_dir / name, title, facet):
             written.append(name)

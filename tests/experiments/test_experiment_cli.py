@@ -116,6 +116,24 @@ def test_an_unwritable_out_dir_exits_2_before_running(tmp_path, capsys):
     assert "cannot write to --out" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("name", ["report.md", "runs.jsonl", "hold_vs_delay.png", "report.md.tmp"])
+def test_an_output_file_that_is_a_directory_exits_2_before_running(tmp_path, capsys, name):
+    grid, out = write_grid(tmp_path), tmp_path / "out"
+    (out / name).mkdir(parents=True)
+    assert experiment(grid, out) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"{name}: it is a directory" in err and "\n" not in err
+    assert sorted(p.name for p in out.iterdir()) == [name]  # nothing run, nothing written
+
+
+def test_an_empty_out_exits_2(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    grid = write_grid(tmp_path)
+    assert experiment(grid, "") == 2
+    assert "--out needs a directory name" in capsys.readouterr().err
+    assert not (tmp_path / "runs.jsonl").exists()
+
+
 def test_bad_arguments_exit_2(tmp_path, capsys):
     grid = write_grid(tmp_path)
     assert experiment(tmp_path / "none.toml", tmp_path / "o") == 2

@@ -276,6 +276,38 @@ def test_client_closing_closes_the_target_side() -> None:
         assert "1 connection(s)" in relay.stop()
 
 
+def test_an_end_that_goes_away_mid_stream_leaves_no_noise_in_the_log() -> None:
+    """The bytes still on their way to an end that has gone are dropped quietly (asyncio used to
+    print 'socket.send() raised exception.' for each, dozens of lines as an operator exits)."""
+    server = socket.create_server(("127.0.0.1", 0))
+    port = server.getsockname()[1]
+    with server, link(
+        "--listen", "tcp/127.0.0.1:0", "--connect", f"tcp/127.0.0.1:{port}",
+        "--up", "delay=200", "--down", "delay=200",
+    ) as relay:  # fmt: skip
+        probe, _ = server.accept()  # the start-up reachability check
+        probe.close()
+        client = socket.create_connection(("127.0.0.1", relay.port))
+        conn, _ = server.accept()
+        with conn:
+            for _ in range(30):  # 300 ms of a stream towards the client
+                conn.sendall(b"x" * 100)
+                time.sleep(0.01)
+            # The client goes (as an operator process that exits) while 200 ms of the stream
+            # are still in the link, and its end of stream takes 200 ms to reach the target.
+            client.close()
+            for _ in range(30):
+                try:
+                    conn.sendall(b"x" * 100)
+                except OSError:
+                    break
+                time.sleep(0.01)
+            time.sleep(0.3)
+        err = relay.stop()
+    assert "raised exception" not in err, err
+    assert "1 connection(s)" in err
+
+
 def one_line_exit_2(*args: str) -> str:
     proc = subprocess.run([*LINK, *args], capture_output=True, text=True, timeout=15)
     assert proc.returncode == 2, proc.stderr
