@@ -56,6 +56,8 @@ class Status:
     # Via points (DESIGN 7): the robot's active one and how many follow; None: none active.
     goal: tuple[float, float] | None = None
     goals_left: int = 0
+    # The robot was asked to move and sent its base nothing (``held_still``).
+    held_still: bool = False
 
 
 def _seconds(ms: float) -> str:
@@ -108,10 +110,15 @@ def _driving(s: Status, reason: str) -> str:
         delay = "" if s.loop_delay_ms is None else f" {_seconds(s.loop_delay_ms)}"
         cap = latency_cap_text(s.v_lim_latency, s.w_lim_latency)
         return f"SLOWED: link delay{delay} -> speed capped{cap}"
-    if limiter in FILTER_LIMITERS:
-        return f"SLOWED: obstacle (filter {limiter})"
-    if limiter == "sweep":
-        return "SLOWED: obstacle next to the footprint (sweep check)"
+    if limiter in FILTER_LIMITERS or limiter == "sweep":
+        which = f"filter {limiter}" if limiter != "sweep" else "sweep check"
+        if s.held_still:
+            return (
+                f"STOPPED: obstacle too close for this command ({which}) - ease off or steer away"
+            )
+        if limiter == "sweep":
+            return "SLOWED: obstacle next to the footprint (sweep check)"
+        return f"SLOWED: obstacle ({which})"
     if "resum" in reason.lower():
         return "DRIVING: resumed after a link gap, ramping up"
     if limiter == "limits":
@@ -247,4 +254,14 @@ def status_of(
         view_age_ms=command.view_age_ms,
         goal=None if t is None else t.goal,
         goals_left=0 if t is None else t.goals_left,
+        held_still=t is not None and held_still(t),
     )
+
+
+_STILL = 1e-3  # m/s, rad/s
+
+
+def held_still(t: Telemetry) -> bool:
+    """The operator asked for motion and the base was sent none (a filter or the sweep)."""
+    asked = abs(t.v_ref) > _STILL or abs(t.w_ref) > _STILL
+    return asked and abs(t.v_cmd) <= _STILL and abs(t.w_cmd) <= _STILL

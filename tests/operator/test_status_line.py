@@ -6,7 +6,15 @@ import io
 from dataclasses import replace
 
 import pytest
-from egc_operator.status_line import Status, StatusLine, format_status, link_figures, situation
+from egc_common.messages import OperatorCommand, Telemetry
+from egc_operator.status_line import (
+    Status,
+    StatusLine,
+    format_status,
+    link_figures,
+    situation,
+    status_of,
+)
 
 BASE = Status(
     rtt_ms=12.3,
@@ -45,6 +53,27 @@ CASES = [
     ("DRIVING", "x", "assist", {"filter": "assist"}, "SLOWED: obstacle (filter assist)"),
     ("DRIVING", "x", "dwa", {"filter": None}, "SLOWED: obstacle (filter dwa)"),
     ("DRIVING", "x", "sweep", {}, "SLOWED: obstacle next to the footprint (sweep check)"),
+    (
+        "DRIVING",
+        "x",
+        "egc",
+        {"held_still": True},
+        "STOPPED: obstacle too close for this command (filter egc) - ease off or steer away",
+    ),
+    (
+        "DRIVING",
+        "x",
+        "sweep",
+        {"held_still": True},
+        "STOPPED: obstacle too close for this command (sweep check) - ease off or steer away",
+    ),
+    (
+        "DRIVING",
+        "x",
+        "limits",
+        {"held_still": True},
+        "DRIVING (at the robot's speed/acceleration limits)",
+    ),
     (
         "DRIVING",
         "fresh centred command",
@@ -226,3 +255,22 @@ def test_plain_lines_follow_a_new_filter_pick_and_via_point() -> None:
     line.show(replace(BASE, filter="dwa"), 0.2)
     line.show(replace(BASE, filter="dwa", goal=(1.0, 1.0)), 0.3)
     assert len(out.getvalue().splitlines()) == 3
+
+
+@pytest.mark.parametrize(
+    ("v_ref", "w_ref", "v_cmd", "w_cmd", "held"),
+    [
+        (2.0, 0.0, 0.0, 0.0, True),  # full stick, nothing sent: the filter holds it still
+        (0.0, 0.5, 0.0, 0.0, True),
+        (2.0, 0.0, 0.1, 0.2, False),  # slowed, still moving
+        (0.0, 0.0, 0.0, 0.0, False),  # centred stick: nothing asked
+    ],
+)
+def test_status_of_knows_when_the_filter_holds_the_robot_still(v_ref, w_ref, v_cmd, w_cmd, held):
+    command = OperatorCommand(1, 1, 1.0, 0.0, "shared", True, False, False, "op", 0)
+    t = Telemetry(1, 1, "DRIVING", "shared", v_ref, w_ref, v_cmd, w_cmd, 0.0, limiter="egc")
+    status = status_of(command, t, None, None, True)
+    assert status.held_still is held
+    assert situation(replace(status, robot_state="DRIVING")).startswith(
+        "STOPPED" if held else "SLOWED"
+    )

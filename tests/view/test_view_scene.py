@@ -82,6 +82,9 @@ def test_status_text_names_the_limiter_and_region() -> None:
     )
     assert "limit: e-stop" in status_text(telemetry(1, state="ESTOP", limiter="estop"))
     assert "limit: something_new" in status_text(telemetry(1, limiter="something_new"))
+    still = telemetry(1, limiter="egc", v_ref=2.0, w_ref=0.0, v_cmd=0.0, w_cmd=0.0)
+    assert "limit: EGC, stopped: ease off or steer away ·" in status_text(still)
+    assert "stopped" not in status_text(telemetry(1, limiter="egc", v_cmd=0.05))
 
 
 def test_time_series_follow_paper_fig_11_and_skip_unknown_ages() -> None:
