@@ -207,6 +207,12 @@ def run_settings(
     goal = settings.goal or world.goal
     if goal is None:
         raise UsageError(f"map {settings.map!r} suggests no goal: give --goal X,Y")
+    x0, y0 = world.origin
+    if not (x0 <= goal[0] <= x0 + world.width_m and y0 <= goal[1] <= y0 + world.height_m):
+        raise UsageError(
+            f"goal {goal[0]:g},{goal[1]:g} is outside map {settings.map!r} (x {x0:g} to "
+            f"{x0 + world.width_m:g}, y {y0:g} to {y0 + world.height_m:g} m)"
+        )
     tolerance = settings.goal_tolerance_m or world.goal_tolerance_m or DEFAULT_GOAL_TOLERANCE_M
     mode = "direct" if settings.filter == "none" else "shared"
     # The simulated lidar declares "no return" as free: within its range it truly is.
@@ -394,8 +400,8 @@ def _settings_from_args(args: argparse.Namespace) -> EpisodeSettings:
         raise UsageError(f"--goal-tolerance must be a positive number, got {args.goal_tolerance}")
     return EpisodeSettings(
         map=args.map or "",
-        start=parse_start(args.start) if args.start else None,
-        goal=parse_goal(args.goal) if args.goal else None,
+        start=parse_start(args.start) if args.start is not None else None,
+        goal=parse_goal(args.goal) if args.goal is not None else None,
         operator=args.operator,
         filter=args.filter,
         profile=args.profile,
@@ -510,7 +516,7 @@ def _suite_settings(path: str, base: EpisodeSettings) -> list[EpisodeSettings]:
             raise UsageError(f"{where}: unknown key(s) {', '.join(unknown)}")
         try:
             out.append(_apply_suite_item(item, base))
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, UsageError) as exc:
             raise UsageError(f"{where}: {exc}") from None
     if not out:
         raise UsageError(f"suite {path} holds no episodes")

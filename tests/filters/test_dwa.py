@@ -312,6 +312,8 @@ def test_params_from_profile_and_mapping():
         {"lookahead_m": math.inf},
         {"no_return_is_free": 1},
         {"margin_m": True},
+        {"margin_m": 0.02},  # below the sweep's margin: DWA would stall against the sweep
+        {"latency_s": 0.0},
     ],
 )
 def test_params_mapping_rejects_bad_values(table):

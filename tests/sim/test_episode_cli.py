@@ -96,6 +96,9 @@ def test_stall_time_ends_a_deadlocked_episode(capsys):
         (["--map", "no/such/map.yaml"], "cannot load map"),
         (["--map", "hallway", "--start", "1,2"], "--start X,Y,YAW"),
         (["--map", "hallway", "--goal", "a,b"], "--goal X,Y"),
+        (["--map", "hallway", "--goal", ""], "--goal X,Y"),  # was the map's goal, silently
+        (["--map", "hallway", "--start", ""], "--start X,Y,YAW"),
+        (["--map", "hallway", "--goal", "1000,1000"], "outside map 'hallway' (x -0.2 to 18.2"),
         (["--map", "hallway", "--filter", "teleport"], "--filter"),
         (["--map", "hallway", "--profile", "roomba"], "--profile"),
         (["--map", "hallway", "--max-time", "-1"], "--max-time"),
@@ -155,6 +158,7 @@ def test_random_worlds_batch_to_stdout(capsys):
         ('{"map": "hallway", "speed": 3}\n', "unknown key"),
         ("not json\n", "not JSON"),
         ('{"map": "hallway", "start": [1, 2]}\n', "start"),
+        ('{"map": "hallway", "goal": "a,b"}\n', "suite.jsonl:1: goal must be 2"),
         ("\n", "no episodes"),
     ],
 )
@@ -186,3 +190,21 @@ def test_record_saves_the_operator_view_one_row_per_cycle(tmp_path, capsys):
     assert len(recording["/plots/v/cmd"]) == 60 and len(recording["/robot/scan"]) == 60
     assert recording["/plots/v/ref"].column("Scalars:scalars")[-1] == [0.14]
     assert len(recording["/world/robot"]) == 60
+
+
+def test_a_reader_that_goes_away_ends_it_quietly():
+    """``egc-teleop episode ... | head -1``: no traceback when the pipe closes."""
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "egc_app.cli", "episode", "--random-worlds", "4", "--jobs", "1",
+         "--filter", "none", "--max-time", "5"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    )  # fmt: skip
+    assert proc.stdout is not None and proc.stderr is not None
+    proc.stdout.readline()
+    proc.stdout.close()  # the reader goes after the first line
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 141, err
+    assert "Traceback" not in err
