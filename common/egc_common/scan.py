@@ -33,6 +33,9 @@ class Scan:
     no_return_is_free: bool = False
     mount_x_m: float = 0.0
     mount_y_m: float = 0.0
+    # Obstacle points in {R} that no beam's range holds: REP 117's -inf readings placed where
+    # the object may be nearest (``too_close_points``). (K, 2) or None.
+    extra_xy_m: FloatArray | None = None
     _obstacles: ObstaclePoints | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -88,6 +91,8 @@ class Scan:
                 self.mount_x_m,
                 self.mount_y_m,
             )
+            if self.extra_xy_m is not None and len(self.extra_xy_m):
+                xy = np.concatenate((xy, np.asarray(self.extra_xy_m, np.float64).reshape(-1, 2)))
             cached = obstacle_points(xy)
             for array in (cached.xy, cached.x, cached.y, cached.r2):
                 array.flags.writeable = False
@@ -201,6 +206,47 @@ def ranges_to_points(
     r = r[keep]
     a = a[keep]
     out = np.empty((r.size, 2), dtype=np.float64)
+    out[:, 0] = r * np.cos(a) + mount_x_m
+    out[:, 1] = r * np.sin(a) + mount_y_m
+    return out
+
+
+def footprint_exit_m(
+    angles_rad: FloatArray, mount_x_m: float, mount_y_m: float, half_l_m: float, half_w_m: float
+) -> FloatArray:
+    """How far each beam (angles in {R}) runs from the sensor before it leaves the footprint
+    rectangle |x| <= half_l, |y| <= half_w; 0 for a sensor outside it."""
+    a = np.asarray(angles_rad, dtype=np.float64)
+    if abs(mount_x_m) > half_l_m or abs(mount_y_m) > half_w_m:
+        return np.zeros_like(a)
+    c, s = np.cos(a), np.sin(a)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tx = np.where(c != 0.0, (np.copysign(half_l_m, c) - mount_x_m) / c, np.inf)
+        ty = np.where(s != 0.0, (np.copysign(half_w_m, s) - mount_y_m) / s, np.inf)
+    out: FloatArray = np.minimum(tx, ty)
+    return out
+
+
+def too_close_points(
+    angles_rad: FloatArray,
+    range_min_m: float,
+    mount_x_m: float,
+    mount_y_m: float,
+    footprint_half_m: tuple[float, float],
+    gap_m: float = 0.001,
+) -> FloatArray:
+    """Where REP 117's ``-inf`` readings (an object closer than range_min, distance unknown)
+    may be nearest: on each such beam just outside the footprint, as (K, 2) points in {R}.
+
+    The reading stays ``-inf`` while the robot closes in, so a point at range_min alone (DESIGN
+    11) would let it drive on into the object; this one stops motion towards it. Beams whose
+    range_min ends inside the footprint (the laser seeing the robot itself) add nothing.
+    """
+    a = np.asarray(angles_rad, dtype=np.float64)
+    r = footprint_exit_m(a, mount_x_m, mount_y_m, *footprint_half_m) + gap_m
+    keep = r < range_min_m
+    a, r = a[keep], r[keep]
+    out = np.empty((a.size, 2), dtype=np.float64)
     out[:, 0] = r * np.cos(a) + mount_x_m
     out[:, 1] = r * np.sin(a) + mount_y_m
     return out

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from egc_common.profiles import RobotProfile
-from egc_common.scan import ObstaclePoints, obstacle_points
+from egc_common.scan import ObstaclePoints, obstacle_points, too_close_points
 
 from egc_robot import pipeline
 from egc_robot.pipeline import PipelineConfig, PipelineResult
@@ -173,10 +173,11 @@ def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
-def scan_points(scan: LogScan) -> ScanPoints:
+def scan_points(scan: LogScan, footprint_half_m: tuple[float, float] | None = None) -> ScanPoints:
     """REP 117 ranges to points in {R}: finite readings within [range_min, range_max], plus
-    ``-inf`` readings as obstacles at range_min; ``+inf``, ``NaN`` and finite readings outside
-    the range are dropped."""
+    ``-inf`` readings as obstacles at range_min (and, given the footprint's half length and
+    width, just outside the footprint: ``egc_common.scan.too_close_points``); ``+inf``, ``NaN``
+    and finite readings outside the range are dropped."""
     r = np.asarray(scan.ranges_m, dtype=np.float64)
     angles = scan.angle_min_rad + scan.angle_increment_rad * np.arange(r.size, dtype=np.float64)
     with np.errstate(invalid="ignore"):
@@ -188,6 +189,9 @@ def scan_points(scan: LogScan) -> ScanPoints:
     xy = np.empty((rr_m.size, 2), dtype=np.float64)
     xy[:, 0] = rr_m * np.cos(a)
     xy[:, 1] = rr_m * np.sin(a)
+    if footprint_half_m is not None and too_close.any():
+        near = too_close_points(angles[too_close], scan.range_min_m, 0.0, 0.0, footprint_half_m)
+        xy = np.concatenate((xy, near))
     free = rr_m.size == 0 and r.size > 0 and bool(np.all(np.isposinf(r)))
     closest = float(rr_m.min()) if rr_m.size else None
     return ScanPoints(xy, free, closest)

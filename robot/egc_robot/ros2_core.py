@@ -8,7 +8,9 @@ Scans (``scan_from_laser``) follow REP 117:
 - ``+inf``: no object within ``range_max`` on that beam. Free (REP 117 defines it so); dropped
   from the points, but it is information: a scan of nothing but ``+inf`` says "all free".
 - ``NaN``: no information on that beam (unknown); dropped.
-- ``-inf``: an object closer than ``range_min``: an obstacle *at* ``range_min``, kept.
+- ``-inf``: an object closer than ``range_min``: an obstacle *at* ``range_min``, kept; and, as
+  the reading stays ``-inf`` however close the object comes, one more just outside the
+  footprint on that beam, where it may be nearest (the robot may back away, not drive on).
 - finite readings outside ``[range_min, range_max]`` (an older driver's "no return" code, 0.0,
   ``range_max + 1``): dropped, and not information.
 
@@ -35,7 +37,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from egc_common.messages import Odometry
-from egc_common.scan import Scan
+from egc_common.scan import Scan, too_close_points
 
 # Bounds on what a scan from the network may be; beyond them it is rejected, not processed.
 MAX_BEAMS = 100_000
@@ -165,10 +167,13 @@ def scan_from_laser(
     range_max_m: float,
     pose: LaserPose,
     stamp_ns: int = 0,
+    footprint_half_m: tuple[float, float] | None = None,
 ) -> Scan | Rejected:
     """A ``sensor_msgs/LaserScan``'s fields as a Scan in {R} (REP 117; see the module docstring).
 
-    Never raises on any input: a malformed or empty scan is a ``Rejected``.
+    With the footprint's half length and width, each ``-inf`` beam also gets a point just
+    outside the footprint (``egc_common.scan.too_close_points``). Never raises on any input: a
+    malformed or empty scan is a ``Rejected``.
     """
     try:
         r = np.array(ranges_m, dtype=np.float64).reshape(-1)
@@ -190,7 +195,8 @@ def scan_from_laser(
     beam_angles = angle_min_rad + angle_increment_rad * np.arange(r.size, dtype=np.float64)
     if r.size and not (np.all(np.isfinite(beam_angles)) and np.abs(beam_angles).max() <= 1e3):
         return Rejected("malformed", "beam angles are not finite")
-    r[r == -np.inf] = range_min_m  # REP 117: an object closer than range_min
+    too_close = r == -np.inf
+    r[too_close] = range_min_m  # REP 117: an object closer than range_min
     free = r == np.inf
     with np.errstate(invalid="ignore"):
         valid = (r >= range_min_m) & (r <= range_max_m)  # False for NaN and +inf
@@ -200,6 +206,11 @@ def scan_from_laser(
         )
     sign = -1.0 if pose.upside_down else 1.0
     angles = pose.yaw_rad + sign * beam_angles
+    extra = None
+    if footprint_half_m is not None and too_close.any():
+        extra = too_close_points(
+            angles[too_close], range_min_m, pose.x_m, pose.y_m, footprint_half_m
+        )
     return Scan(
         angles,
         r,
@@ -209,6 +220,7 @@ def scan_from_laser(
         no_return_is_free=True,  # scans with no information at all were rejected above
         mount_x_m=pose.x_m,
         mount_y_m=pose.y_m,
+        extra_xy_m=extra,
     )
 
 

@@ -77,7 +77,14 @@ def require_rclpy() -> None:
 class Ros2Driver:
     """The Driver of ``egc-teleop robot --driver ros2`` (see the module docstring)."""
 
-    def __init__(self, settings: Ros2Settings, node_name: str = NODE_NAME) -> None:
+    def __init__(
+        self,
+        settings: Ros2Settings,
+        node_name: str = NODE_NAME,
+        footprint_half_m: tuple[float, float] | None = None,
+    ) -> None:
+        """``footprint_half_m``: the profile's half length and width, for ``-inf`` readings."""
+        self._footprint_half_m = footprint_half_m
         require_rclpy()
         import rclpy
         from geometry_msgs.msg import Twist, TwistStamped
@@ -163,6 +170,7 @@ class Ros2Driver:
                 msg.range_max,
                 self.settings.laser,
                 stamp_ns=rx_ns,
+                footprint_half_m=self._footprint_half_m,
             )
             if isinstance(result, Rejected):
                 self._count(result, "scan")

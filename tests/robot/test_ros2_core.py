@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from egc_common.messages import Odometry
 from egc_common.profiles import get_profile
-from egc_common.scan import Scan
+from egc_common.scan import Scan, footprint_exit_m
 from egc_robot.pipeline import PipelineConfig, step_command
 from egc_robot.ros2_core import (
     LaserPose,
@@ -233,3 +233,48 @@ def test_odometry_is_stamped_with_arrival_and_checked():
     )
     assert isinstance(odometry_from_ros(NAN, 0.0, (0, 0, 0, 1), 0.0, 0.0, 1), Rejected)
     assert isinstance(odometry_from_ros(0.0, 0.0, (0, 0, 0, 0), 0.0, 0.0, 1), Rejected)
+
+
+# -- -inf beyond the footprint: the object may be anywhere nearer than range_min ---------------
+
+HALF = (0.2275, 0.1905)  # the Pioneer 3-DX's footprint, half length and width
+
+
+def test_the_footprint_exit_of_a_beam():
+    ahead, left, diagonal = footprint_exit_m(np.array([0.0, math.pi / 2, math.pi / 4]), 0, 0, *HALF)
+    assert (ahead, left) == pytest.approx(HALF)
+    assert diagonal == pytest.approx(HALF[1] / math.sin(math.pi / 4))
+    assert footprint_exit_m(np.array([0.0]), 0.1, 0.0, *HALF)[0] == pytest.approx(0.1275)
+    assert footprint_exit_m(np.array([0.0]), 0.5, 0.0, *HALF)[0] == 0.0  # a laser outside it
+
+
+def test_minus_inf_beyond_the_footprint_adds_a_point_at_its_edge():
+    """range_min 0.6 m: the object is somewhere nearer than 0.6 m and the reading stays -inf
+    however close it comes, so the nearest place it may be counts too."""
+    scan = scan_from_laser([INF, -INF, INF], -0.1, 0.1, 0.6, 10.0, HERE, footprint_half_m=HALF)
+    np.testing.assert_allclose(points(scan), [[0.6, 0.0], [HALF[0] + 0.001, 0.0]], atol=1e-12)
+    plain = scan_from_laser([INF, -INF, INF], -0.1, 0.1, 0.6, 10.0, HERE)
+    np.testing.assert_allclose(points(plain), [[0.6, 0.0]], atol=1e-12)  # DESIGN 11's point
+    inside = scan_from_laser([-INF], 0.0, 0.1, 0.1, 10.0, HERE, footprint_half_m=HALF)
+    np.testing.assert_allclose(points(inside), [[0.1, 0.0]], atol=1e-12)  # the robot itself
+
+
+@pytest.mark.parametrize("profile_name", ["pioneer3dx", "jackal"])
+@pytest.mark.parametrize("filter_name", ["egc", "ek-egc", "assist", "dwa"])
+def test_no_filter_drives_on_into_minus_inf_readings_beyond_the_footprint(
+    filter_name, profile_name
+):
+    """The ROS 2 verifier's case: a wall 0.5 m from the laser, range_min 0.6 m, stick forward.
+    With the point at range_min alone the Jackal drove into the wall at 1 m/s (every filter
+    sent 0.1 m/s here; assist and dwa on the Pioneer too)."""
+    profile = get_profile(profile_name)
+    ranges = np.full(360, INF)
+    ranges[150:211] = -INF  # +-30 deg ahead: closer than range_min
+    half = (0.5 * profile.length_m, 0.5 * profile.width_m)
+    scan = scan_from_laser(ranges, -math.pi, math.pi / 180, 0.6, 10.0, HERE, footprint_half_m=half)
+    assert isinstance(scan, Scan)
+    cfg = PipelineConfig(profile, filter=filter_name)
+    forward = step_command(cfg, 1.0, 0.0, "shared", scan.obstacles(), (0.0, 0.0), 0.05)
+    assert forward.v_cmd_mps <= 0.0, forward
+    back = step_command(cfg, -1.0, 0.0, "shared", scan.obstacles(), (0.0, 0.0), 0.05)
+    assert back.v_cmd_mps < 0.0, back  # backing away from it is still allowed

@@ -66,8 +66,10 @@ class FakeBase:
         wall_x_m: float | None = None,
         laser_yaw_rad: float = 0.0,
         upside_down: bool = False,
+        range_min_m: float = RANGE_MIN_M,
     ) -> None:
         self.wall_x_m = wall_x_m
+        self.range_min_m = range_min_m
         self.laser_yaw_rad = laser_yaw_rad
         self.upside_down = upside_down
         self.ranges_override: np.ndarray | None = None
@@ -157,7 +159,7 @@ class FakeBase:
             c = np.cos(robot_angles)
             with np.errstate(divide="ignore"):
                 d = np.where(c > 1e-6, (self.wall_x_m - self.x_m) / c, np.inf)
-            d = np.where(d < RANGE_MIN_M, -np.inf, d)  # closer than range_min (REP 117)
+            d = np.where(d < self.range_min_m, -np.inf, d)  # closer than range_min (REP 117)
             out = np.where(d <= RANGE_MAX_M, d, np.inf)
         return out
 
@@ -179,7 +181,7 @@ class FakeBase:
                 scan.angle_min = -math.pi
                 scan.angle_increment = 2 * math.pi / BEAMS
                 scan.angle_max = math.pi - 2 * math.pi / BEAMS
-                scan.range_min = RANGE_MIN_M
+                scan.range_min = self.range_min_m
                 scan.range_max = RANGE_MAX_M
                 scan.ranges = self.ranges().astype(np.float32)
                 self._scan_pub.publish(scan)

@@ -128,6 +128,26 @@ def test_sigterm_while_driving_leaves_a_zero_twist_last(base, procs, tmp_path):
     assert "last zero twist was not acknowledged" not in procs.log("robot")
 
 
+@pytest.mark.parametrize("filter_name", ["egc", "assist"])
+def test_a_wall_nearer_than_range_min_is_not_driven_into(ros_domain, procs, tmp_path, filter_name):
+    """A Jackal 0.25 m from a wall, laser range_min 0.6 m: the beams ahead read -inf however
+    close it comes. With an obstacle only at range_min (DESIGN 11) it drove into the wall at
+    1 m/s (found by an outside check); now nothing moves it forward."""
+    base = FakeBase(wall_x_m=0.5, range_min_m=0.6)
+    try:
+        start_robot_and_operator(
+            base, procs, tmp_path, 1.0, "--profile", "jackal", "--filter", filter_name
+        )
+        wait_log(procs, "robot", r"state DRIVING", 30.0)
+        time.sleep(1.5)
+        cmds = base.commands()
+        assert len(cmds) > 20
+        assert max(c.linear_mps for c in cmds) <= 0.0, max(c.linear_mps for c in cmds)
+        assert base.max_x_m + 0.254 < 0.5, base.max_x_m
+    finally:
+        base.close()
+
+
 def test_twist_stamped_drives_and_stops_before_a_wall(ros_domain, procs, tmp_path):
     base = FakeBase(cmd_type="twist-stamped", wall_x_m=1.2)
     try:
