@@ -95,8 +95,24 @@ class Ros2Settings:
                 raise ValueError(f"ros2 {what} topic {topic!r} is not a valid ROS 2 topic name")
         if self.cmd_type not in CMD_TYPES:
             raise ValueError(f"ros2 cmd_type must be one of {', '.join(CMD_TYPES)}")
-        if self.namespace and not _NAMESPACE.match(self.namespace):
-            raise ValueError(f"ros2 namespace {self.namespace!r} is not a valid ROS 2 namespace")
+        namespace = normalise_namespace(self.namespace)
+        object.__setattr__(self, "namespace", namespace)
+
+
+def normalise_namespace(namespace: str) -> str:
+    """A ROS 2 namespace as rclpy takes it (``robot1`` is ``/robot1``); ValueError if invalid."""
+    if not namespace:
+        return ""
+    absolute = namespace if namespace.startswith("/") else "/" + namespace
+    if not _NAMESPACE.match(absolute):
+        raise ValueError(f"ros2 namespace {namespace!r} is not a valid ROS 2 namespace")
+    return absolute
+
+
+def default_topic(default: str, namespace: str) -> str:
+    """The pinned default (``/scan``) or, in a namespace, the same name relative to it
+    (``scan``, so ``/robot1/scan``), as ROS 2 users expect a namespace to move the defaults."""
+    return default.lstrip("/") if namespace and namespace != "/" else default
 
 
 def parse_laser_pose(text: str) -> tuple[float, float, float]:
@@ -141,12 +157,13 @@ def ros2_settings(table: Mapping[str, Any], flags: Mapping[str, Any]) -> Ros2Set
     upside_down = merged.get("laser_upside_down", False)
     if not isinstance(upside_down, bool):
         raise ValueError(f"ros2 laser_upside_down must be true or false, got {upside_down!r}")
+    namespace = merged.get("namespace", "")
     return Ros2Settings(
-        scan_topic=merged.get("scan", DEFAULT_SCAN_TOPIC),
-        odom_topic=merged.get("odom", DEFAULT_ODOM_TOPIC),
-        cmd_topic=merged.get("cmd", DEFAULT_CMD_TOPIC),
+        scan_topic=merged.get("scan", default_topic(DEFAULT_SCAN_TOPIC, namespace)),
+        odom_topic=merged.get("odom", default_topic(DEFAULT_ODOM_TOPIC, namespace)),
+        cmd_topic=merged.get("cmd", default_topic(DEFAULT_CMD_TOPIC, namespace)),
         cmd_type=merged.get("cmd_type", "twist"),
-        namespace=merged.get("namespace", ""),
+        namespace=namespace,
         laser=LaserPose(pose[0], pose[1], pose[2], upside_down),
     )
 

@@ -51,9 +51,10 @@ def add_ros2_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="be a ROS 2 robot: LaserScan and Odometry out, Twist in (no Zenoh)",
     )
-    group.add_argument("--ros-scan", default="/scan", metavar="TOPIC", help="(default: /scan)")
-    group.add_argument("--ros-odom", default="/odom", metavar="TOPIC", help="(default: /odom)")
-    group.add_argument("--ros-cmd", default="/cmd_vel", metavar="TOPIC", help="(default: /cmd_vel)")
+    in_ns = ", or relative to --ros-namespace"
+    group.add_argument("--ros-scan", metavar="TOPIC", help=f"(default: /scan{in_ns})")
+    group.add_argument("--ros-odom", metavar="TOPIC", help=f"(default: /odom{in_ns})")
+    group.add_argument("--ros-cmd", metavar="TOPIC", help=f"(default: /cmd_vel{in_ns})")
     group.add_argument(
         "--ros-cmd-type", choices=CMD_TYPES, default="twist", help="(default: twist)"
     )
@@ -189,10 +190,20 @@ class Ros2Base:
             self._thread.join(2.0)
 
 
+def resolve_topics(args: argparse.Namespace) -> None:
+    """Topics not given: ``/scan``, ``/odom``, ``/cmd_vel``, or in a ``--ros-namespace`` the
+    same names relative to it (``/robot1/scan``), as for ``robot --driver ros2``."""
+    in_namespace = bool(args.ros_namespace) and args.ros_namespace != "/"
+    for attr, name in (("ros_scan", "scan"), ("ros_odom", "odom"), ("ros_cmd", "cmd_vel")):
+        if getattr(args, attr, None) is None:
+            setattr(args, attr, name if in_namespace else "/" + name)
+
+
 def run_ros2_base(sim: Simulator, args: argparse.Namespace) -> int:
     """Step ``sim`` in real time as a ROS 2 robot until SIGINT/SIGTERM (see the module doc)."""
     from egc_sim.bridge import RealTimeSim  # the same real-time stepping as the Zenoh bridge
 
+    resolve_topics(args)
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())

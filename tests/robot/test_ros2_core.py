@@ -207,6 +207,17 @@ def test_bad_settings_name_the_key(table, message):
 def test_namespaces_and_relative_topics_are_accepted():
     s = Ros2Settings(scan_topic="front/scan", namespace="/robot1")
     assert s.namespace == "/robot1"
+    assert Ros2Settings(namespace="robot1").namespace == "/robot1"  # as rclpy takes it
+
+
+def test_a_namespace_moves_the_default_topics_into_it():
+    """``--ros-namespace /robot1`` alone listens on /robot1/scan (the defaults become relative);
+    a topic given explicitly stays as given."""
+    s = ros2_settings({}, {"namespace": "/robot1"})
+    assert (s.scan_topic, s.odom_topic, s.cmd_topic) == ("scan", "odom", "cmd_vel")
+    s = ros2_settings({"namespace": "robot1"}, {"scan": "/front/scan"})
+    assert (s.namespace, s.scan_topic, s.odom_topic) == ("/robot1", "/front/scan", "odom")
+    assert ros2_settings({}, {"namespace": "/"}).scan_topic == "/scan"
 
 
 def test_parse_laser_pose_takes_negative_numbers():

@@ -30,13 +30,20 @@ def procs(tmp_path):
             print(f"---- {name} ----\n{group.log(name)[-3000:]}")
 
 
-@pytest.mark.parametrize("cmd_type", ["twist", "twist-stamped"])
+@pytest.mark.parametrize(
+    ("cmd_type", "topics", "scan_topic"),
+    [
+        ("twist", ["--ros-scan", "front/scan"], "/front/scan"),
+        # A namespace alone moves the default topics into it (relative, as ROS 2 users expect).
+        ("twist-stamped", ["--ros-namespace", "robot1"], "/robot1/scan"),
+    ],
+)
 def test_sim_ros2_drives_under_the_robot_and_stops_on_silence(
-    ros_domain, procs, tmp_path, cmd_type
+    ros_domain, procs, tmp_path, cmd_type, topics, scan_topic
 ):
     port = free_tcp_port()
     summary = tmp_path / "summary.json"
-    ros_flags = ["--ros-cmd-type", cmd_type, "--ros-scan", "front/scan"]
+    ros_flags = ["--ros-cmd-type", cmd_type, *topics]
     procs.start("sim", "sim", "--ros2", "--map", "hallway", *ros_flags)
     procs.start(
         "robot",
@@ -45,6 +52,7 @@ def test_sim_ros2_drives_under_the_robot_and_stops_on_silence(
     )
     wait_log(procs, "robot", r"ready: driver ros2")
     wait_log(procs, "sim", r"as a ROS 2 robot")
+    assert f"scans {scan_topic}," in procs.log("robot")
     # The robot hears the simulator's scans (no 'sensor stale' once the operator comes).
     time.sleep(2.0)
     stick = joystick_file(tmp_path / "stick.csv", [(0, 0, 0, 1), (1.5, 1, 0, 1), (60, 1, 0, 1)])
