@@ -324,7 +324,9 @@ def main() -> int:
         f"{'in-process sim: scan -> base cmd':<34}{sim['consumed']:>7}{sim['p50_ms']:>9.2f}{sim['p99_ms']:>9.2f}"
     )
     print(
-        f"added by ROS 2: p50 {result['added_p50_ms']:.2f} ms, p99 {result['added_p99_ms']:.2f} ms "
+        f"ROS 2 minus in-process (differences of percentiles; a negative p99 difference means the "
+        f"in-process run had the worse tail): p50 {result['added_p50_ms']:+.2f} ms, "
+        f"p99 {result['added_p99_ms']:+.2f} ms "
         f"(target: ROS 2 p99 < {TARGET_P99_MS:.0f} ms); {ros['driving_cycles']} of the measured "
         f"cycles drove; load {load_before:.2f} -> {result['load_after']:.2f}"
     )
