@@ -204,6 +204,9 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
         safety = config_mod.section(cfg, "safety", SECTIONS["safety"])
         link = config_mod.section(cfg, "link", SECTIONS["link"])
         pipe = config_mod.section(cfg, "pipeline", SECTIONS["pipeline"])
+        # [ros2] is checked whatever the driver: a file that is wrong fails now, not on the
+        # day the robot first runs on --driver ros2.
+        ros2_settings(config_mod.section(cfg, "ros2", SECTIONS["ros2"]), {})
         profile = get_profile(args.profile)
         horizon = pipe.get("horizon_s")
         free = bool(pipe.get("no_return_is_free", getattr(args, "driver", None) == "ros2"))

@@ -65,3 +65,19 @@ def test_bad_ros2_settings_are_one_line(tmp_path):
     assert out.stderr.strip().splitlines() == [
         "egc-teleop robot: error: laser pose must be X,Y,YAW in metres and radians, got '-0.1,0'"
     ]
+
+
+def test_a_bad_ros2_table_fails_with_any_driver(tmp_path):
+    """The robot TOML's [ros2] is checked even when the robot runs on the simulator."""
+    config = tmp_path / "robot.toml"
+    config.write_text("[ros2]\nscan = 3\n")
+    out = subprocess.run(
+        [sys.executable, "-m", "egc_app.cli", "robot", "--driver", "sim", "--config", str(config)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode == 2
+    assert out.stderr.strip().splitlines() == [
+        "egc-teleop robot: error: ros2 scan must be a string, got 3"
+    ]
