@@ -45,39 +45,24 @@ def test_missing_rclpy_is_one_line_naming_the_extra(no_rclpy_env, args):
     assert "Traceback" not in out.stderr + out.stdout
 
 
-def test_bad_ros2_settings_are_one_line(tmp_path):
+@pytest.mark.parametrize(
+    ("args", "config", "message"),
+    [
+        (["--driver", "ros2", "--laser-pose", "-0.1,0"], None,
+         "laser pose must be X,Y,YAW in metres and radians, got '-0.1,0'"),
+        # The robot TOML's [ros2] is checked even when the robot runs on the simulator.
+        (["--driver", "sim"], "[ros2]\nscan = 3\n", "ros2 scan must be a string, got 3"),
+    ],
+)  # fmt: skip
+def test_bad_ros2_settings_are_one_line(tmp_path, args, config, message):
+    if config is not None:
+        (tmp_path / "robot.toml").write_text(config)
+        args = [*args, "--config", str(tmp_path / "robot.toml")]
     out = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "egc_app.cli",
-            "robot",
-            "--driver",
-            "ros2",
-            "--laser-pose",
-            "-0.1,0",
-        ],
+        [sys.executable, "-m", "egc_app.cli", "robot", *args],
         capture_output=True,
         text=True,
         timeout=60,
     )
     assert out.returncode == 2
-    assert out.stderr.strip().splitlines() == [
-        "egc-teleop robot: error: laser pose must be X,Y,YAW in metres and radians, got '-0.1,0'"
-    ]
-
-
-def test_a_bad_ros2_table_fails_with_any_driver(tmp_path):
-    """The robot TOML's [ros2] is checked even when the robot runs on the simulator."""
-    config = tmp_path / "robot.toml"
-    config.write_text("[ros2]\nscan = 3\n")
-    out = subprocess.run(
-        [sys.executable, "-m", "egc_app.cli", "robot", "--driver", "sim", "--config", str(config)],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert out.returncode == 2
-    assert out.stderr.strip().splitlines() == [
-        "egc-teleop robot: error: ros2 scan must be a string, got 3"
-    ]
+    assert out.stderr.strip().splitlines() == [f"egc-teleop robot: error: {message}"]
