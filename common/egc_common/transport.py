@@ -152,7 +152,10 @@ def options_from_args(args: argparse.Namespace) -> ZenohOptions:
     """The options given on the command line; role defaults apply only without a config file."""
     from_file = args.zenoh_config is not None
     connect = args.zenoh_connect or ([] if from_file else list(args._zenoh_default_connect))
-    listen = args.zenoh_listen or ([] if from_file else list(args._zenoh_default_listen))
+    # A client accepts no sessions: the role's default listen endpoint would only collide with
+    # a router on the same machine (the robot's default port is the router's).
+    no_default_listen = from_file or args.zenoh_mode == "client"
+    listen = args.zenoh_listen or ([] if no_default_listen else list(args._zenoh_default_listen))
     return ZenohOptions(
         mode=args.zenoh_mode,
         connect=tuple(connect),

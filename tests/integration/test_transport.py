@@ -89,5 +89,17 @@ def test_a_config_file_drops_the_role_defaults(tmp_path):
     assert options_from_args(p.parse_args(["--zenoh-config", str(f)])).listen == ()
 
 
+def test_client_mode_drops_the_default_listen_endpoint():
+    """`robot --zenoh-mode client --connect ...` next to a router on the same machine: the
+    robot's default tcp/127.0.0.1:7447 is the router's port (it failed: address in use)."""
+    p = argparse.ArgumentParser()
+    add_zenoh_arguments(p, default_listen=(DEFAULT_ENDPOINT,))
+    client = p.parse_args(["--zenoh-mode", "client", "--connect", "tcp/127.0.0.1:7447"])
+    assert options_from_args(client).listen == ()
+    assert options_from_args(p.parse_args([])).listen == (DEFAULT_ENDPOINT,)
+    given = p.parse_args(["--zenoh-mode", "client", "--listen", "tcp/127.0.0.1:9"])
+    assert options_from_args(given).listen == ("tcp/127.0.0.1:9",)
+
+
 def test_free_tcp_port():
     assert 1024 <= free_tcp_port() <= 65535
