@@ -16,7 +16,9 @@ process holding a Zenoh session in router mode.
   commands from an allowed certificate drive it (the positive control).
 - Each role sends only its own messages: commands published with a robot certificate do not
   reach the robot, telemetry and state forged with an operator certificate reach no one; the
-  map query of the world-frame view passes.
+  map query of the world-frame view passes; the operator's via points (goal) pass.
+- A robot certificate is tied to its robot id: robot-1's base commands reach robot-1's base
+  bridge, not another robot's; an operator certificate reaches no base.
 - Without a client certificate, with one from another CA, or over plain TCP, no session opens.
 """
 
@@ -53,6 +55,7 @@ DEPLOY = ROOT / "deploy"
 OPENSSL = shutil.which("openssl") or "/usr/bin/openssl"
 ALLOWED = ("router", "operator-1", "robot-1")  # common names the shipped ACL knows (or needs)
 INTRUDER = "intruder"  # signed by the project CA, but not in the ACL
+ROBOT = "robot-1"  # the robot id the shipped ACL ties the robot-1 certificate to
 
 ROUTER_SCRIPT = """\
 import sys, time, zenoh
@@ -279,7 +282,7 @@ def stop_robot(procs) -> None:
 
 
 def test_an_operator_drives_a_robot_through_the_tls_router(procs, pki, port, router, tmp_path):
-    robot = "tls-drive"
+    robot = ROBOT
     robot_cfg = client_config("robot-tls.json5", pki, port, tmp_path / "robot-tls.json5")
     op_cfg = operator_config(pki, port, tmp_path / "operator-tls.json5")
     # README: on a network you do not control, commands must carry a robot-clock stamp.
@@ -291,12 +294,15 @@ def test_an_operator_drives_a_robot_through_the_tls_router(procs, pki, port, rou
         assert clock_replies(watcher.session, robot), "the robot's clock did not answer"
         js = joystick_file(tmp_path / "fwd.csv", [(0, 0, 0, 1), (1.5, 0.5, 0, 1), (60, 0.5, 0, 1)])
         op_args = ["--robot", robot, "--operator-id", "op-tls", "--joystick-file", str(js)]
-        op_args += ["--no-view", "--no-status", "--zenoh-config", str(op_cfg)]
+        op_args += ["--no-view", "--no-status", "--zenoh-config", str(op_cfg), "--goal", "5,1.2"]
         procs.start("op", "operator", *op_args)
         driving = wait_until("DRIVING with v_cmd > 0", watcher.moving, 20)
         assert driving.operator == "op-tls", driving
         assert driving.v_cmd > 0.0 and driving.v_ref > 0.0, driving
         assert "operator op-tls alive" in procs.log("robot")  # its liveliness token got through
+        # Its via points too (egc/<robot>/goal; the first ACL had no rule for them).
+        wait_until("the via point", lambda: "via points from op-tls" in procs.log("robot"), 5)
+        wait_until("the active via point echoed", lambda: watcher.telemetry()[-1].goal, 5)
         # Killed, the operator's link closes: the router withdraws its token from the robot.
         killed = time.monotonic_ns()
         procs.children["op"].kill()
@@ -317,7 +323,7 @@ def test_an_operator_drives_a_robot_through_the_tls_router(procs, pki, port, rou
 
 
 def test_a_certificate_outside_the_acl_cannot_drive(procs, pki, port, router, tmp_path):
-    robot = "tls-acl"
+    robot = ROBOT
     robot_cfg = client_config("robot-tls.json5", pki, port, tmp_path / "robot-tls.json5")
     start_robot(procs, robot, robot_cfg)
     sessions: list[zenoh.Session] = []
@@ -366,7 +372,7 @@ def test_a_certificate_outside_the_acl_cannot_drive(procs, pki, port, router, tm
 
 def test_each_role_sends_only_its_own_messages(procs, pki, port, router, tmp_path):
     """Robot certificates cannot command, operator certificates cannot forge telemetry."""
-    robot = "tls-roles"
+    robot = ROBOT
     robot_cfg = client_config("robot-tls.json5", pki, port, tmp_path / "robot-tls.json5")
     start_robot(procs, robot, robot_cfg)
     sessions: list[zenoh.Session] = []
@@ -410,6 +416,38 @@ def test_each_role_sends_only_its_own_messages(procs, pki, port, router, tmp_pat
         if watcher is not None:
             watcher.close()
         for session in sessions:
+            session.close()
+
+
+def test_a_robot_certificate_reaches_only_its_own_robot_id(pki, port, router, tmp_path):
+    """The robot-1 certificate carries base commands and scans between the robot process and
+    its base bridge, for egc/robot-1 only: put to another robot's base it reaches no one (an
+    outside check drove robot 'sim''s base with it, past the filter, when rules said egc/*)."""
+    cfg = client_config("robot-tls.json5", pki, port, tmp_path / "robot-tls.json5")
+    bridge, other = open_client(cfg), open_client(cfg)
+    got: dict[str, list[bytes]] = {"robot-1": [], "sim": []}
+    subs = [
+        bridge.declare_subscriber(
+            keys.base_cmd(rid), lambda s, rid=rid: got[rid].append(s.payload.to_bytes())
+        )
+        for rid in got
+    ]
+    operator = open_client(operator_config(pki, port, tmp_path / "op.json5"))
+    try:
+        time.sleep(0.5)  # declarations through the router
+        for _ in range(20):
+            other.put(keys.base_cmd("sim"), b"drive")  # another robot's base
+            operator.put(keys.base_cmd("robot-1"), b"drive")  # an operator at a base
+            other.put(keys.base_cmd("robot-1"), b"own")  # positive control
+            time.sleep(0.02)
+        wait_until("the robot's own base commands", lambda: len(got["robot-1"]) >= 20, 5)
+        time.sleep(0.3)
+        assert got["sim"] == [], "a robot-1 certificate reached another robot's base"
+        assert set(got["robot-1"]) == {b"own"}, "an operator certificate reached a base"
+    finally:
+        for sub in subs:
+            sub.undeclare()
+        for session in (bridge, other, operator):
             session.close()
 
 
