@@ -144,6 +144,7 @@ class OperatorNode:
         self.history = CommandHistory()  # the commands sent, for the predictive display
         self._state: StateMessage | None = None
         self._robot_alive = False
+        self._telemetry_rx_ns: int | None = None  # our clock, when the newest telemetry came
         self._map_attempts_left = 0 if view is None else _MAP_ATTEMPTS
         self.published = 0
         self._filter_default = filter_default
@@ -173,6 +174,7 @@ class OperatorNode:
             return
         with self._lock:
             self._telemetry = t
+            self._telemetry_rx_ns = self._clock()
             synced = self._sync.synchronised
             received = self._sync.robot_now(self._clock()) if synced else None
         if self._view is not None:
@@ -404,8 +406,10 @@ class OperatorNode:
             t, s, alive = self._telemetry, self._state, self._robot_alive
             latest = self._sync.latest
             synced = self._sync.synchronised
+            rx = self._telemetry_rx_ns
         rtt_ms = None if latest is None else latest.rtt_ns / 1e6
-        return status_of(command, t, s, rtt_ms, synced, alive)
+        age_s = None if rx is None else (self._clock() - rx) / NS_PER_S
+        return status_of(command, t, s, rtt_ms, synced, alive, age_s)
 
     def close(self) -> None:
         for entity in self._entities:

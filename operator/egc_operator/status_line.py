@@ -25,6 +25,8 @@ from egc_common.messages import FILTER_NAMES, OperatorCommand, StateMessage, Tel
 
 # DESIGN 8 defaults, as the operator cannot read the robot's configuration.
 RESUME_WINDOW_S = 2.0
+# Telemetry comes every control cycle (20 Hz and more); older than this, the robot is silent.
+TELEMETRY_STALE_S = 0.5
 MAX_COMMAND_AGE_MS = {"direct": 300, "shared": 1000}
 # Telemetry limiter values that name the filter of DESIGN 6 that changed the command.
 FILTER_LIMITERS = frozenset(name for name in FILTER_NAMES if name != "none")
@@ -58,6 +60,11 @@ class Status:
     goals_left: int = 0
     # The robot was asked to move and sent its base nothing (``held_still``).
     held_still: bool = False
+    # Seconds since the newest telemetry arrived (None: none yet); beyond TELEMETRY_STALE_S
+    # the telemetry figures are left out and the line says the robot is silent.
+    telemetry_age_s: float | None = None
+    controller: str | None = None  # the operator in control, from the robot's state
+    robot_present: bool = True  # its liveliness token is held
 
 
 def _seconds(ms: float) -> str:
@@ -129,8 +136,18 @@ def _driving(s: Status, reason: str) -> str:
 def situation(s: Status) -> str:
     """What the robot does and why, in an operator's words (the status line's first part)."""
     state = s.robot_state
+    age = s.telemetry_age_s
+    if age is not None and age > TELEMETRY_STALE_S:
+        gone = "robot or link silent" if s.robot_present else "its session ended"
+        return (
+            f"NO TELEMETRY for {age:.1f} s ({gone}) - the view is old; the robot stops when "
+            "your commands stop reaching it"
+        )
     if state is None:
         return "robot: no telemetry"
+    if s.in_control is False and state in ("HOLD", "DRIVING", "IDLE"):
+        who = s.controller or "another operator"
+        return f"WATCHING: {who} is in control - you can take over once it quits or is lost"
     reason = s.reason or ""
     if state == "ESTOP":
         return "ESTOP: latched - release the e-stop, centre the stick, hold the deadman, reset"
@@ -227,20 +244,23 @@ def status_of(
     rtt_ms: float | None,
     synchronised: bool,
     robot_alive: bool = True,
+    telemetry_age_s: float | None = None,
 ) -> Status:
-    """The status line's inputs from the newest messages (robot gone: no state shown)."""
-    t = telemetry
-    s = state if robot_alive else None
+    """The status line's inputs from the newest messages (robot gone: no state shown; telemetry
+    older than TELEMETRY_STALE_S: none of its figures, and nothing said about control)."""
+    stale = telemetry_age_s is not None and telemetry_age_s > TELEMETRY_STALE_S
+    t = None if stale else telemetry
+    s = state if robot_alive and not stale else None
     return Status(
         rtt_ms=rtt_ms,
         synchronised=synchronised,
         robot_state=None if s is None else s.state,
         reason=None if s is None else s.reason,
         w_si=None if t is None else t.w_si,
-        rejected=None if state is None else state.rejected,
+        rejected=None if s is None else s.rejected,
         mode=command.mode,
         deadman=command.deadman,
-        in_control=None if state is None else state.operator == command.op,
+        in_control=None if s is None else s.operator == command.op,
         limiter=None if t is None else t.limiter,
         filter=None if t is None else t.filter or None,
         v_lim_latency=None if t is None else t.v_lim_latency,
@@ -255,6 +275,9 @@ def status_of(
         goal=None if t is None else t.goal,
         goals_left=0 if t is None else t.goals_left,
         held_still=t is not None and held_still(t),
+        telemetry_age_s=telemetry_age_s,
+        controller=None if s is None else s.operator,
+        robot_present=robot_alive,
     )
 
 

@@ -6,7 +6,7 @@ import io
 from dataclasses import replace
 
 import pytest
-from egc_common.messages import OperatorCommand, Telemetry
+from egc_common.messages import OperatorCommand, StateMessage, Telemetry
 from egc_operator.status_line import (
     Status,
     StatusLine,
@@ -214,10 +214,10 @@ def test_link_figures_in_plain_numbers() -> None:
 
 
 def test_the_whole_line_keeps_its_order() -> None:
-    text = format_status(replace(BASE, link_loss=0.0, in_control=False, deadman=False))
+    text = format_status(replace(BASE, link_loss=0.0, in_control=True, deadman=False))
     assert text == (
         "DRIVING | rtt  12.3 ms, loss 0.0 % | w_SI 0.90 | rejected 0 | shared | deadman off"
-        " | NOT in control"
+        " | in control"
     )
 
 
@@ -274,3 +274,28 @@ def test_status_of_knows_when_the_filter_holds_the_robot_still(v_ref, w_ref, v_c
     assert situation(replace(status, robot_state="DRIVING")).startswith(
         "STOPPED" if held else "SLOWED"
     )
+
+
+def test_another_operator_in_control_is_named_instead_of_a_hold_reason():
+    """It used to say 'HOLD: centre the stick to drive', which does not help a watcher."""
+    watching = replace(BASE, robot_state="HOLD", reason="waiting for a centred stick")
+    text = situation(replace(watching, in_control=False, controller="op-2"))
+    assert text == "WATCHING: op-2 is in control - you can take over once it quits or is lost"
+    assert situation(replace(watching, in_control=True)) == "HOLD: centre the stick to drive"
+
+
+def test_a_silent_robot_is_said_so_and_its_old_figures_are_left_out():
+    """A frozen robot process: the line said DRIVING for 2.3 s on stale telemetry, then
+    'robot: no telemetry' with the old link figures and 'in control'."""
+    command = OperatorCommand(1, 1, 1.0, 0.0, "shared", True, False, False, "op", 0)
+    t = Telemetry(1, 1, "DRIVING", "shared", 0.1, 0.0, 0.1, 0.0, 1.0, cmd_age_p50_ms=5.0)
+    state = StateMessage(1, "DRIVING", "fresh centred command", "op", 0)
+    fresh = status_of(command, t, state, 2.0, True, telemetry_age_s=0.05)
+    assert situation(fresh) == "DRIVING" and fresh.in_control is True
+    silent = status_of(command, t, state, 2.0, True, telemetry_age_s=1.34)
+    assert situation(silent).startswith("NO TELEMETRY for 1.3 s (robot or link silent)")
+    line = format_status(silent)
+    assert "cmd age" not in line and "in control" not in line and "rtt   2.0 ms" in line
+    gone = status_of(command, t, state, 2.0, True, robot_alive=False, telemetry_age_s=3.0)
+    assert situation(gone).startswith("NO TELEMETRY for 3.0 s (its session ended)")
+    assert status_of(command, None, None, None, False).robot_state is None  # before any contact
