@@ -32,6 +32,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any, Protocol
 
 import numpy.typing as npt
@@ -56,12 +57,14 @@ from egc_operator.clock_sync import ClockSync
 from egc_operator.command_source import CommandSource
 from egc_operator.prediction import CommandHistory, SentCommand
 from egc_operator.status_line import Status, StatusLine, status_of
-from egc_operator.via_route import Route, RoutePlanner
+from egc_operator.via_route import Route, RoutePlanner, active_index
 
 log = logging.getLogger("egc.operator")
 
 NS_PER_S = 1_000_000_000
 _STATUS_PERIOD_NS = 200_000_000
+# Via points sent this long without the robot echoing one of them: say so on the status line.
+VIA_UNTAKEN_NS = 3_000_000_000
 _RELEASE_AFTER_END_NS = 300_000_000
 _CLOCK_TIMEOUT_S = 3.0  # above the round trip of a satellite link (2 x 500 ms + jitter)
 _START_WAIT_NS = 10 * NS_PER_S  # a script starts when the robot is seen, or after this
@@ -152,6 +155,12 @@ class OperatorNode:
         self._actions: list[str] = []  # "next" / "clear" presses for the goal thread (locked)
         self._goal_wake = threading.Event()
         self._goal_in_control = False
+        # Whether the robot has echoed a point of the route as sent (DESIGN 7), and since when
+        # this route goes out unechoed: a robot that never takes them (an ACL without
+        # egc/<robot>/goal) must not fail silently.
+        self._route_echoed = False
+        self._route_pending_since_ns: int | None = None
+        self._last_route: Route | None = None
         self.goals_published = 0
         self._publisher = command_publisher(session, keys.cmd(robot_id))
         self._goal_publisher = goal_publisher(session, keys.goal(robot_id))
@@ -389,7 +398,14 @@ class OperatorNode:
             if self._view is not None:
                 self._view.on_text("INFO", f"via points: {action}")
         now = self._clock()
+        route = planner.route
+        if route is not self._last_route:
+            self._last_route, self._route_echoed, self._route_pending_since_ns = route, False, None
+        if t is not None and active_index(route, t.goal, t.goal_frame, t.goals_left) is not None:
+            self._route_echoed = True
         if planner.due(now, in_control):
+            if route.points and self._route_pending_since_ns is None:
+                self._route_pending_since_ns = now
             message = planner.message(self._op, stamp, now)
             self._goal_publisher.put(message.encode())
             self.goals_published += 1
@@ -407,9 +423,19 @@ class OperatorNode:
             latest = self._sync.latest
             synced = self._sync.synchronised
             rx = self._telemetry_rx_ns
+        now = self._clock()
         rtt_ms = None if latest is None else latest.rtt_ns / 1e6
-        age_s = None if rx is None else (self._clock() - rx) / NS_PER_S
-        return status_of(command, t, s, rtt_ms, synced, alive, age_s)
+        age_s = None if rx is None else (now - rx) / NS_PER_S
+        status = status_of(command, t, s, rtt_ms, synced, alive, age_s)
+        pending = self._route_pending_since_ns
+        if (
+            pending is not None
+            and not self._route_echoed
+            and status.in_control
+            and now - pending > VIA_UNTAKEN_NS
+        ):
+            status = replace(status, via_untaken=True)
+        return status
 
     def close(self) -> None:
         for entity in self._entities:

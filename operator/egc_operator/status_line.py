@@ -65,6 +65,8 @@ class Status:
     telemetry_age_s: float | None = None
     controller: str | None = None  # the operator in control, from the robot's state
     robot_present: bool = True  # its liveliness token is held
+    # This operator's via points have gone out for a while and the robot never echoed them.
+    via_untaken: bool = False
 
 
 def _seconds(ms: float) -> str:
@@ -186,6 +188,8 @@ def format_status(s: Status) -> str:
     if s.goal is not None:
         more = f" +{s.goals_left}" if s.goals_left else ""
         via = f" | via {s.goal[0]:.1f},{s.goal[1]:.1f}{more}"
+    elif s.via_untaken:
+        via = " | via points NOT taken by the robot (does the router pass egc/<robot>/goal?)"
     return (
         f"{situation(s)} | {link_figures(s)} | {w_si} | {rejected} | {mode}{via} | "
         f"{deadman}{control}"

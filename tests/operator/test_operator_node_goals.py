@@ -209,3 +209,41 @@ def test_without_a_route_or_filter_nothing_extra_is_sent(session: zenoh.Session)
             sub.undeclare()
     assert goals == []
     assert commands and all(c.filter is None for c in commands)  # the robot's default runs
+
+
+def test_via_points_the_robot_never_echoes_are_reported_on_the_status_line(
+    session: zenoh.Session,
+) -> None:
+    """Through a router whose ACL has no rule for egc/<robot>/goal the robot never took them,
+    and nothing told the operator. Echoed once, the warning goes."""
+    node = OperatorNode(session, ROBOT, "op1", Buttons(), route=ROUTE)
+    stop = threading.Event()
+    runner = threading.Thread(target=node.run, args=(stop,))
+    runner.start()
+    token = session.liveliness().declare_token(keys.alive_robot(ROBOT))
+    command = OperatorCommand(1, 1, 0.0, 0.0, "shared", True, False, False, "op1", 0)
+    state = StateMessage(time.monotonic_ns(), "DRIVING", "x", "op1")
+    echo: list[tuple[float, float]] = []  # what the robot reports as its active via point
+    quit_robot = threading.Event()
+
+    def robot() -> None:  # state and telemetry at 10 Hz, as a robot in control would
+        while not quit_robot.wait(0.1):
+            session.put(keys.state(ROBOT), state.encode())
+            goal = echo[0] if echo else None
+            session.put(keys.telemetry(ROBOT), telemetry(goal, 2 if echo else 0).encode())
+
+    robot_thread = threading.Thread(target=robot)
+    robot_thread.start()
+    try:
+        wait_for(lambda: node.goals_published >= 1, 3.0)
+        assert not node._status_of(command).via_untaken  # just sent
+        wait_for(lambda: node._status_of(command).via_untaken, 5.0)
+        echo.append(ROUTE.points[0])  # the robot takes them: it echoes the first point
+        wait_for(lambda: not node._status_of(command).via_untaken, 3.0)
+    finally:
+        quit_robot.set()
+        robot_thread.join(5)
+        stop.set()
+        runner.join(5)
+        token.undeclare()
+        node.close()

@@ -299,3 +299,9 @@ def test_a_silent_robot_is_said_so_and_its_old_figures_are_left_out():
     gone = status_of(command, t, state, 2.0, True, robot_alive=False, telemetry_age_s=3.0)
     assert situation(gone).startswith("NO TELEMETRY for 3.0 s (its session ended)")
     assert status_of(command, None, None, None, False).robot_state is None  # before any contact
+
+
+def test_via_points_the_robot_did_not_take_are_said_so():
+    line = format_status(replace(BASE, via_untaken=True))
+    assert "| via points NOT taken by the robot (does the router pass egc/<robot>/goal?) |" in line
+    assert "NOT taken" not in format_status(replace(BASE, via_untaken=True, goal=(1.0, 2.0)))
