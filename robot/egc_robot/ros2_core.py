@@ -241,6 +241,31 @@ def scan_from_laser(
     )
 
 
+_DIRECTIONS = (
+    ("ahead", 0.0),
+    ("left", 0.5 * math.pi),
+    ("behind", math.pi),
+    ("right", -0.5 * math.pi),
+)
+
+
+def blind_directions(angles_rad: npt.ArrayLike) -> list[str]:
+    """Which of ahead, left, behind and right no beam of a scan looks at (beam angles in {R};
+    a direction counts as seen within 1.5 beam gaps of a beam). What the laser does not see
+    counts as free, so the driver says so once (README, "what the laser does not cover")."""
+    a = np.sort(np.mod(np.asarray(angles_rad, dtype=np.float64).reshape(-1), 2.0 * math.pi))
+    if a.size < 2:
+        return [name for name, _ in _DIRECTIONS]
+    gaps = np.diff(np.concatenate((a, [a[0] + 2.0 * math.pi])))
+    tolerance = 1.5 * float(np.median(gaps))
+    blind = []
+    for name, direction in _DIRECTIONS:
+        d = np.abs(np.mod(a - direction + math.pi, 2.0 * math.pi) - math.pi)
+        if float(d.min()) > tolerance:
+            blind.append(name)
+    return blind
+
+
 def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
     """The yaw (rad, about +z) of a rotation quaternion; NaN if it is not a finite, non-zero one."""
     if not all(math.isfinite(v) for v in (x, y, z, w)) or x * x + y * y + z * z + w * w < 1e-12:

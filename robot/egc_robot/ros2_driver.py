@@ -44,6 +44,7 @@ from egc_robot.drivers import SensorUpdate
 from egc_robot.ros2_core import (
     Rejected,
     Ros2Settings,
+    blind_directions,
     command_is_finite,
     odometry_from_ros,
     scan_from_laser,
@@ -87,6 +88,7 @@ class Ros2Driver:
     ) -> None:
         """``footprint_half_m``: the profile's half length and width, for ``-inf`` readings."""
         self._footprint_half_m = footprint_half_m
+        self._coverage_logged = False
         require_rclpy()
         import rclpy
         from geometry_msgs.msg import Twist, TwistStamped
@@ -178,6 +180,15 @@ class Ros2Driver:
                 self._count(result, "scan")
                 return
             result.obstacles()  # prepared here, off the command path
+            if not self._coverage_logged:
+                self._coverage_logged = True
+                blind = blind_directions(result.angles_rad)
+                if blind:
+                    log.warning(
+                        "the laser does not look %s: what it does not see counts as free "
+                        "(README: mount it to cover the direction you drive in)",
+                        " or ".join(blind),
+                    )
             age_ns = self._node.get_clock().now().nanoseconds - (
                 msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
             )

@@ -17,6 +17,7 @@ from egc_robot.ros2_core import (
     LaserPose,
     Rejected,
     Ros2Settings,
+    blind_directions,
     odometry_from_ros,
     parse_laser_pose,
     quaternion_from_yaw,
@@ -289,3 +290,13 @@ def test_no_filter_drives_on_into_minus_inf_readings_beyond_the_footprint(
     assert forward.v_cmd_mps <= 0.0, forward
     back = step_command(cfg, -1.0, 0.0, "shared", scan.obstacles(), (0.0, 0.0), 0.05)
     assert back.v_cmd_mps < 0.0, back  # backing away from it is still allowed
+
+
+def test_blind_directions_of_a_laser():
+    full = -math.pi + 2 * math.pi / 360 * np.arange(360)
+    assert blind_directions(full) == []
+    front_270 = np.linspace(-0.75 * math.pi, 0.75 * math.pi, 1081)
+    assert blind_directions(front_270) == ["behind"]
+    assert blind_directions(front_270 + math.pi) == ["ahead"]  # mounted backwards
+    assert blind_directions(np.linspace(-0.5, 0.5, 100)) == ["left", "behind", "right"]
+    assert blind_directions([0.0]) == ["ahead", "left", "behind", "right"]
