@@ -147,8 +147,8 @@ def situation(s: Status) -> str:
         )
     if state is None:
         return "robot: no telemetry"
-    if s.in_control is False and state in ("HOLD", "DRIVING", "IDLE"):
-        who = s.controller or "another operator"
+    if s.in_control is False and s.controller is not None and state in ("HOLD", "DRIVING"):
+        who = s.controller
         return f"WATCHING: {who} is in control - you can take over once it quits or is lost"
     reason = s.reason or ""
     if state == "ESTOP":

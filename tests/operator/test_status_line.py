@@ -282,6 +282,9 @@ def test_another_operator_in_control_is_named_instead_of_a_hold_reason():
     text = situation(replace(watching, in_control=False, controller="op-2"))
     assert text == "WATCHING: op-2 is in control - you can take over once it quits or is lost"
     assert situation(replace(watching, in_control=True)) == "HOLD: centre the stick to drive"
+    # Nobody in control (IDLE): how to take control, not "watching".
+    idle = replace(BASE, robot_state="IDLE", reason="", in_control=False, controller=None)
+    assert situation(idle).startswith("IDLE: no operator - hold the deadman")
 
 
 def test_a_silent_robot_is_said_so_and_its_old_figures_are_left_out():
