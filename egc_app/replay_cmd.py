@@ -313,8 +313,7 @@ def replay(
             desc=f"replay {path.name}",
         )
         try:
-            profile = replayer.config.profile
-            footprint = (0.5 * profile.length_m, 0.5 * profile.width_m)
+            footprint = replayer.config.profile.half_size_m
             for scan in _scans(reader, topics.scan):
                 points = scan_points(scan, footprint)
                 command = track.at(scan.log_ns)

@@ -290,10 +290,8 @@ def _open_driver(args: argparse.Namespace, cfg: dict[str, Any], session: Any) ->
 
         settings = _ros2_settings(args, cfg)
         try:
-            profile = get_profile(args.profile)
-            return Ros2Driver(
-                settings, footprint_half_m=(0.5 * profile.length_m, 0.5 * profile.width_m)
-            )
+            footprint = get_profile(args.profile).half_size_m
+            return Ros2Driver(settings, footprint_half_m=footprint)
         except Exception as exc:  # rclpy's own errors (e.g. ROS_DOMAIN_ID out of range)
             raise UsageError(f"cannot start the ROS 2 node: {exc}") from None
     if args.driver == "zenoh":

@@ -55,6 +55,11 @@ class RobotProfile:
         return self.r_max_m / self.v_max_mps
 
     @property
+    def half_size_m(self) -> tuple[float, float]:
+        """Half length and half width of the footprint rectangle, centred on {R}'s origin."""
+        return 0.5 * self.length_m, 0.5 * self.width_m
+
+    @property
     def half_diagonal_m(self) -> float:
         """Radius of the circle swept by the footprint when turning in place."""
         return 0.5 * math.hypot(self.length_m, self.width_m)

@@ -110,7 +110,7 @@ def drawable_circle(circle: Circle | None) -> Circle | None:
 
 def footprint_half_size(profile: RobotProfile) -> tuple[float, float]:
     """Half length and half width of the footprint rectangle, centred on the origin of {R}."""
-    return 0.5 * profile.length_m, 0.5 * profile.width_m
+    return profile.half_size_m
 
 
 def command_vector(v_mps: float, w_radps: float, horizon_s: float) -> tuple[float, float]:

@@ -44,9 +44,7 @@ class SweepParams:
 
 def _min_clearance(x_m: FloatArray, y_m: FloatArray, profile: RobotProfile) -> float:
     """Smallest signed clearance of points given in the footprint's frame."""
-    return float(
-        signed_distance_to_rectangle(x_m, y_m, 0.5 * profile.length_m, 0.5 * profile.width_m).min()
-    )
+    return float(signed_distance_to_rectangle(x_m, y_m, *profile.half_size_m).min())
 
 
 def footprint_clearance(points: FloatArray, profile: RobotProfile) -> float:

@@ -282,7 +282,7 @@ def test_no_filter_drives_on_into_minus_inf_readings_beyond_the_footprint(
     profile = get_profile(profile_name)
     ranges = np.full(360, INF)
     ranges[150:211] = -INF  # +-30 deg ahead: closer than range_min
-    half = (0.5 * profile.length_m, 0.5 * profile.width_m)
+    half = profile.half_size_m
     scan = scan_from_laser(ranges, -math.pi, math.pi / 180, 0.6, 10.0, HERE, footprint_half_m=half)
     assert isinstance(scan, Scan)
     cfg = PipelineConfig(profile, filter=filter_name)

@@ -386,7 +386,7 @@ def _free_and_admissible(
     free = np.full(k, np.inf)
     standing = (v == 0.0) & (w == 0.0)
     admissible = standing.copy()
-    half_l, half_w = 0.5 * profile.length_m, 0.5 * profile.width_m
+    half_l, half_w = profile.half_size_m
     reach = profile.half_diagonal_m + params.margin_m + lookahead
     near = pts.r2 <= reach * reach
     x, y = pts.x[near], pts.y[near]
