@@ -30,6 +30,8 @@ TELEMETRY_STALE_S = 0.5
 MAX_COMMAND_AGE_MS = {"direct": 300, "shared": 1000}
 # Telemetry limiter values that name the filter of DESIGN 6 that changed the command.
 FILTER_LIMITERS = frozenset(name for name in FILTER_NAMES if name != "none")
+# ... and those that mean an obstacle changed it: a filter or the footprint sweep.
+OBSTACLE_LIMITERS = FILTER_LIMITERS | {"sweep"}
 
 
 @dataclass(frozen=True, slots=True)
@@ -119,7 +121,7 @@ def _driving(s: Status, reason: str) -> str:
         delay = "" if s.loop_delay_ms is None else f" {_seconds(s.loop_delay_ms)}"
         cap = latency_cap_text(s.v_lim_latency, s.w_lim_latency)
         return f"SLOWED: link delay{delay} -> speed capped{cap}"
-    if limiter in FILTER_LIMITERS or limiter == "sweep":
+    if limiter in OBSTACLE_LIMITERS:
         which = f"filter {limiter}" if limiter != "sweep" else "sweep check"
         if s.held_still:
             return (
@@ -289,6 +291,7 @@ _STILL = 1e-3  # m/s, rad/s
 
 
 def held_still(t: Telemetry) -> bool:
-    """The operator asked for motion and the base was sent none (a filter or the sweep)."""
+    """The operator asked for motion and a filter or the sweep sent the base none."""
     asked = abs(t.v_ref) > _STILL or abs(t.w_ref) > _STILL
-    return asked and abs(t.v_cmd) <= _STILL and abs(t.w_cmd) <= _STILL
+    still = abs(t.v_cmd) <= _STILL and abs(t.w_cmd) <= _STILL
+    return t.limiter in OBSTACLE_LIMITERS and asked and still

@@ -26,7 +26,7 @@ from egc_common.messages import Circle, Telemetry
 from egc_common.profiles import PROFILES, RobotProfile
 
 from egc_operator.prediction import Prediction
-from egc_operator.status_line import FILTER_LIMITERS, held_still, latency_cap_text
+from egc_operator.status_line import held_still, latency_cap_text
 from egc_operator.via_route import Route, active_index
 
 F32 = npt.NDArray[np.float32]
@@ -136,7 +136,7 @@ def status_text(t: Telemetry) -> str:
         limiter += f" <= {t.v_lim_latency:.2f} m/s"
         if t.w_lim_latency is not None:
             limiter += f", {t.w_lim_latency:.2f} rad/s"
-    if (t.limiter in FILTER_LIMITERS or t.limiter == "sweep") and held_still(t):
+    if held_still(t):
         limiter += ", stopped: ease off or steer away"
     state = t.state if t.state == "DRIVING" or not t.reason else f"{t.state} ({t.reason})"
     mode = t.mode if t.filter in ("", "none") else f"{t.mode} ({t.filter})"
