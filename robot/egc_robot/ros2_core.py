@@ -37,15 +37,18 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from egc_common.messages import Odometry
+from egc_common.ros2_topics import (
+    DEFAULT_CMD_TOPIC,
+    DEFAULT_ODOM_TOPIC,
+    DEFAULT_SCAN_TOPIC,
+    default_topic,
+)
 from egc_common.scan import Scan, too_close_points
 
 # Bounds on what a scan from the network may be; beyond them it is rejected, not processed.
 MAX_BEAMS = 100_000
 MAX_RANGE_M = 1e5
 CMD_TYPES = ("twist", "twist-stamped")
-DEFAULT_SCAN_TOPIC = "/scan"
-DEFAULT_ODOM_TOPIC = "/odom"
-DEFAULT_CMD_TOPIC = "/cmd_vel"
 # The [ros2] keys of the robot TOML; flags of the same name (scan -> --ros-scan) override them.
 ROS2_KEYS = ("scan", "odom", "cmd", "cmd_type", "namespace", "laser_pose", "laser_upside_down")
 
@@ -107,12 +110,6 @@ def normalise_namespace(namespace: str) -> str:
     if not _NAMESPACE.match(absolute):
         raise ValueError(f"ros2 namespace {namespace!r} is not a valid ROS 2 namespace")
     return absolute
-
-
-def default_topic(default: str, namespace: str) -> str:
-    """The pinned default (``/scan``) or, in a namespace, the same name relative to it
-    (``scan``, so ``/robot1/scan``), as ROS 2 users expect a namespace to move the defaults."""
-    return default.lstrip("/") if namespace and namespace != "/" else default
 
 
 def parse_laser_pose(text: str) -> tuple[float, float, float]:

@@ -28,6 +28,12 @@ import time
 from typing import Any
 
 from egc_common.errors import UsageError
+from egc_common.ros2_topics import (
+    DEFAULT_CMD_TOPIC,
+    DEFAULT_ODOM_TOPIC,
+    DEFAULT_SCAN_TOPIC,
+    default_topic,
+)
 from egc_common.scan import Scan
 
 from egc_sim.simulator import Simulator
@@ -193,10 +199,13 @@ class Ros2Base:
 def resolve_topics(args: argparse.Namespace) -> None:
     """Topics not given: ``/scan``, ``/odom``, ``/cmd_vel``, or in a ``--ros-namespace`` the
     same names relative to it (``/robot1/scan``), as for ``robot --driver ros2``."""
-    in_namespace = bool(args.ros_namespace) and args.ros_namespace != "/"
-    for attr, name in (("ros_scan", "scan"), ("ros_odom", "odom"), ("ros_cmd", "cmd_vel")):
+    for attr, default in (
+        ("ros_scan", DEFAULT_SCAN_TOPIC),
+        ("ros_odom", DEFAULT_ODOM_TOPIC),
+        ("ros_cmd", DEFAULT_CMD_TOPIC),
+    ):
         if getattr(args, attr, None) is None:
-            setattr(args, attr, name if in_namespace else "/" + name)
+            setattr(args, attr, default_topic(default, args.ros_namespace))
 
 
 def run_ros2_base(sim: Simulator, args: argparse.Namespace) -> int:
