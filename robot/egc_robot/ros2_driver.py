@@ -303,8 +303,11 @@ class Ros2Driver:
             rejected or "none",
             "unknown (the sensor's clock is not ours)" if age is None else f"{age / 1e6:.1f} ms",
         )
+        # The spinning thread must be out of the executor before the node goes: destroying a
+        # node under a running wait crashed the process (a segfault seen in a CI run).
         try:
             self._executor.shutdown(timeout_sec=1.0)
+            self._thread.join(2.0)
             self._node.destroy_node()  # type: ignore[no-untyped-call]
         finally:
             self._context.try_shutdown()

@@ -188,8 +188,11 @@ class Ros2Base:
         self._odom_pub.publish(msg)
 
     def close(self) -> None:
+        # The spinning thread must be out of the executor before the node goes: destroying a
+        # node under a running wait crashed the process (a segfault seen in a CI run).
         try:
             self._executor.shutdown(timeout_sec=1.0)
+            self._thread.join(2.0)
             self._node.destroy_node()  # type: ignore[no-untyped-call]
         finally:
             self._context.try_shutdown()

@@ -197,7 +197,9 @@ class FakeBase:
     def close(self) -> None:
         self._stop.set()
         self._threads[1].join(2)
+        # The spinning thread leaves the executor before the node goes (destroying the node
+        # under a running wait segfaulted a CI run).
         self._executor.shutdown(timeout_sec=1.0)
+        self._threads[0].join(2)
         self.node.destroy_node()
         self._context.try_shutdown()
-        self._threads[0].join(2)
