@@ -234,21 +234,43 @@ def too_close_points(
     mount_y_m: float,
     footprint_half_m: tuple[float, float],
     gap_m: float = 0.001,
+    step_m: float = 0.02,
 ) -> FloatArray:
     """Where REP 117's ``-inf`` readings (an object closer than range_min, distance unknown)
-    may be nearest: on each such beam just outside the footprint, as (K, 2) points in {R}.
+    may touch the robot first: (K, 2) points in {R} just outside the footprint.
 
     The reading stays ``-inf`` while the robot closes in, so a point at range_min alone (DESIGN
-    11) would let it drive on into the object; this one stops motion towards it. Beams whose
-    range_min ends inside the footprint (the laser seeing the robot itself) add nothing.
+    11) would let it drive on into the object, and so would any point that keeps its distance
+    from the laser. The object lies somewhere on the beam between the laser (or, for a laser
+    inside the footprint, where the beam leaves it) and range_min: each place on that stretch,
+    sampled every ``step_m``, is taken to the nearest point of the footprint's edge and moved
+    ``gap_m`` out of it. That stops motion towards every place the object may be, also for a
+    laser mounted beyond the footprint's edge, whose beams never cross the footprint. Places
+    inside the footprint (the laser seeing the robot itself) add nothing.
     """
     a = np.asarray(angles_rad, dtype=np.float64)
-    r = footprint_exit_m(a, mount_x_m, mount_y_m, *footprint_half_m) + gap_m
-    keep = r < range_min_m
-    a, r = a[keep], r[keep]
-    out = np.empty((a.size, 2), dtype=np.float64)
-    out[:, 0] = r * np.cos(a) + mount_x_m
-    out[:, 1] = r * np.sin(a) + mount_y_m
+    half_l, half_w = footprint_half_m
+    t0 = footprint_exit_m(a, mount_x_m, mount_y_m, half_l, half_w) + gap_m
+    span = np.clip(range_min_m - t0, 0.0, None)
+    n = int(np.ceil(span.max() / step_m)) + 1 if span.size else 0
+    if n == 0:
+        return np.empty((0, 2), dtype=np.float64)
+    frac = np.linspace(0.0, 1.0, n) if n > 1 else np.zeros(1)
+    t = t0[:, None] + span[:, None] * frac[None, :]  # (K, n) along each beam
+    ok = np.broadcast_to(span[:, None] > 0.0, t.shape)
+    qx = (mount_x_m + t * np.cos(a)[:, None])[ok]
+    qy = (mount_y_m + t * np.sin(a)[:, None])[ok]
+    cx, cy = np.clip(qx, -half_l, half_l), np.clip(qy, -half_w, half_w)
+    dx, dy = qx - cx, qy - cy
+    d = np.hypot(dx, dy)
+    outside = d > 0.0
+    dx, dy, d, cx, cy = dx[outside], dy[outside], d[outside], cx[outside], cy[outside]
+    out = np.empty((d.size, 2), dtype=np.float64)
+    out[:, 0] = cx + gap_m * dx / d
+    out[:, 1] = cy + gap_m * dy / d
+    if out.shape[0] > 1:  # many places map onto the same bit of edge: one point per 5 mm
+        _, first = np.unique(np.round(out / 0.005), axis=0, return_index=True)
+        out = out[np.sort(first)]
     return out
 
 

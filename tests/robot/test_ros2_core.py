@@ -300,3 +300,74 @@ def test_blind_directions_of_a_laser():
     assert blind_directions(front_270 + math.pi) == ["ahead"]  # mounted backwards
     assert blind_directions(np.linspace(-0.5, 0.5, 100)) == ["left", "behind", "right"]
     assert blind_directions([0.0]) == ["ahead", "left", "behind", "right"]
+
+
+def _ranges_to_post(
+    pose: tuple[float, float, float],
+    mount: tuple[float, float],
+    angles: np.ndarray,
+    post: tuple[float, float, float],
+    range_min_m: float,
+) -> np.ndarray:
+    """A laser at ``mount`` in {R} of a robot at ``pose`` sees one round post: REP 117 ranges
+    (``-inf`` nearer than range_min, ``+inf`` for no return)."""
+    x, y, th = pose
+    px = x + mount[0] * math.cos(th) - mount[1] * math.sin(th)
+    py = y + mount[0] * math.sin(th) + mount[1] * math.cos(th)
+    cx, cy, r = post
+    dx, dy = np.cos(th + angles), np.sin(th + angles)
+    ox, oy = px - cx, py - cy
+    b = ox * dx + oy * dy
+    disc = b * b - (ox * ox + oy * oy - r * r)
+    with np.errstate(invalid="ignore"):
+        t = -b - np.sqrt(disc)
+    hit = (disc >= 0) & (t > 0)
+    ranges = np.where(hit, t, INF)
+    ranges[hit & (t < range_min_m)] = -INF
+    return ranges
+
+
+def _gap_to_footprint(pose, post, half) -> float:
+    x, y, th = pose
+    cx, cy, r = post
+    dx, dy = cx - x, cy - y
+    lx = dx * math.cos(th) + dy * math.sin(th)
+    ly = -dx * math.sin(th) + dy * math.cos(th)
+    return math.hypot(max(abs(lx) - half[0], 0.0), max(abs(ly) - half[1], 0.0)) - r
+
+
+@pytest.mark.parametrize("filter_name", ["egc", "ek-egc", "assist", "dwa"])
+@pytest.mark.parametrize("post_x_m", [0.9, 1.9])  # -inf from the start; seen first, then -inf
+@pytest.mark.parametrize(
+    "mount, y_o",
+    [
+        ((0.15, 0.0), 0.0),  # inside the footprint
+        ((0.30, 0.0), 0.0),  # 4.6 cm beyond the Jackal's front edge (outside verifier, 4 of 4)
+        ((0.30, 0.10), 0.0),
+        ((0.30, 0.0), 0.3),  # turning left into it
+    ],
+)
+def test_a_stick_held_forward_never_drives_into_a_post_seen_as_minus_inf(
+    mount, y_o, post_x_m, filter_name
+):
+    """Closed loop: a fake base that does exactly what it is told, a laser with a 1 m range_min,
+    a post ahead. Once the post is nearer than range_min every beam on it reads -inf and keeps
+    reading -inf however close the robot comes; the points at range_min and any point that
+    moves with the laser (the old one for a laser outside the footprint sat 1 mm from the
+    laser, 4.6 cm ahead of the bumper forever) let the robot creep on into it."""
+    profile = get_profile("jackal")
+    half = profile.half_size_m
+    cfg = PipelineConfig(profile, filter=filter_name)
+    angles = -math.pi + 2 * math.pi / 720 * np.arange(720)
+    post = (post_x_m, 0.0, 0.2)
+    pose, cmd, dt = (0.0, 0.0, 0.0), (0.0, 0.0), 0.05
+    laser = LaserPose(*mount)
+    for _ in range(160):
+        ranges = _ranges_to_post(pose, mount, angles, post, 1.0)
+        scan = scan_from_laser(ranges, -math.pi, 2 * math.pi / 720, 1.0, 10.0, laser, 0, half)
+        assert isinstance(scan, Scan)
+        out = step_command(cfg, 1.0, y_o, "shared", scan.obstacles(), cmd, dt)
+        cmd = (out.v_cmd_mps, out.w_cmd_radps)
+        x, y, th = pose
+        pose = (x + cmd[0] * dt * math.cos(th), y + cmd[0] * dt * math.sin(th), th + cmd[1] * dt)
+        assert _gap_to_footprint(pose, post, half) > 0.0, (pose, cmd)
