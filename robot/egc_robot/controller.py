@@ -226,6 +226,9 @@ class RobotController:
         self._command_rx_ns = 0
         self._tracks: OrderedDict[str, _OperatorTrack] = OrderedDict()
         self._alive: set[str] = set()
+        # Operators whose liveliness token went away: their commands still in flight (or a hung
+        # process that wakes up) must not take control again until the token is back.
+        self._departed: OrderedDict[str, None] = OrderedDict()
         self._estop_pending = False
         self._scan: _Scan | None = None
         self._telemetry_xy: npt.NDArray[np.float32] | None = None  # of ``_scan``, when asked for
@@ -324,6 +327,15 @@ class RobotController:
         else:
             self._track(op, seq, now_ns)
         took_control = False
+        if self._controller_op is None and cmd.deadman and op in self._departed:
+            return self._reject(
+                cmd,
+                Rejection(
+                    RejectReason.NOT_IN_CONTROL,
+                    f"{op}: its liveliness token is gone (the session ended or was lost)",
+                ),
+                now_ns,
+            )
         if self._controller_op is None and cmd.deadman:
             self._controller_op = op
             self._control_epoch += 1
@@ -419,12 +431,17 @@ class RobotController:
         if self._unreported is not None:
             self._report()
         if alive:
+            self._departed.pop(operator_id, None)
             if operator_id not in self._alive:
                 self._tracks.pop(operator_id, None)  # a (re)started operator: new seq session
             if len(self._alive) < _MAX_TRACKED_OPERATORS:
                 self._alive.add(operator_id)
             return
         self._alive.discard(operator_id)
+        self._departed[operator_id] = None
+        self._departed.move_to_end(operator_id)
+        while len(self._departed) > _MAX_TRACKED_OPERATORS:
+            self._departed.popitem(last=False)
         if operator_id == self._controller_op:
             self._release(f"operator {operator_id} lost")
 

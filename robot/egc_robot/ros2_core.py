@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -49,6 +49,10 @@ from egc_common.scan import Scan, too_close_points
 MAX_BEAMS = 100_000
 MAX_RANGE_M = 1e5
 CMD_TYPES = ("twist", "twist-stamped")
+ROS_TYPE_OF_CMD = {
+    "twist": "geometry_msgs/msg/Twist",
+    "twist-stamped": "geometry_msgs/msg/TwistStamped",
+}
 # The [ros2] keys of the robot TOML; flags of the same name (scan -> --ros-scan) override them.
 ROS2_KEYS = ("scan", "odom", "cmd", "cmd_type", "namespace", "laser_pose", "laser_upside_down")
 
@@ -261,6 +265,27 @@ def blind_directions(angles_rad: npt.ArrayLike) -> list[str]:
         if float(d.min()) > tolerance:
             blind.append(name)
     return blind
+
+
+def cmd_topic_warning(topic: str, cmd_type: str, subscriber_types: Sequence[str]) -> str | None:
+    """What is wrong with who listens to our command topic, in one line (None: a subscriber
+    takes our type). ROS 2 does not connect a publisher and a subscriber of different types, so
+    a base that wants TwistStamped never sees our Twist, and no error says so anywhere."""
+    ours = ROS_TYPE_OF_CMD[cmd_type]
+    if ours in subscriber_types:
+        return None
+    if not subscriber_types:
+        return (
+            f"nobody subscribes to {topic}: no base will move (is the base driver running, in "
+            "this namespace and ROS_DOMAIN_ID? `ros2 topic info -v` shows who listens)"
+        )
+    theirs = sorted(set(subscriber_types))
+    fix = [name for name, ros in ROS_TYPE_OF_CMD.items() if ros in theirs]
+    hint = f": run with --ros-cmd-type {fix[0]} (or cmd_type in [ros2])" if fix else ""
+    return (
+        f"the base subscribes to {topic} as {' and '.join(theirs)} but this robot publishes "
+        f"{ours}, which ROS 2 does not deliver to it{hint}"
+    )
 
 
 def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:

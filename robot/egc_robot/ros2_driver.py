@@ -45,6 +45,7 @@ from egc_robot.ros2_core import (
     Rejected,
     Ros2Settings,
     blind_directions,
+    cmd_topic_warning,
     command_is_finite,
     odometry_from_ros,
     scan_from_laser,
@@ -62,6 +63,8 @@ MISSING_RCLPY = (
 # 1 s wait, which then warned of a zero twist the base had long received. Shutdown waits for the
 # acknowledgement at most this long.
 _ACK_TIMEOUT_S = 3.5
+# Discovery takes a moment: "nobody subscribes to /cmd_vel" is said only after this long.
+_DISCOVERY_GRACE_NS = 3_000_000_000
 # Header stamps within this of our ROS clock at arrival mean the sensor's clock agrees with ours.
 _CLOCKS_AGREE_NS = 1_000_000_000
 
@@ -112,6 +115,8 @@ class Ros2Driver:
         self._stamped = settings.cmd_type == "twist-stamped"
         self._twist_type: Any = TwistStamped if self._stamped else Twist
         self._scan_listener: Callable[[], None] | None = None
+        self._cmd_warning: str | None = None
+        self._started_ns = time.monotonic_ns()
 
         # Our own context: rclpy installs no signal handlers (the robot process owns SIGINT and
         # SIGTERM, to send the last zero twist) and nothing global is touched.
@@ -137,6 +142,8 @@ class Ros2Driver:
             node.create_subscription(
                 OdometryMsg, settings.odom_topic, self._on_odometry, qos_profile_sensor_data
             )
+            self._cmd_topic = node.resolve_topic_name(settings.cmd_topic)
+            node.create_timer(1.0, self._check_cmd_subscribers)
             self._executor = SingleThreadedExecutor(context=self._context)
             self._executor.add_node(node)
         except Exception:
@@ -205,6 +212,25 @@ class Ros2Driver:
                 listener()
             except Exception as exc:  # never out of a callback
                 log.error("scan listener failed: %s", exc)
+
+    def _check_cmd_subscribers(self) -> None:
+        """Say (once per change) when no subscriber of ``/cmd_vel`` takes our message type."""
+        try:
+            infos = self._node.get_subscriptions_info_by_topic(self._cmd_topic)
+            warning = cmd_topic_warning(
+                self._cmd_topic, self.settings.cmd_type, [i.topic_type for i in infos]
+            )
+        except Exception as exc:  # never out of a callback
+            log.debug("could not list the subscribers of %s: %s", self._cmd_topic, exc)
+            return
+        young = time.monotonic_ns() - self._started_ns < _DISCOVERY_GRACE_NS
+        if warning == self._cmd_warning or (young and not infos):
+            return
+        if warning is not None:
+            log.warning("%s", warning)
+        elif self._cmd_warning is not None:
+            log.info("%s now has a subscriber of our message type", self._cmd_topic)
+        self._cmd_warning = warning
 
     def _on_odometry(self, msg: Any) -> None:
         rx_ns = time.monotonic_ns()

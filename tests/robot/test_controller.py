@@ -242,6 +242,23 @@ def test_operator_liveliness_lost_holds_at_once_and_releases_control():
     assert rig.send(op="bob", seq=1).took_control
 
 
+def test_a_departed_operator_cannot_take_control_again_until_its_token_is_back():
+    """Outside check: an operator ended with its stick forward; a command of it still in
+    flight after its token went away gave it control again (then HOLD, then IDLE 2 s later)."""
+    rig = driving_rig()
+    rig.c.on_operator_alive("alice", True)
+    rig.c.on_operator_alive("alice", False)
+    rig.cycle()
+    late = rig.send(x=1.0, seq=999)
+    assert not late.accepted and not late.took_control
+    assert "liveliness token is gone" in late.rejection.detail
+    assert rig.cycle().telemetry.operator is None
+    rig.c.on_operator_alive("alice", True)  # the same operator back (restarted or reconnected)
+    assert rig.send(seq=1).took_control
+    rig.c.on_operator_alive("bob", False)  # a watcher that leaves does not disturb control
+    assert rig.send(seq=2).accepted
+
+
 def test_silent_operator_loses_control_and_robot_goes_idle():
     rig = driving_rig()
     for _ in range(110):  # 2.2 s > release_timeout

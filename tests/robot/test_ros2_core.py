@@ -18,6 +18,7 @@ from egc_robot.ros2_core import (
     Rejected,
     Ros2Settings,
     blind_directions,
+    cmd_topic_warning,
     odometry_from_ros,
     parse_laser_pose,
     quaternion_from_yaw,
@@ -371,3 +372,18 @@ def test_a_stick_held_forward_never_drives_into_a_post_seen_as_minus_inf(
         x, y, th = pose
         pose = (x + cmd[0] * dt * math.cos(th), y + cmd[0] * dt * math.sin(th), th + cmd[1] * dt)
         assert _gap_to_footprint(pose, post, half) > 0.0, (pose, cmd)
+
+
+def test_the_command_topic_warning_names_the_type_the_base_wants():
+    stamped, plain = "geometry_msgs/msg/TwistStamped", "geometry_msgs/msg/Twist"
+    assert cmd_topic_warning("/cmd_vel", "twist", [plain]) is None
+    assert cmd_topic_warning("/cmd_vel", "twist", [stamped, plain]) is None
+    assert cmd_topic_warning("/cmd_vel", "twist-stamped", [stamped]) is None
+    wrong = cmd_topic_warning("/cmd_vel", "twist", [stamped])
+    assert wrong is not None and "--ros-cmd-type twist-stamped" in wrong and stamped in wrong
+    back = cmd_topic_warning("/r1/cmd_vel", "twist-stamped", [plain])
+    assert back is not None and "--ros-cmd-type twist" in back and "/r1/cmd_vel" in back
+    odd = cmd_topic_warning("/cmd_vel", "twist", ["std_msgs/msg/String"])
+    assert odd is not None and "--ros-cmd-type" not in odd
+    nobody = cmd_topic_warning("/cmd_vel", "twist", [])
+    assert nobody is not None and nobody.startswith("nobody subscribes to /cmd_vel")

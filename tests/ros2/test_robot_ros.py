@@ -163,6 +163,22 @@ def test_twist_stamped_drives_and_stops_before_a_wall(ros_domain, procs, tmp_pat
         base.close()
 
 
+def test_a_base_that_wants_the_other_twist_type_is_named_in_the_log(ros_domain, procs):
+    """ROS 2 does not connect a Twist publisher to a TwistStamped subscriber: without a word,
+    the robot said DRIVING and the base got nothing (outside check)."""
+    base = FakeBase(cmd_type="twist-stamped")
+    try:
+        procs.start("robot", "robot", "--robot", ROBOT, "--driver", "ros2")
+        wait_log(
+            procs,
+            "robot",
+            r"the base subscribes to /cmd_vel as geometry_msgs/msg/TwistStamped but this robot "
+            r"publishes geometry_msgs/msg/Twist.*--ros-cmd-type twist-stamped",
+        )
+    finally:
+        base.close()
+
+
 def test_laser_mounted_upside_down_and_turned(ros_domain, procs, tmp_path):
     """The laser looks left and is upside down: the wall ahead of the robot appears at the
     laser's +90 deg. Read without the mounting, it would be behind the robot."""
