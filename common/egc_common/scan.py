@@ -93,7 +93,11 @@ class Scan:
             )
             if self.extra_xy_m is not None and len(self.extra_xy_m):
                 xy = np.concatenate((xy, np.asarray(self.extra_xy_m, np.float64).reshape(-1, 2)))
-            cached = obstacle_points(xy)
+            cached = obstacle_points(
+                xy,
+                seen_ahead_m=self.range_max_m + self.mount_x_m,
+                seen_behind_m=self.range_max_m - self.mount_x_m,
+            )
             for array in (cached.xy, cached.x, cached.y, cached.r2):
                 array.flags.writeable = False
             object.__setattr__(self, "_obstacles", cached)
@@ -114,6 +118,10 @@ class ObstaclePoints:
     x: FloatArray
     y: FloatArray
     r2: FloatArray  # squared distance of each point from the origin of {R}
+    # How far ahead of and behind {R}'s origin the sensor sees (its range_max from where it
+    # sits): what lies beyond was not seen, free or not. inf when unknown (points only).
+    seen_ahead_m: float = math.inf
+    seen_behind_m: float = math.inf
     count: int = field(init=False)  # len(xy), without asking numpy on the command path
     _index: PointIndex | None = field(default=None, init=False, repr=False)
 
@@ -274,11 +282,16 @@ def too_close_points(
     return out
 
 
-def obstacle_points(points: npt.ArrayLike | ObstaclePoints) -> ObstaclePoints:
+def obstacle_points(
+    points: npt.ArrayLike | ObstaclePoints,
+    *,
+    seen_ahead_m: float = math.inf,
+    seen_behind_m: float = math.inf,
+) -> ObstaclePoints:
     """Check points once: drop rows that are not finite or beyond ``MAX_ABS_COORD_M``.
 
     Raises ValueError unless ``points`` is empty or an (N, 2) array; already prepared points are
-    returned as they are.
+    returned as they are. ``seen_ahead_m``/``seen_behind_m``: the sensor's reach (``Scan``).
     """
     if isinstance(points, ObstaclePoints):
         return points
@@ -292,4 +305,4 @@ def obstacle_points(points: npt.ArrayLike | ObstaclePoints) -> ObstaclePoints:
             p = p[np.all(np.abs(p) <= MAX_ABS_COORD_M, axis=1)]
     p = np.ascontiguousarray(p)
     x, y = p[:, 0].copy(), p[:, 1].copy()
-    return ObstaclePoints(p, x, y, x * x + y * y)
+    return ObstaclePoints(p, x, y, x * x + y * y, seen_ahead_m, seen_behind_m)

@@ -35,6 +35,7 @@ from egc_robot.filters.family import (
 from egc_robot.safety import (
     SweepParams,
     brake_along,
+    horizon_scale,
     increases_clearance,
     limit_acceleration,
     limit_velocity,
@@ -186,7 +187,12 @@ def filter_velocity(
         v, w = limit_acceleration(v, w, previous_cmd, dt_s, profile)
     limited = abs(v - after_filter[0]) > _SAME or abs(w - after_filter[1]) > _SAME
 
-    scale = sweep_scale(v, w, obstacles, profile, config.sweep) if shared else 1.0
+    scale = 1.0
+    if shared:
+        scale = min(
+            sweep_scale(v, w, obstacles, profile, config.sweep),
+            horizon_scale(v, w, obstacles, profile, config.sweep),
+        )
     if scale < 1.0:
         v, w = scale * v, scale * w
         if previous_cmd is not None and not reachable(v, w, previous_cmd, dt_s, profile):

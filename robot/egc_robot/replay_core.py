@@ -87,6 +87,7 @@ class ScanPoints:
     xy_m: FloatArray  # (N, 2)
     free_if_empty: bool
     closest_m: float | None  # nearest valid reading, None when there is none
+    range_max_m: float = math.inf  # the laser's reach: nothing beyond it was seen
 
 
 @dataclass(frozen=True, slots=True)
@@ -194,7 +195,7 @@ def scan_points(scan: LogScan, footprint_half_m: tuple[float, float] | None = No
         xy = np.concatenate((xy, near))
     free = rr_m.size == 0 and r.size > 0 and bool(np.all(np.isposinf(r)))
     closest = float(rr_m.min()) if rr_m.size else None
-    return ScanPoints(xy, free, closest)
+    return ScanPoints(xy, free, closest, float(scan.range_max_m))
 
 
 def velocities_from_poses(
@@ -284,7 +285,8 @@ class Replayer:
         """One scan through the pipeline with the command in effect; without a command the scan
         is only measured. Returns the verdict, the pipeline's result (None without a command),
         the obstacle points it saw and the filter's memory for the next scan."""
-        obstacles = obstacle_points(points.xy_m)
+        reach = points.range_max_m
+        obstacles = obstacle_points(points.xy_m, seen_ahead_m=reach, seen_behind_m=reach)
         if command is None:
             verdict = ScanVerdict(
                 scan.log_ns, scan.stamp_ns, False, 0.0, 0.0, 0.0, 0.0, "none", points.closest_m

@@ -102,6 +102,35 @@ def sweep_min_clearance(
     return _min_clearance(c * dx + s * dy, -s * dx + c * dy, profile)
 
 
+def horizon_scale(
+    v_mps: float,
+    w_radps: float,
+    obstacles: ObstaclePoints,
+    profile: RobotProfile,
+    params: SweepParams,
+) -> float:
+    """Largest s in [0, 1] such that the command (s v, s w) stops within what the sensor sees.
+
+    REP 117 counts a beam with no return as free, but only up to range_max: beyond it nothing
+    was seen. The sweep finds no point there, so on a short-range sensor (range_max 0.6 m) a
+    Jackal drove at 2 m/s until a wall came into view 0.35 m from its bumper, where it needs
+    0.67 m to stop. Here the stopping distance in the direction of travel (one period at the
+    command, then the profile's deceleration: |v| T + v^2 / (2 a)) must fit between the
+    footprint's edge (plus the margin) and the sensor's reach.
+    """
+    if v_mps == 0.0:
+        return 1.0
+    reach = obstacles.seen_ahead_m if v_mps > 0.0 else obstacles.seen_behind_m
+    room = reach - 0.5 * profile.length_m - params.margin_m
+    speed, a, period = abs(v_mps), profile.decel_max_mps2, params.period_s
+    if speed * period + speed * speed / (2.0 * a) <= room:
+        return 1.0
+    if room <= 0.0:
+        return 0.0
+    v_cap = a * (math.sqrt(period * period + 2.0 * room / a) - period)
+    return min(1.0, v_cap / speed)
+
+
 def sweep_scale(
     v_mps: float,
     w_radps: float,

@@ -387,3 +387,33 @@ def test_the_command_topic_warning_names_the_type_the_base_wants():
     assert odd is not None and "--ros-cmd-type" not in odd
     nobody = cmd_topic_warning("/cmd_vel", "twist", [])
     assert nobody is not None and nobody.startswith("nobody subscribes to /cmd_vel")
+
+
+def test_a_short_range_laser_caps_the_speed_to_what_it_can_stop_within():
+    """Outside check: range_max 0.6 m, all +inf (free): the Jackal drove at 2 m/s until a wall
+    came into view 0.35 m from its bumper; it needs 0.67 m to stop from 2 m/s at 3 m/s^2."""
+    profile = get_profile("jackal")
+    half = profile.half_size_m
+    cfg = PipelineConfig(profile, filter="egc")
+    ranges = np.full(360, INF)
+    ranges[0] = 0.55  # one reading behind: a scan that saw something (none at all is a stop)
+    free = scan_from_laser(ranges, -math.pi, math.pi / 180, 0.05, 0.6, HERE, 0, half)
+    assert isinstance(free, Scan)
+    cmd = (1.3, 0.0)  # within one period's braking of the cap
+    out = step_command(cfg, 1.0, 0.0, "shared", free.obstacles(), cmd, 0.05)
+    room = 0.6 - half[0] - 0.03  # reach - footprint's front - the sweep's margin
+    stop = out.v_cmd_mps * 0.05 + out.v_cmd_mps**2 / (2 * profile.decel_max_mps2)
+    assert stop == pytest.approx(room, abs=1e-9) and out.limiter.value == "sweep"
+    far = scan_from_laser(ranges, -math.pi, math.pi / 180, 0.05, 10.0, HERE, 0, half)
+    assert isinstance(far, Scan)
+    fast = step_command(cfg, 1.0, 0.0, "shared", far.obstacles(), cmd, 0.05)
+    assert fast.v_cmd_mps == pytest.approx(1.4)  # a 10 m lidar does not limit it (accel only)
+    direct = step_command(cfg, 1.0, 0.0, "direct", free.obstacles(), cmd, 0.05)
+    assert direct.v_cmd_mps == pytest.approx(1.4)  # direct mode: no filter, no sweep
+    mounted = scan_from_laser(
+        ranges, -math.pi, math.pi / 180, 0.05, 0.6, LaserPose(0.2, 0.0), 0, half
+    )
+    assert isinstance(mounted, Scan)
+    ahead = step_command(cfg, 1.0, 0.0, "shared", mounted.obstacles(), cmd, 0.05)
+    assert ahead.v_cmd_mps > out.v_cmd_mps  # mounted 0.2 m forward, it sees further ahead
+    assert mounted.obstacles().seen_behind_m == pytest.approx(0.4)
