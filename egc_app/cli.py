@@ -56,8 +56,14 @@ class CliArgumentParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
+DESCRIPTION = (
+    "Teleoperation of mobile robots with a shared-autonomy safety layer: operator, robot, "
+    "simulator, network lab and tools, one subcommand each (egc-teleop COMMAND --help)."
+)
+
+
 def build_parser() -> CliArgumentParser:
-    parser = CliArgumentParser(prog="egc-teleop", description=__doc__.splitlines()[0])
+    parser = CliArgumentParser(prog="egc-teleop", description=DESCRIPTION)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=CliArgumentParser)
     sub.required = True
     for name, (_, help_text) in SUBCOMMANDS.items():
@@ -69,8 +75,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args_list = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     # Parse only the subcommand name first, then let its module define the rest.
-    if not args_list or args_list[0] in ("-h", "--help"):
-        parser.parse_args(args_list or ["--help"])
+    if not args_list:  # no command is a bad argument: the list on stderr, exit 2
+        parser.print_help(sys.stderr)
+        return 2
+    if args_list[0] in ("-h", "--help"):
+        parser.parse_args(args_list)
         return 0
     name = args_list[0]
     if name not in SUBCOMMANDS:

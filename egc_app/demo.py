@@ -52,9 +52,19 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--save", metavar="FILE.rrd", help="save the operator view to a file")
     parser.add_argument("--no-view", action="store_true", help="run without the operator view")
-    parser.add_argument("--world", default="hallway", help="built-in world or map file")
-    parser.add_argument("--profile", default="pioneer3dx")
-    parser.add_argument("--script", default="demo", help="built-in operator script")
+    parser.add_argument(
+        "--world", default="hallway", help="built-in world or map file (default: hallway)"
+    )
+    parser.add_argument(
+        "--profile",
+        default="pioneer3dx",
+        help="robot profile: jackal, pioneer3dx (default: pioneer3dx)",
+    )
+    parser.add_argument(
+        "--script",
+        default="demo",
+        help="built-in operator script (default: demo; `operator --script list` lists them)",
+    )
     link = parser.add_argument_group("emulated link (egc-teleop link between the two)")
     link.add_argument("--up", metavar="SPEC", help="operator -> robot, e.g. delay=200,jitter=50")
     link.add_argument("--down", metavar="SPEC", help="robot -> operator, same form")

@@ -87,6 +87,7 @@ SECTIONS: dict[str, tuple[str, ...]] = {
     "sim": ("scan_hz", "beams", "seed"),
     "ros2": ROS2_KEYS,
 }
+ROBOT_TABLES = (*SECTIONS, "dwa", "assist")  # [dwa] and [assist] are checked by their params
 
 
 class SimDriver:
@@ -209,7 +210,7 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
         ros2_settings(config_mod.section(cfg, "ros2", SECTIONS["ros2"]), {})
         profile = get_profile(args.profile)
         horizon = pipe.get("horizon_s")
-        free = bool(pipe.get("no_return_is_free", getattr(args, "driver", None) == "ros2"))
+        free = _flag(pipe, "no_return_is_free", getattr(args, "driver", None) == "ros2")
         filter_tables = {"no_return_is_free": free}
         dwa_table = cfg.get("dwa", {})
         assist_table = cfg.get("assist", {})
@@ -252,7 +253,7 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
             scan_timeout_s=_number(safety, "scan_timeout_s", defaults.scan_timeout_s),
             release_timeout_s=_number(safety, "release_timeout_s", defaults.release_timeout_s),
             centre_tolerance=_number(safety, "centre_tolerance", defaults.centre_tolerance),
-            require_clock_sync=bool(safety.get("require_clock_sync", False)),
+            require_clock_sync=_flag(safety, "require_clock_sync", False),
             telemetry_scan_decimation=int(
                 _number(robot, "telemetry_scan_decimation", defaults.telemetry_scan_decimation)
             ),
@@ -344,7 +345,7 @@ def run(args: argparse.Namespace) -> int:
     if args.record_scan_every < 1:
         raise UsageError("--record-scan-every must be >= 1")
     try:
-        cfg = config_mod.load(args.config, args.set)
+        cfg = config_mod.load(args.config, args.set, ROBOT_TABLES)
     except config_mod.ConfigError as exc:
         raise UsageError(str(exc)) from None
     controller_config = build_controller_config(args, cfg)

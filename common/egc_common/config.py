@@ -56,8 +56,22 @@ def merge(base: Mapping[str, Any], overrides: Iterable[str]) -> dict[str, Any]:
     return out
 
 
-def load(path: str | Path | None, overrides: Iterable[str] = ()) -> dict[str, Any]:
-    return merge(load_toml(path) if path else {}, overrides)
+def load(
+    path: str | Path | None, overrides: Iterable[str] = (), tables: Iterable[str] | None = None
+) -> dict[str, Any]:
+    """The file merged with the overrides; with ``tables``, any other top-level name (a
+    misspelled ``[saftey]``, a key given without its table) is an error, not a silent no-op."""
+    config = merge(load_toml(path) if path else {}, overrides)
+    if tables is not None:
+        known = set(tables)
+        unknown = sorted(set(config) - known)
+        if unknown:
+            raise ConfigError(
+                f"unknown config table(s): {', '.join(unknown)} (known: "
+                f"{', '.join(sorted(known))}; a key is given as table.key, e.g. "
+                f"{sorted(known)[0]}.<key>)"
+            )
+    return config
 
 
 def section(config: Mapping[str, Any], name: str, allowed: Iterable[str]) -> dict[str, Any]:

@@ -10,8 +10,10 @@ Our ``udp/`` transport is two links on one port number (``egc_common.transport``
 datagrams on UDP and Zenoh's reliable control traffic on TCP. So a ``udp/`` relay also relays
 TCP between the same port numbers (the *companion*), with the same delay, jitter, rate and
 outages, on the same clock, but without loss or reordering (TCP retransmits what a lossy path
-drops: only the delay remains). ``--udp-only`` turns the companion off; it is also left out,
-with a note, when nothing accepts TCP at the target.
+drops: only the delay remains). ``--udp-only`` turns the companion off. When nothing accepts
+TCP at the target yet (a relay started before the robot), the ready line says so and the
+companion relays each TCP connection once the target accepts it (the client's earlier tries
+are closed, and Zenoh retries).
 """
 
 from __future__ import annotations
@@ -183,10 +185,14 @@ def _companion(relay: Relay, args: argparse.Namespace, port: int) -> tuple[Relay
     if args.udp_only:
         return None, "UDP only "
     target = Endpoint("tcp", relay.connect.host, relay.connect.port)
+    note = "and tcp (control link, no loss) "
     try:
         check_reachable(target)
     except OSError as exc:
-        return None, f"UDP only: nothing accepts TCP at {target} ({_reason(exc)}) "
+        note = (
+            f"and tcp (control link, no loss; nothing accepts TCP at {target} yet "
+            f"({_reason(exc)}): relayed once it does) "
+        )
     log = (lambda line: None) if args.quiet else None
     return Relay(
         Endpoint("tcp", relay.listen.host, port),
@@ -195,7 +201,7 @@ def _companion(relay: Relay, args: argparse.Namespace, port: int) -> tuple[Relay
         relay.down.without_loss(),
         seed=relay.seed,
         log=log,
-    ), "and tcp (control link, no loss) "
+    ), note
 
 
 def run(args: argparse.Namespace) -> int:

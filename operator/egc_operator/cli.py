@@ -226,7 +226,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         robot_id = keys.validate_id(args.robot)
         operator_id = keys.validate_id(args.operator_id or default_operator_id(), "operator id")
-        cfg = config_mod.load(args.config, args.set)
+        cfg = config_mod.load(args.config, args.set, ("operator", "joystick"))
         op_cfg = config_mod.section(cfg, "operator", OPERATOR_KEYS)
     except ValueError as exc:  # includes ConfigError
         raise UsageError(str(exc)) from None

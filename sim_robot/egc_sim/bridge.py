@@ -81,9 +81,9 @@ def open_simulator(
     kwargs: dict[str, Any] = {"seed": seed}
     if start is not None:
         kwargs["start_pose"] = start
-    if beams is not None:
-        kwargs["lidar"] = LidarConfig(beams=beams)
     try:
+        if beams is not None:
+            kwargs["lidar"] = LidarConfig(beams=beams)
         return Simulator(world, profile, **kwargs)
     except ValueError as exc:
         raise UsageError(f"cannot start the simulator: {exc}") from None
@@ -154,7 +154,12 @@ def scan_message(scan: Scan, stamp_ns: int) -> ScanMessage:
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--robot", default=keys.DEFAULT_ROBOT_ID, metavar="ID")
+    parser.add_argument(
+        "--robot",
+        default=keys.DEFAULT_ROBOT_ID,
+        metavar="ID",
+        help=f"robot id in the Zenoh keys (default: {keys.DEFAULT_ROBOT_ID})",
+    )
     parser.add_argument(
         "--map",
         default=DEFAULT_WORLD,
@@ -162,13 +167,25 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help=f"map.yaml, world .toml, built-in name or random:SEED (default: {DEFAULT_WORLD})",
     )
     parser.add_argument(
-        "--profile", default="pioneer3dx", metavar="NAME", help=", ".join(sorted(PROFILES))
+        "--profile",
+        default="pioneer3dx",
+        metavar="NAME",
+        help=f"{', '.join(sorted(PROFILES))} (default: pioneer3dx)",
     )
     parser.add_argument("--start", metavar="X,Y,YAW", help="start pose (default: the world's)")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--beams", type=int, default=None, help="lidar beams per scan")
+    parser.add_argument(
+        "--seed", type=int, default=0, help="sensor noise and random-world seed (default: 0)"
+    )
+    parser.add_argument(
+        "--beams",
+        type=int,
+        default=None,
+        help=f"lidar beams per scan, 1-100000 (default: {LidarConfig().beams})",
+    )
     parser.add_argument("--scan-hz", type=float, default=20.0, help="scan rate (default: 20)")
-    parser.add_argument("--physics-hz", type=float, default=100.0, help="(default: 100)")
+    parser.add_argument(
+        "--physics-hz", type=float, default=100.0, help="physics steps per second (default: 100)"
+    )
     parser.add_argument(
         "--base-timeout-s",
         type=float,

@@ -55,6 +55,35 @@ def test_a_tiny_grid_end_to_end(tmp_path, capsys):
     assert "2 of 2 runs" in err and "2 new" in err
 
 
+def test_a_grid_jittered_at_every_delay_still_gets_its_delay_plots(tmp_path):
+    """Outside check: jitter 20 ms at every delay point wrote report.md and no PNG at all."""
+    grid = write_grid(
+        tmp_path, TINY.replace("delay_ms = [0, 200]", "delay_ms = [50, 200]\njitter_ms = 20")
+    )
+    out = tmp_path / "out"
+    assert experiment(grid, out) == 0
+    report = (out / "report.md").read_text()
+    for name in ("outcome_vs_delay.png", "time_vs_delay.png", "hold_vs_delay.png"):
+        assert (out / name).read_bytes().startswith(b"\x89PNG")
+        assert f"]({name})" in report
+
+
+def test_the_delay_plots_take_the_least_jitter_at_each_delay():
+    from egc_experiments.report import least_jitter_per_delay
+
+    rows = [
+        {"delay_ms": d, "jitter_ms": j}
+        for d, j in [(0, 0), (100, 0), (100, 30), (200, 0), (200, 60)]
+    ]
+    kept, note = least_jitter_per_delay(rows)
+    assert [(r["delay_ms"], r["jitter_ms"]) for r in kept] == [(0, 0), (100, 0), (200, 0)]
+    assert note == "no jitter"
+    kept, note = least_jitter_per_delay([r for r in rows if r["jitter_ms"]])
+    assert len(kept) == 2 and note == "the least jitter at each delay"
+    kept, note = least_jitter_per_delay([{"delay_ms": 5, "jitter_ms": 20}])
+    assert note == "jitter 20 ms"
+
+
 def test_a_rerun_skips_what_is_done_and_redoes_a_cut_line(tmp_path, capsys):
     grid, out = write_grid(tmp_path), tmp_path / "out"
     out.mkdir()

@@ -443,3 +443,38 @@ def test_a_udp_relay_also_relays_tcp_on_the_same_ports_without_loss(tmp_path):
     assert proc.returncode == 0
     report = json.loads(stats.read_text())
     assert report["tcp"]["up"]["forwarded"] >= 20 and report["tcp"]["up"]["dropped"] == 0
+
+
+def test_a_udp_relay_started_before_its_target_relays_tcp_once_the_target_is_up():
+    """Outside check: started before the robot, the udp/ relay left its TCP half out for good,
+    so a Zenoh session over it never opened (a udp/ session opens on TCP first)."""
+    import socket
+
+    from egc_common.transport import free_port
+
+    target, listen = free_port("udp"), free_port("udp")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "egc_app.cli", "link", "--listen", f"udp/127.0.0.1:{listen}",
+         "--connect", f"udp/127.0.0.1:{target}", "--up", "delay=20"],
+        stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    server = None
+    try:
+        ready = proc.stderr.readline()
+        assert "nothing accepts TCP" in ready and "relayed once it does" in ready, ready
+        with socket.create_connection(("127.0.0.1", listen), timeout=5) as early:
+            early.settimeout(5)
+            assert early.recv(1) == b""  # the relay closes a try while the target is down
+        server = socket.create_server(("127.0.0.1", target))
+        with socket.create_connection(("127.0.0.1", listen), timeout=5) as c:
+            conn, _ = server.accept()
+            with conn:
+                c.sendall(b"hello")
+                conn.settimeout(5)
+                assert conn.recv(5) == b"hello"
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=10)
+        if server is not None:
+            server.close()
+    assert proc.returncode == 0

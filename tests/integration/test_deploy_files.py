@@ -14,7 +14,7 @@ from egc_operator.cli import JOYSTICK_KEYS, OPERATOR_KEYS
 from egc_operator.joystick_evdev import ButtonMap
 from egc_robot.controller import ControllerConfig
 
-from egc_app.robot_cmd import build_controller_config
+from egc_app.robot_cmd import ROBOT_TABLES, build_controller_config
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 
@@ -27,7 +27,7 @@ def test_zenoh_files_load_with_the_2s_lease(name):
 
 
 def test_robot_toml_matches_the_defaults():
-    cfg = config_mod.load(DEPLOY / "robot.toml")
+    cfg = config_mod.load(DEPLOY / "robot.toml", tables=ROBOT_TABLES)
     args = argparse.Namespace(profile="pioneer3dx", filter="egc", rate_hz=None)
     c = build_controller_config(args, cfg)
     assert (c.max_command_age_s, c.command_timeout_s, c.scan_timeout_s) == (0.3, 0.25, 0.2)
@@ -48,8 +48,31 @@ def test_robot_config_switches_the_turn_cap_off(tmp_path):
         build_controller_config(args, config_mod.load(path))
 
 
+@pytest.mark.parametrize("key", ["pipeline.no_return_is_free", "safety.require_clock_sync"])
+@pytest.mark.parametrize("text", ["False", '"false"', "0", '"no"'])
+def test_true_or_false_settings_take_nothing_else(key, text):
+    """Outside check: bool() made 'False' and "false" true, and so a scan that saw nothing
+    counted as free space (the robot drove 143 of 315 cycles where it must stop)."""
+    args = argparse.Namespace(profile="pioneer3dx", filter="egc", rate_hz=None)
+    with pytest.raises(UsageError, match="must be true or false"):
+        build_controller_config(args, config_mod.load(None, [f"{key}={text}"]))
+    table, name = key.split(".")
+    off = build_controller_config(args, config_mod.load(None, [f"{key}=false"]))
+    on = build_controller_config(args, config_mod.load(None, [f"{key}=true"]))
+    where = (lambda c: c.pipeline) if table == "pipeline" else (lambda c: c)
+    assert (getattr(where(off), name), getattr(where(on), name)) == (False, True)
+
+
+@pytest.mark.parametrize(
+    "override", ["saftey.command_timeout_s=0.1", "command_timeout_s=0.1", "nosuch.key=3"]
+)
+def test_a_misspelt_or_missing_table_fails_loudly(override):
+    with pytest.raises(config_mod.ConfigError, match="unknown config table"):
+        config_mod.load(None, [override], ROBOT_TABLES)
+
+
 def test_operator_toml_is_the_default_mapping():
-    cfg = config_mod.load(DEPLOY / "operator.toml")
+    cfg = config_mod.load(DEPLOY / "operator.toml", tables=("operator", "joystick"))
     config_mod.section(cfg, "operator", OPERATOR_KEYS)
     table = config_mod.section(cfg, "joystick", JOYSTICK_KEYS)
     assert ButtonMap.from_table(table) == ButtonMap()
