@@ -53,6 +53,7 @@ import json
 import logging
 import re
 import socket
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -262,12 +263,45 @@ def _one_line(exc: BaseException) -> str:
     return " ".join(text.split()) or type(exc).__name__
 
 
+_OPEN_NOTICE_S = 2.0
+
+
 def open_config(config: zenoh.Config) -> zenoh.Session:
-    """Open a session on ``config``; a failure (e.g. a port in use) is one UsageError line."""
-    try:
-        return zenoh.open(config)
-    except Exception as exc:
-        raise UsageError(f"cannot open zenoh session: {_one_line(exc)}") from None
+    """Open a session on ``config``; a failure (e.g. a port in use) is one UsageError line.
+
+    ``zenoh.open`` blocks while a ``udp/`` connect waits for its TCP half (``_tcp_first``), and
+    Python handles Ctrl-C only between bytecodes of the main thread: a process connecting to a
+    peer that was not up sat silent and deaf to Ctrl-C. So it opens in a helper thread while
+    this one waits in short steps (Ctrl-C ends the wait) and says, once, what it waits for.
+    """
+    result: list[zenoh.Session | BaseException] = []
+
+    def open_it() -> None:
+        try:
+            result.append(zenoh.open(config))
+        except BaseException as exc:
+            result.append(exc)
+
+    opener = threading.Thread(target=open_it, name="zenoh-open", daemon=True)
+    opener.start()
+    opener.join(_OPEN_NOTICE_S)
+    if opener.is_alive():
+        try:
+            endpoints = json.loads(config.get_json("connect/endpoints"))
+            peers = ", ".join(str(e).partition("#")[0] for e in endpoints) or "?"
+        except Exception:
+            peers = "?"
+        logging.getLogger("egc.transport").warning(
+            "waiting for the peer to accept at %s (a udp/ endpoint opens on TCP first; is the "
+            "other side up?); Ctrl-C to stop",
+            peers,
+        )
+        while opener.is_alive():
+            opener.join(0.1)
+    outcome = result[0]
+    if isinstance(outcome, BaseException):
+        raise UsageError(f"cannot open zenoh session: {_one_line(outcome)}") from None
+    return outcome
 
 
 def open_session(options: ZenohOptions) -> zenoh.Session:

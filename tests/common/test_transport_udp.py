@@ -40,3 +40,33 @@ def test_an_endpoint_configuration_part_is_kept_on_both_links():
         tcp.split("#", 1)[1].split(";")
     )
     assert udp == "udp/h:3?rel=0#iface=lo"
+
+
+def test_connecting_udp_to_nobody_says_so_and_ctrl_c_ends_it():
+    """Outside check: an operator connecting udp/ to a port nobody listens on sat silent for
+    90 s and ignored Ctrl-C (zenoh.open waits for the TCP half in Rust, in the main thread)."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from egc_common.transport import free_port
+
+    port = free_port("udp")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "egc_app.cli", "operator", "--robot", "nobody", "--script",
+         "demo", "--no-view", "--no-status", "--zenoh-connect", f"udp/127.0.0.1:{port}"],
+        stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
+    )  # fmt: skip
+    try:
+        line = proc.stderr.readline()  # the notice comes after 2 s of waiting
+        assert f"waiting for the peer to accept at tcp/127.0.0.1:{port}" in line, line
+        assert "Ctrl-C to stop" in line
+        t0 = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(10) == 130
+        assert time.monotonic() - t0 < 5
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
