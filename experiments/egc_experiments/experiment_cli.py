@@ -47,6 +47,7 @@ import json
 import multiprocessing
 import os
 import shlex
+import signal
 import sys
 import tempfile
 import time
@@ -231,7 +232,8 @@ def run_grid(
         disable=not progress,
         dynamic_ncols=True,
     )
-    items = [(run_mode, p, str(out)) for p in todo]
+    # Absolute: an emulated run starts its processes in its own work directory.
+    items = [(run_mode, p, str(out.absolute())) for p in todo]
     try:
         with runs_path.open("a", encoding="utf-8") as f:
             for key, row, error in _results(items, jobs):
@@ -258,8 +260,44 @@ def _results(
         for item in items:
             yield _work(item)
         return
-    with multiprocessing.get_context("fork").Pool(min(jobs, len(items))) as pool:
+    context = multiprocessing.get_context("fork")
+    with context.Pool(min(jobs, len(items)), initializer=_stop_on_signals) as pool:
         yield from pool.imap_unordered(_work, items, chunksize=1)
+
+
+def _stop(signum: int, frame: object) -> None:
+    """The first SIGINT or SIGTERM unwinds the run, so that every ``finally`` stops its
+    processes and removes its namespaces; later ones (Pool.terminate's SIGTERM after a Ctrl-C,
+    a second Ctrl-C) are ignored so that they cannot cut that cleanup short."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    raise SystemExit(128 + signum)
+
+
+def _stop_on_signals() -> None:
+    signal.signal(signal.SIGINT, _stop)
+    signal.signal(signal.SIGTERM, _stop)
+
+
+def _saved(grid: Grid, out: Path, run_mode: str, what: str = "") -> str:
+    """How many of the grid's runs are in runs.jsonl, and how to go on."""
+    keys: set[str] = set()
+    try:  # read only: load_runs would rewrite a file with a cut line
+        for line in (out / RUNS).read_text(encoding="utf-8").splitlines():
+            try:
+                row = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            if isinstance(row, dict) and isinstance(row.get("key"), str):
+                keys.add(row["key"])
+    except (OSError, UnicodeDecodeError):
+        pass
+    n = sum(run_key(run_mode, p) in keys for p in grid.points)
+    head = f"{what}: " if what else ""
+    return (
+        f"{head}{n} of {len(grid.points)} runs saved in {out / RUNS}; the same command again "
+        "runs the rest"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -275,22 +313,36 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     _check_out_dir(out)
     t0 = time.perf_counter()
-    rows, new, errors = run_grid(grid, out, args.mode, args.jobs)
+    _stop_on_signals()  # a SIGTERM (timeout, systemd) cleans up like Ctrl-C
+    try:
+        rows, new, errors = run_grid(grid, out, args.mode, args.jobs)
+    except SystemExit:
+        print(_saved(grid, out, args.mode, "stopped"), file=sys.stderr)
+        raise
+    except OSError as exc:  # a full disk, a directory removed under us
+        raise UsageError(
+            f"cannot write the results: {exc.strerror or exc}; " + _saved(grid, out, args.mode)
+        ) from None
     command = "egc-teleop experiment " + " ".join(
         shlex.quote(a)
         for a in ("--grid", str(args.grid), "--out", str(args.out), "--mode", args.mode)
     )
     if args.jobs > 1:
         command += f" --jobs {args.jobs}"
-    plots = write_plots(rows, out)
-    write_report(
-        rows,
-        out / REPORT,
-        f"Network-delay experiment: {Path(args.grid).name} ({args.mode})",
-        grid.description,
-        command,
-        plots,
-    )
+    try:
+        plots = write_plots(rows, out)
+        write_report(
+            rows,
+            out / REPORT,
+            f"Network-delay experiment: {Path(args.grid).name} ({args.mode})",
+            grid.description,
+            command,
+            plots,
+        )
+    except OSError as exc:
+        raise UsageError(
+            f"cannot write the report: {exc.strerror or exc}; " + _saved(grid, out, args.mode)
+        ) from None
     wall = time.perf_counter() - t0
     print(
         f"{len(rows)} of {len(grid.points)} runs in {out / RUNS} ({new} new, "
