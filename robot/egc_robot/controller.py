@@ -445,6 +445,11 @@ class RobotController:
         if operator_id == self._controller_op:
             self._release(f"operator {operator_id} lost")
 
+    def on_base_stopped(self) -> None:
+        """The node sent the base a zero command outside a cycle (a failed cycle): the next
+        cycle ramps up from standstill instead of resuming the last command at once."""
+        self._previous = (0.0, 0.0)
+
     # -- the control cycle --------------------------------------------------------------------
 
     def step(self, now_ns: int) -> CycleOutput:

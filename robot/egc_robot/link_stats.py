@@ -80,6 +80,9 @@ class LinkStats:
 
     def on_accepted(self, age_ns: int | None, view_age_ms: int | None, rx_ns: int) -> None:
         if age_ns is not None:
+            # Stamped ahead of our clock (an operator's clock sync off, or a hostile one): the
+            # link cannot be faster than instant, and a negative tau broke the governor.
+            age_ns = max(age_ns, 0)
             self._ages.append((rx_ns, age_ns))
             insort(self._sorted_ages, age_ns)
         if view_age_ms is not None:

@@ -261,8 +261,23 @@ class RobotNode:
         try:
             now = self._clock()
             self._driver.send(BaseCommand(stamp_ns=now, seq=0, linear_mps=0.0, angular_radps=0.0))
+            self._controller.on_base_stopped()
         except Exception as send_exc:
             log.error("could not stop the base: %s", send_exc)
+        try:  # the operators see telemetry stop; the state says why, at most once a second
+            now = self._clock()
+            if now - self._last_state_ns >= _STATE_PERIOD_NS:
+                self._last_state_ns = now
+                state = StateMessage(
+                    stamp_ns=now,
+                    state="HOLD",
+                    reason="control cycle failed (robot log)",
+                    operator=self._controller.operator,
+                    rejected=self._controller.counters.rejected_total,
+                )
+                self._state.put(state.encode())
+        except Exception as state_exc:
+            log.error("could not publish the failed cycle's state: %s", state_exc)
 
     def _handle_command(self, payload: bytes, rx_ns: int) -> CommandVerdict:
         """Vet one command (accepted: it came from the operator in control and passed)."""

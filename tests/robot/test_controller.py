@@ -259,6 +259,28 @@ def test_a_departed_operator_cannot_take_control_again_until_its_token_is_back()
     assert rig.send(seq=2).accepted
 
 
+@pytest.mark.parametrize("mode, ahead_ms", [("shared", 500.0), ("shared", 600.0), ("direct", 280.0)])
+def test_commands_stamped_ahead_of_the_robot_clock_leave_the_governor_working(mode, ahead_ms):
+    """Outside check: stamps up to max_command_age ahead are accepted; their negative ages
+    made tau negative and every cycle raised in the latency governor (telemetry went silent)."""
+    rig = driving_rig()
+    for _ in range(100):  # 2 s: the link window holds only these
+        rig.send(x=1.0, delay_ms=-ahead_ms, mode=mode, view_age_ms=0)
+        out = rig.cycle()
+    assert out.telemetry.state == "DRIVING" and out.base.linear_mps > 0.0
+    assert out.telemetry.loop_delay_ms >= 250.0  # the reaction time at least
+
+
+def test_a_failed_cycle_makes_the_next_one_ramp_up_from_standstill():
+    rig = driving_rig()
+    rig.drive(1.0, cycles=40)
+    fast = rig.cycle().base.linear_mps
+    rig.c.on_base_stopped()  # the node sent zero after a failed cycle
+    rig.send(x=1.0)
+    after = rig.cycle().base.linear_mps
+    assert 0.0 < after < fast
+
+
 def test_silent_operator_loses_control_and_robot_goes_idle():
     rig = driving_rig()
     for _ in range(110):  # 2.2 s > release_timeout
