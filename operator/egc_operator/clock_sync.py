@@ -20,6 +20,8 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass
 
+from egc_common.messages import MAX_INT
+
 _MS = 1_000_000
 
 
@@ -77,4 +79,6 @@ class ClockSync:
         best = self.best
         if best is None:
             return 0
-        return max(0, local_ns + best.offset_ns)
+        # Clamped to the wire's range: a reply near 2**63 (any peer can answer the clock key)
+        # made the command's stamp overflow it, and the operator died on its own command.
+        return min(max(0, local_ns + best.offset_ns), MAX_INT)

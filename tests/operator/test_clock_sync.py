@@ -58,3 +58,15 @@ def test_same_clock_replies_give_offset_zero_on_a_one_sided_link():
     same = ClockSync()
     same.add(0, 100 * MS, 100 * MS, same_clock=True)
     assert same.robot_now(1_000 * MS) == 1_000 * MS
+
+
+def test_a_clock_reply_near_the_end_of_the_wire_range_cannot_overflow_a_command():
+    """Outside check: a peer answering egc/<robot>/clock with stamp 2**63 - 1 made the
+    operator's next command stamp overflow the wire's range, and the operator died."""
+    from egc_common.messages import MAX_INT, OperatorCommand
+
+    sync = ClockSync()
+    sync.add(1_000, MAX_INT, 2_000)
+    stamp = sync.robot_now(10**12)
+    assert stamp == MAX_INT
+    OperatorCommand(1, stamp, 0.0, 0.0, "shared", True, False, False, "a")
