@@ -33,6 +33,7 @@ import dataclasses
 import gc
 import json
 import logging
+import math
 import signal
 import threading
 import time
@@ -189,6 +190,10 @@ def _number(table: dict[str, Any], key: str, default: float) -> float:
     value = table.get(key, default)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise UsageError(f"config key {key} must be a number, got {value!r}")
+    if not math.isfinite(value) or abs(value) > 1e9:
+        raise UsageError(
+            f"config key {key} must be a finite number of sensible size, got {value!r}"
+        )
     return float(value)
 
 

@@ -81,6 +81,7 @@ from egc_robot.via_points import (
 
 NS_PER_S = 1_000_000_000
 _MAX_TRACKED_OPERATORS = 64
+_MAX_SETTING = 3600.0
 _STOPPED_EPS = 1e-6
 _MAX_DT_S = 0.5
 
@@ -125,8 +126,10 @@ class ControllerConfig:
             "via_tolerance_m",
         ):
             value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive number of seconds")
+            unit = "metres" if name.endswith("_m") else "seconds"
+            # At most an hour (or 3.6 km): 1e300 overflowed the ns conversion with a traceback.
+            if not (isinstance(value, (int, float)) and 0 < value <= _MAX_SETTING):
+                raise ValueError(f"{name} must be a positive number of {unit}, at most 3600")
         if not 0.0 <= self.centre_tolerance < 1.0:
             raise ValueError("centre_tolerance must be in [0, 1)")
         if self.telemetry_scan_decimation < 1:

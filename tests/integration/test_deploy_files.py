@@ -76,3 +76,19 @@ def test_operator_toml_is_the_default_mapping():
     config_mod.section(cfg, "operator", OPERATOR_KEYS)
     table = config_mod.section(cfg, "joystick", JOYSTICK_KEYS)
     assert ButtonMap.from_table(table) == ButtonMap()
+
+
+@pytest.mark.parametrize(
+    "override",
+    [
+        "safety.max_command_age_s=1e300",  # overflowed the ns conversion: a traceback, a hang
+        "safety.release_timeout_s=1e300",
+        "safety.command_timeout_s=1e308",  # started, then every cycle failed (tau inf)
+        "robot.telemetry_scan_decimation=inf",
+        "pipeline.gamma_v=nan",
+    ],
+)
+def test_absurd_numbers_are_one_clear_error(override):
+    args = argparse.Namespace(profile="pioneer3dx", filter="egc", rate_hz=None)
+    with pytest.raises(UsageError):
+        build_controller_config(args, config_mod.load(None, [override]))

@@ -259,7 +259,9 @@ def test_a_departed_operator_cannot_take_control_again_until_its_token_is_back()
     assert rig.send(seq=2).accepted
 
 
-@pytest.mark.parametrize("mode, ahead_ms", [("shared", 500.0), ("shared", 600.0), ("direct", 280.0)])
+@pytest.mark.parametrize(
+    "mode, ahead_ms", [("shared", 500.0), ("shared", 600.0), ("direct", 280.0)]
+)
 def test_commands_stamped_ahead_of_the_robot_clock_leave_the_governor_working(mode, ahead_ms):
     """Outside check: stamps up to max_command_age ahead are accepted; their negative ages
     made tau negative and every cycle raised in the latency governor (telemetry went silent)."""
