@@ -86,6 +86,25 @@ class RejectionLog:
         )
 
 
+class EventLog:
+    """At most one line per second per kind of event (liveliness, via points), with the count of
+    the lines held back: a peer declaring thousands of tokens, or sending thousands of routes,
+    must not flood the log (an outside check got 10,000 and 7,188 lines)."""
+
+    def __init__(self) -> None:
+        self._last_ns: dict[str, int] = {}
+        self._held: Counter[str] = Counter()
+
+    def allow(self, kind: str, now_ns: int) -> int | None:
+        """None: hold this line back; else log it, with this many held back since the last."""
+        last = self._last_ns.get(kind)
+        if last is not None and now_ns - last < _LOG_PERIOD_NS:
+            self._held[kind] += 1
+            return None
+        self._last_ns[kind] = now_ns
+        return self._held.pop(kind, 0)
+
+
 class RobotNode:
     """Runs a RobotController against a driver and a Zenoh session until ``stop`` is set."""
 
@@ -114,6 +133,7 @@ class RobotNode:
         self._shut_down = False  # set under the lock: the zero command sent last stays last
         self._rejections = RejectionLog()
         self._goal_log_ns = -_LOG_PERIOD_NS
+        self._events = EventLog()
         self._telemetry = data_publisher(session, keys.telemetry(robot_id))
         self._state = data_publisher(session, keys.state(robot_id))
         liveliness = session.liveliness()
@@ -182,13 +202,16 @@ class RobotNode:
             if now - self._goal_log_ns >= _LOG_PERIOD_NS:  # a flood must not flood the log
                 self._goal_log_ns = now
                 log.warning("rejected goal (%s): %s", rejection.reason.value, rejection.detail)
-        elif after is not before:
+        elif (
+            after is not before and (held := self._events.allow("goal", self._clock())) is not None
+        ):
             log.info(
-                "via points from %s: %d in %s%s",
+                "via points from %s: %d in %s%s%s",
                 after.op or "?",
                 len(after.points),
                 after.frame,
                 f", active {after.active[0]:.2f},{after.active[1]:.2f}" if after.active else "",
+                f" (+{held} more route changes since the last line)" if held else "",
             )
 
     def _on_liveliness(self, sample: zenoh.Sample) -> None:
@@ -197,8 +220,17 @@ class RobotNode:
             return
         alive = sample.kind == zenoh.SampleKind.PUT
         with self._lock:
+            in_control = self._controller.operator
             self._controller.on_operator_alive(operator_id, alive)
-        log.info("operator %s %s", operator_id, "alive" if alive else "lost")
+        # The operator in control always gets its line; others at most one a second.
+        held = 0 if operator_id == in_control else self._events.allow("alive", self._clock())
+        if held is not None:
+            log.info(
+                "operator %s %s%s",
+                operator_id,
+                "alive" if alive else "lost",
+                f" (+{held} more liveliness changes since the last line)" if held else "",
+            )
 
     def _on_clock_query(self, query: zenoh.Query) -> None:
         try:

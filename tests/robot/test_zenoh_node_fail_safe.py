@@ -64,3 +64,14 @@ def test_failed_cycles_send_zero_and_the_loop_keeps_running(caplog):
     assert driver.sent and all(c.linear_mps == 0.0 and c.angular_radps == 0.0 for c in driver.sent)
     assert sum(c.seq == 0 for c in driver.sent) >= controller.calls // 2 - 1  # one stop per fault
     assert "control cycle failed" in caplog.text
+
+
+def test_event_lines_are_held_back_to_one_a_second_with_a_count():
+    from egc_robot.zenoh_node import EventLog
+
+    events, s = EventLog(), 1_000_000_000
+    assert events.allow("alive", 0) == 0
+    assert [events.allow("alive", t) for t in (1, 2, 3)] == [None, None, None]
+    assert events.allow("goal", 5) == 0  # each kind on its own
+    assert events.allow("alive", s) == 3  # the next line says how many were held back
+    assert events.allow("alive", s + 1) is None
