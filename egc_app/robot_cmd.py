@@ -303,7 +303,7 @@ def _open_driver(args: argparse.Namespace, cfg: dict[str, Any], session: Any) ->
     if args.driver == "zenoh":
         from egc_robot.zenoh_driver import ZenohDriver
 
-        return ZenohDriver(session, args.robot)
+        return ZenohDriver(session, args.robot, get_profile(args.profile).half_size_m)
     from egc_sim.bridge import RealTimeSim, open_simulator, parse_pose
     from egc_sim.grid_world import map_message
 

@@ -616,7 +616,8 @@ def decode_clock_id(payload: object) -> str | None:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class ScanMessage:
-    """A planar scan in the ROS LaserScan layout; ranges may hold inf/NaN (no return)."""
+    """A planar scan in the ROS LaserScan layout; ranges per REP 117 (+inf no return, NaN
+    unknown, -inf an object nearer than range_min)."""
 
     stamp_ns: int
     angle_min_rad: float

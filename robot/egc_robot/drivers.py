@@ -16,7 +16,7 @@ from typing import Protocol
 
 import numpy as np
 from egc_common.messages import BaseCommand, Odometry, ScanMessage
-from egc_common.scan import Scan
+from egc_common.scan import Scan, too_close_points
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,14 +40,32 @@ class Driver(Protocol):
     def close(self) -> None: ...
 
 
-def scan_from_message(message: ScanMessage) -> Scan:
-    """A decoded ``egc/<robot>/scan`` message as a Scan in {R}."""
+def scan_from_message(
+    message: ScanMessage, footprint_half_m: tuple[float, float] | None = None
+) -> Scan:
+    """A decoded ``egc/<robot>/scan`` message as a Scan in {R}.
+
+    The message has the ROS LaserScan layout, so ``-inf`` means what REP 117 says (an object
+    nearer than range_min), as on the ROS 2 driver: an obstacle at range_min and, given the
+    footprint, points just outside it (``too_close_points``). It was dropped as "no return",
+    so a bridge forwarding LaserScan ranges lost every too-close obstacle.
+    """
+    ranges = message.ranges_m.astype(np.float64)
+    too_close = ranges == -np.inf
+    extra = None
+    if too_close.any():
+        ranges[too_close] = message.range_min_m
+        if footprint_half_m is not None:
+            index = np.flatnonzero(too_close).astype(np.float64)
+            angles = message.angle_min_rad + message.angle_increment_rad * index
+            extra = too_close_points(angles, message.range_min_m, 0.0, 0.0, footprint_half_m)
     return Scan.uniform(
-        message.ranges_m.astype(np.float64),
+        ranges,
         message.angle_min_rad,
         message.angle_increment_rad,
         message.range_min_m,
         message.range_max_m,
         stamp_ns=message.stamp_ns,
         no_return_is_free=message.no_return_is_free,
+        extra_xy_m=extra,
     )

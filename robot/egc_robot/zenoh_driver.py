@@ -32,7 +32,14 @@ _NOTHING_NEW = SensorUpdate()
 
 
 class ZenohDriver:
-    def __init__(self, session: zenoh.Session, robot_id: str) -> None:
+    def __init__(
+        self,
+        session: zenoh.Session,
+        robot_id: str,
+        footprint_half_m: tuple[float, float] | None = None,
+    ) -> None:
+        """``footprint_half_m``: the profile's half length and width, for ``-inf`` readings."""
+        self._footprint_half_m = footprint_half_m
         self._lock = threading.Lock()
         self._scan: Scan | None = None
         self._scan_rx_ns = 0
@@ -52,7 +59,7 @@ class ZenohDriver:
         if isinstance(decoded, Rejection):
             self._count(decoded, "scan")
             return
-        scan = scan_from_message(decoded)
+        scan = scan_from_message(decoded, self._footprint_half_m)
         # Prepared here, in the receiving thread, off the command path: the checked points and
         # their index by distance, which the filter and the sweep look near places with.
         scan.obstacles().index()

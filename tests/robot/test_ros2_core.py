@@ -417,3 +417,25 @@ def test_a_short_range_laser_caps_the_speed_to_what_it_can_stop_within():
     ahead = step_command(cfg, 1.0, 0.0, "shared", mounted.obstacles(), cmd, 0.05)
     assert ahead.v_cmd_mps > out.v_cmd_mps  # mounted 0.2 m forward, it sees further ahead
     assert mounted.obstacles().seen_behind_m == pytest.approx(0.4)
+
+
+@pytest.mark.parametrize("filter_name", ["egc", "ek-egc", "assist", "dwa"])
+def test_the_zenoh_scan_message_reads_minus_inf_as_the_ros2_driver_does(filter_name):
+    """Outside check: on egc/<robot>/scan (the LaserScan layout) -inf was dropped as no
+    return: a sector of -inf ahead left the robot at full speed, limiter none."""
+    from egc_common.messages import ScanMessage
+    from egc_robot.drivers import scan_from_message
+
+    profile = get_profile("pioneer3dx")
+    ranges = np.full(360, 5.0, dtype=np.float32)
+    ranges[160:201] = -np.inf  # +-20 deg ahead: nearer than range_min
+    message = ScanMessage(0, -math.pi, math.pi / 180, 0.3, 10.0, ranges, False)
+    scan = scan_from_message(message, profile.half_size_m)
+    cfg = PipelineConfig(profile, filter=filter_name)
+    prev = (profile.v_max_mps, 0.0)
+    forward = step_command(cfg, 1.0, 0.0, "shared", scan.obstacles(), prev, 0.05)
+    assert forward.v_cmd_mps < profile.v_max_mps and forward.limiter.value != "none"
+    for _ in range(40):  # closed loop against the same reading: it comes to a stop
+        prev = (forward.v_cmd_mps, forward.w_cmd_radps)
+        forward = step_command(cfg, 1.0, 0.0, "shared", scan.obstacles(), prev, 0.05)
+    assert forward.v_cmd_mps <= 0.0
