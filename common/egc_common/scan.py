@@ -235,6 +235,30 @@ def footprint_exit_m(
     return out
 
 
+def too_close_readings(
+    ranges_m: FloatArray,
+    angles_rad: FloatArray,
+    range_min_m: float,
+    mount_x_m: float,
+    mount_y_m: float,
+    footprint_half_m: tuple[float, float] | None,
+) -> tuple[FloatArray, FloatArray | None]:
+    """REP 117's ``-inf`` readings (an object nearer than range_min), as every scan source of
+    the robot reads them: the ranges with each ``-inf`` at range_min (DESIGN 11), and, given
+    the footprint's half length and width, the points of ``too_close_points`` (else None).
+    ``ranges_m`` (float64) is changed in place and returned; ``angles_rad`` are in {R}."""
+    too_close = ranges_m == -np.inf
+    if not too_close.any():
+        return ranges_m, None
+    ranges_m[too_close] = range_min_m
+    if footprint_half_m is None:
+        return ranges_m, None
+    extra = too_close_points(
+        angles_rad[too_close], range_min_m, mount_x_m, mount_y_m, footprint_half_m
+    )
+    return ranges_m, extra
+
+
 def too_close_points(
     angles_rad: FloatArray,
     range_min_m: float,

@@ -162,14 +162,9 @@ def _check_out_dir(out: Path) -> None:
             raise UsageError(f"cannot write to {path}: permission denied")
 
 
-def load_runs(path: Path) -> dict[str, dict[str, Any]]:
-    """The complete result lines of runs.jsonl by key; lines cut short are removed from it."""
-    if not path.exists():
-        return {}
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UsageError(f"cannot read {path}: {exc}") from None
+def parse_runs(text: str) -> tuple[dict[str, dict[str, Any]], list[str], int]:
+    """runs.jsonl's text: the result lines by key, the lines kept, and how many were unreadable
+    (cut short by an interrupted run, or not a result)."""
     done: dict[str, dict[str, Any]] = {}
     kept: list[str] = []
     bad = 0
@@ -186,6 +181,18 @@ def load_runs(path: Path) -> dict[str, dict[str, Any]]:
             continue
         done[row["key"]] = row
         kept.append(line)
+    return done, kept, bad
+
+
+def load_runs(path: Path) -> dict[str, dict[str, Any]]:
+    """The complete result lines of runs.jsonl by key; lines cut short are removed from it."""
+    if not path.exists():
+        return {}
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UsageError(f"cannot read {path}: {exc}") from None
+    done, kept, bad = parse_runs(text)
     if bad or (text and not text.endswith("\n")):
         if bad:
             print(
@@ -281,18 +288,11 @@ def _stop_on_signals() -> None:
 
 def _saved(grid: Grid, out: Path, run_mode: str, what: str = "") -> str:
     """How many of the grid's runs are in runs.jsonl, and how to go on."""
-    keys: set[str] = set()
     try:  # read only: load_runs would rewrite a file with a cut line
-        for line in (out / RUNS).read_text(encoding="utf-8").splitlines():
-            try:
-                row = json.loads(line)
-            except json.JSONDecodeError:
-                continue
-            if isinstance(row, dict) and isinstance(row.get("key"), str):
-                keys.add(row["key"])
+        done = parse_runs((out / RUNS).read_text(encoding="utf-8"))[0]
     except (OSError, UnicodeDecodeError):
-        pass
-    n = sum(run_key(run_mode, p) in keys for p in grid.points)
+        done = {}
+    n = sum(run_key(run_mode, p) in done for p in grid.points)
     head = f"{what}: " if what else ""
     return (
         f"{head}{n} of {len(grid.points)} runs saved in {out / RUNS}; the same command again "

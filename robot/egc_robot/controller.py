@@ -330,16 +330,16 @@ class RobotController:
         else:
             self._track(op, seq, now_ns)
         took_control = False
-        if self._controller_op is None and cmd.deadman and op in self._departed:
-            return self._reject(
-                cmd,
-                Rejection(
-                    RejectReason.NOT_IN_CONTROL,
-                    f"{op}: its liveliness token is gone (the session ended or was lost)",
-                ),
-                now_ns,
-            )
         if self._controller_op is None and cmd.deadman:
+            if op in self._departed:
+                return self._reject(
+                    cmd,
+                    Rejection(
+                        RejectReason.NOT_IN_CONTROL,
+                        f"{op}: its liveliness token is gone (the session ended or was lost)",
+                    ),
+                    now_ns,
+                )
             self._controller_op = op
             self._control_epoch += 1
             self._link.reset()

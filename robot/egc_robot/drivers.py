@@ -16,7 +16,7 @@ from typing import Protocol
 
 import numpy as np
 from egc_common.messages import BaseCommand, Odometry, ScanMessage
-from egc_common.scan import Scan, too_close_points
+from egc_common.scan import Scan, too_close_readings
 
 
 @dataclass(frozen=True, slots=True)
@@ -51,14 +51,12 @@ def scan_from_message(
     so a bridge forwarding LaserScan ranges lost every too-close obstacle.
     """
     ranges = message.ranges_m.astype(np.float64)
-    too_close = ranges == -np.inf
-    extra = None
-    if too_close.any():
-        ranges[too_close] = message.range_min_m
-        if footprint_half_m is not None:
-            index = np.flatnonzero(too_close).astype(np.float64)
-            angles = message.angle_min_rad + message.angle_increment_rad * index
-            extra = too_close_points(angles, message.range_min_m, 0.0, 0.0, footprint_half_m)
+    angles = message.angle_min_rad + message.angle_increment_rad * np.arange(
+        ranges.size, dtype=np.float64
+    )
+    ranges, extra = too_close_readings(
+        ranges, angles, message.range_min_m, 0.0, 0.0, footprint_half_m
+    )
     return Scan.uniform(
         ranges,
         message.angle_min_rad,

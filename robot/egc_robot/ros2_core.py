@@ -43,7 +43,7 @@ from egc_common.ros2_topics import (
     DEFAULT_SCAN_TOPIC,
     default_topic,
 )
-from egc_common.scan import Scan, too_close_points
+from egc_common.scan import Scan, too_close_readings
 
 # Bounds on what a scan from the network may be; beyond them it is rejected, not processed.
 MAX_BEAMS = 100_000
@@ -213,21 +213,15 @@ def scan_from_laser(
     beam_angles = angle_min_rad + angle_increment_rad * np.arange(r.size, dtype=np.float64)
     if r.size and not (np.all(np.isfinite(beam_angles)) and np.abs(beam_angles).max() <= 1e3):
         return Rejected("malformed", "beam angles are not finite")
-    too_close = r == -np.inf
-    r[too_close] = range_min_m  # REP 117: an object closer than range_min
+    sign = -1.0 if pose.upside_down else 1.0
+    angles = pose.yaw_rad + sign * beam_angles
+    r, extra = too_close_readings(r, angles, range_min_m, pose.x_m, pose.y_m, footprint_half_m)
     free = r == np.inf
     with np.errstate(invalid="ignore"):
         valid = (r >= range_min_m) & (r <= range_max_m)  # False for NaN and +inf
     if not (free.any() or valid.any()):
         return Rejected(
             "no_information", f"{r.size} beams, none valid, none +inf (all NaN or out of range)"
-        )
-    sign = -1.0 if pose.upside_down else 1.0
-    angles = pose.yaw_rad + sign * beam_angles
-    extra = None
-    if footprint_half_m is not None and too_close.any():
-        extra = too_close_points(
-            angles[too_close], range_min_m, pose.x_m, pose.y_m, footprint_half_m
         )
     return Scan(
         angles,

@@ -132,7 +132,6 @@ class RobotNode:
         self._faults = 0
         self._shut_down = False  # set under the lock: the zero command sent last stays last
         self._rejections = RejectionLog()
-        self._goal_log_ns = -_LOG_PERIOD_NS
         self._events = EventLog()
         self._telemetry = data_publisher(session, keys.telemetry(robot_id))
         self._state = data_publisher(session, keys.state(robot_id))
@@ -198,10 +197,14 @@ class RobotNode:
                 return
             after = self._controller.route
         if rejection is not None:
-            now = self._clock()
-            if now - self._goal_log_ns >= _LOG_PERIOD_NS:  # a flood must not flood the log
-                self._goal_log_ns = now
-                log.warning("rejected goal (%s): %s", rejection.reason.value, rejection.detail)
+            held = self._events.allow("goal rejected", self._clock())
+            if held is not None:  # a flood must not flood the log
+                log.warning(
+                    "rejected goal (%s): %s%s",
+                    rejection.reason.value,
+                    rejection.detail,
+                    f" (+{held} more rejected goals since the last line)" if held else "",
+                )
         elif (
             after is not before and (held := self._events.allow("goal", self._clock())) is not None
         ):
