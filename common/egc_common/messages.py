@@ -69,6 +69,7 @@ class RejectReason(enum.Enum):
     DUPLICATE_SEQ = "duplicate_seq"
     OUT_OF_ORDER = "out_of_order"
     NOT_IN_CONTROL = "not_in_control"
+    NO_INFORMATION = "no_information"  # a scan with no valid, +inf or -inf beam (REP 117)
 
 
 @dataclass(frozen=True, slots=True)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-from egc_common.messages import BaseCommand, Odometry, ScanMessage
+from egc_common.messages import BaseCommand, Odometry, Rejection, RejectReason, ScanMessage
 from egc_common.scan import Scan, too_close_readings
 
 
@@ -42,15 +42,30 @@ class Driver(Protocol):
 
 def scan_from_message(
     message: ScanMessage, footprint_half_m: tuple[float, float] | None = None
-) -> Scan:
+) -> Scan | Rejection:
     """A decoded ``egc/<robot>/scan`` message as a Scan in {R}.
 
     The message has the ROS LaserScan layout, so ``-inf`` means what REP 117 says (an object
     nearer than range_min), as on the ROS 2 driver: an obstacle at range_min and, given the
     footprint, points just outside it (``too_close_points``). It was dropped as "no return",
     so a bridge forwarding LaserScan ranges lost every too-close obstacle.
+
+    A scan that carries no information at all (no beams, or every beam NaN or a finite value
+    outside [range_min, range_max]) is a Rejection, as on the ROS 2 driver: delivered, it
+    would keep the sensor fresh while saying nothing, and a sender declaring
+    ``no_return_is_free`` would have it read as "all free". Rejected, the sensor goes stale
+    and the robot holds (``scan_timeout``).
     """
     ranges = message.ranges_m.astype(np.float64)
+    with np.errstate(invalid="ignore"):
+        informative = (np.abs(ranges) == np.inf) | (
+            (ranges >= message.range_min_m) & (ranges <= message.range_max_m)
+        )
+    if not informative.any():
+        return Rejection(
+            RejectReason.NO_INFORMATION,
+            f"{ranges.size} beams, none valid, none +-inf (all NaN or out of range)",
+        )
     angles = message.angle_min_rad + message.angle_increment_rad * np.arange(
         ranges.size, dtype=np.float64
     )

@@ -60,6 +60,9 @@ class ZenohDriver:
             self._count(decoded, "scan")
             return
         scan = scan_from_message(decoded, self._footprint_half_m)
+        if isinstance(scan, Rejection):
+            self._count(scan, "scan")
+            return
         # Prepared here, in the receiving thread, off the command path: the checked points and
         # their index by distance, which the filter and the sweep look near places with.
         scan.obstacles().index()

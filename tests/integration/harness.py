@@ -148,7 +148,9 @@ class Record:
     base: list[tuple[int, BaseCommand]] = field(default_factory=list)
 
 
-def open_scan_message(stamp_ns: int, beams: int = 360, range_m: float = 5.0) -> ScanMessage:
+def open_scan_message(
+    stamp_ns: int, beams: int = 360, range_m: float = 5.0, no_return_is_free: bool = False
+) -> ScanMessage:
     return ScanMessage(
         stamp_ns=stamp_ns,
         angle_min_rad=-math.pi,
@@ -156,6 +158,7 @@ def open_scan_message(stamp_ns: int, beams: int = 360, range_m: float = 5.0) -> 
         range_min_m=0.05,
         range_max_m=10.0,
         ranges_m=np.full(beams, range_m, np.float32),
+        no_return_is_free=no_return_is_free,
     )
 
 
@@ -176,6 +179,7 @@ class Observer:
             s.declare_subscriber(keys.base_cmd(ROBOT), self._on_base),
         ]
         self.scans_on = threading.Event()
+        self.scan_range_m = 5.0  # every beam of the scans it publishes (NaN: no information)
         self.stick: dict[str, Any] = {}
         self.seq = 0
         self.op_lock = threading.Lock()  # held by the operator loop while it publishes
@@ -247,7 +251,8 @@ class Observer:
         while not self._stop.wait(period_s):
             if self.scans_on.is_set():
                 now = time.monotonic_ns()
-                self.session.put(keys.scan(ROBOT), open_scan_message(now).encode())
+                scan = open_scan_message(now, range_m=self.scan_range_m, no_return_is_free=True)
+                self.session.put(keys.scan(ROBOT), scan.encode())
 
     def robot_clock_offset_ns(self) -> int:
         """Offset of the robot's clock from ours: the operator's own min-RTT estimator."""

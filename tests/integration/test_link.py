@@ -27,6 +27,7 @@ from tests.integration.harness import (
     ROBOT,
     Observer,
     assert_no_jump,
+    first_state_after,
     first_zero_after,
     forward_file,
     joystick_file,
@@ -367,6 +368,33 @@ def test_a_second_operator_cannot_drive(port, procs, observer, tmp_path):
     observer.wait_for("stopped", lambda: first_zero_after(observer.base(), released))
     assert_holds_still(observer, 1.0, "waiting for a centred stick")
     assert all(b.linear_mps >= 0.0 for _, b in observer.base())
+    finish(procs, observer)
+
+
+def test_scans_without_information_are_a_stale_sensor(port, procs, observer, tmp_path):
+    """A driver that goes on publishing scans whose every beam is NaN (REP 117: unknown): the
+    robot held them fresh; with ``no_return_is_free`` (a sensor whose +inf means free) it saw
+    no obstacle and kept full speed, without it the filter stopped it while the view said
+    DRIVING. They are rejected (as on the ROS 2 driver) and the sensor goes stale."""
+    config = tmp_path / "robot.toml"
+    config.write_text("[pipeline]\nno_return_is_free = true\n")
+    start_robot(procs, observer, port, "--config", str(config))
+    procs.start("alice", *operator_args(port, "alice", forward_file(tmp_path)))
+    wait_full_speed(observer)
+    blind = time.monotonic_ns()
+    observer.scan_range_m = math.nan
+    hold = observer.wait_for("HOLD", lambda: first_state_after(observer, "HOLD", blind), 2)
+    assert (hold - blind) / MS <= 200 + 50 + 100  # scan_timeout + scan period + one cycle
+    observer.wait_for("a zero command", lambda: first_zero_after(observer.base(), blind))
+    assert_holds_still(observer, 0.5, "sensor stale")
+    assert "rejected scan from the driver" in procs.log("robot")
+    assert "no_information" in procs.log("robot")
+    observer.scan_range_m = 5.0  # the sensor back: no jump while the stick is still pushed
+    observer.wait_for(
+        "waiting for a centred stick",
+        lambda: observer.rec.state[-1][1].reason == "waiting for a centred stick",
+        3,
+    )
     finish(procs, observer)
 
 

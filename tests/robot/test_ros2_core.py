@@ -431,6 +431,7 @@ def test_the_zenoh_scan_message_reads_minus_inf_as_the_ros2_driver_does(filter_n
     ranges[160:201] = -np.inf  # +-20 deg ahead: nearer than range_min
     message = ScanMessage(0, -math.pi, math.pi / 180, 0.3, 10.0, ranges, False)
     scan = scan_from_message(message, profile.half_size_m)
+    assert isinstance(scan, Scan)
     cfg = PipelineConfig(profile, filter=filter_name)
     prev = (profile.v_max_mps, 0.0)
     forward = step_command(cfg, 1.0, 0.0, "shared", scan.obstacles(), prev, 0.05)
@@ -439,3 +440,32 @@ def test_the_zenoh_scan_message_reads_minus_inf_as_the_ros2_driver_does(filter_n
         prev = (forward.v_cmd_mps, forward.w_cmd_radps)
         forward = step_command(cfg, 1.0, 0.0, "shared", scan.obstacles(), prev, 0.05)
     assert forward.v_cmd_mps <= 0.0
+
+
+@pytest.mark.parametrize(
+    "ranges",
+    [
+        [],
+        [math.nan] * 90,
+        [0.01, 20.0, math.nan, 0.0],  # finite but outside [range_min, range_max]
+    ],
+    ids=["no beams", "all NaN", "all out of range"],
+)
+def test_a_zenoh_scan_message_without_information_is_rejected(ranges):
+    """As on the ROS 2 driver: such a scan must not keep the sensor fresh (see test_link)."""
+    from egc_common.messages import Rejection, RejectReason, ScanMessage
+    from egc_robot.drivers import scan_from_message
+
+    message = ScanMessage(0, -1.0, 0.02, 0.05, 10.0, np.array(ranges, np.float32), True)
+    rejected = scan_from_message(message, (0.25, 0.2))
+    assert isinstance(rejected, Rejection) and rejected.reason is RejectReason.NO_INFORMATION
+
+
+@pytest.mark.parametrize("reading", [math.inf, -math.inf, 3.0])
+def test_one_informative_beam_among_nan_is_a_scan(reading):
+    from egc_common.messages import ScanMessage
+    from egc_robot.drivers import scan_from_message
+
+    ranges = np.full(90, math.nan, np.float32)
+    ranges[45] = reading
+    assert isinstance(scan_from_message(ScanMessage(0, -1.0, 0.02, 0.05, 10.0, ranges), None), Scan)
