@@ -11,8 +11,10 @@ Sections: overview; against delay (no loss, no outage); against loss (UDP); agai
 TCP against UDP; per world. A section whose runs are not in the grid is left out. Plots
 (``*.png``, matplotlib's Agg backend): outcome, time and hold time against delay, one panel per
 operator, one line per mode (filter) and link-aware setting; and, when the grid has them,
-outcome against loss and hold time against outage length (one panel per operator and
-transport).
+outcome against loss (independent and bursty loss, each its own line labelled with its bursts)
+and hold time against outage length (one panel per operator and transport). ``write_plots``
+removes the plots of ``PLOT_FILES`` it did not write this time (left by an earlier grid in the
+same directory), and no other file.
 """
 
 from __future__ import annotations
@@ -97,14 +99,21 @@ def outage_s(row: Row) -> float:
     return float(sum(d for _, d in row.get("outages") or []))
 
 
-def jitter_pct(row: Row) -> float:
-    return round(100.0 * row["jitter_ms"] / row["delay_ms"]) if row["delay_ms"] else 0.0
+def jitter_pct(row: Row) -> float | None:
+    """The jitter as a percentage of the delay; None (shown ``-``) at delay 0, where it has no
+    meaning. The tables show the jitter in ms (``COLUMNS["jitter"]``)."""
+    return round(100.0 * row["jitter_ms"] / row["delay_ms"]) if row["delay_ms"] else None
+
+
+def burst_label(row: Row) -> str:
+    """``bursts of N`` (Gilbert-Elliott loss, mean burst length N) or ``independent``."""
+    return f"bursts of {row['burst']:g}" if row["burst"] > 1 else "independent"
 
 
 def loss_label(row: Row) -> str:
     if not row["loss"]:
         return "0"
-    return f"{row['loss']:g}" + (f" (bursts of {row['burst']:g})" if row["burst"] > 1 else "")
+    return f"{row['loss']:g}" + (f" ({burst_label(row)})" if row["burst"] > 1 else "")
 
 
 COLUMNS: dict[str, tuple[str, Key]] = {
@@ -112,7 +121,9 @@ COLUMNS: dict[str, tuple[str, Key]] = {
     "setting": ("mode", setting),
     "link_aware": ("link-aware", link_aware),
     "delay": ("delay ms", lambda r: r["delay_ms"]),
-    "jitter": ("jitter %", jitter_pct),
+    # In ms, not as a share of the delay: a percentage is meaningless at delay 0 (it showed 0
+    # there, for any jitter, and grouped jittered runs at delay 0 with unjittered ones).
+    "jitter": ("jitter ms", lambda r: r["jitter_ms"]),
     "loss": ("loss %", loss_label),
     "outage": ("outage s", outage_s),
     "transport": ("transport", lambda r: r["transport"]),
@@ -255,7 +266,7 @@ def write_report(
     sub = subsets(rows)
     if _varies(sub["delay"], COLUMNS["delay"][1]):
         cols = [*by_op, "delay"]
-        if _varies(sub["delay"], jitter_pct):
+        if _varies(sub["delay"], COLUMNS["jitter"][1]):
             cols.append("jitter")
         if _varies(sub["delay"], COLUMNS["transport"][1]):
             cols.append("transport")
@@ -301,16 +312,22 @@ def write_report(
 
 
 def _series(
-    rows: Sequence[Row], x: Key, y: Callable[[Sequence[Row]], float | None]
-) -> dict[tuple[str, str], list[tuple[float, float]]]:
-    groups: dict[tuple[str, str, float], list[Row]] = defaultdict(list)
+    rows: Sequence[Row],
+    x: Key,
+    y: Callable[[Sequence[Row]], float | None],
+    variants: Callable[[Row], Sequence[str]] = lambda r: ("",),
+) -> dict[tuple[str, str, str], list[tuple[float, float]]]:
+    """One line per mode, link-aware setting and variant; a row can be on the lines of several
+    variants (the loss-free runs start the line of each kind of loss)."""
+    groups: dict[tuple[str, str, str, float], list[Row]] = defaultdict(list)
     for r in rows:
-        groups[(setting(r), link_aware(r), float(x(r)))].append(r)
-    out: dict[tuple[str, str], list[tuple[float, float]]] = defaultdict(list)
-    for (mode, aware, xv), group in sorted(groups.items()):
+        for variant in variants(r):
+            groups[(setting(r), link_aware(r), variant, float(x(r)))].append(r)
+    out: dict[tuple[str, str, str], list[tuple[float, float]]] = defaultdict(list)
+    for (mode, aware, variant, xv), group in sorted(groups.items()):
         value = y(group)
         if value is not None:
-            out[(mode, aware)].append((xv, value))
+            out[(mode, aware, variant)].append((xv, value))
     return out
 
 
@@ -322,6 +339,7 @@ def _figure(
     path: Path,
     title: str,
     facet: Key = lambda r: r["operator"],
+    variants: Callable[[Row], Sequence[str]] = lambda r: ("",),
 ) -> bool:
     import matplotlib
 
@@ -342,11 +360,13 @@ def _figure(
     palette = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple"]
     modes = sorted({setting(r) for r in rows})
     colours = {m: palette[i % len(palette)] for i, m in enumerate(modes)}
+    kinds = sorted({v for r in rows for v in variants(r)})
+    markers = {v: "osD^vP"[i % 6] for i, v in enumerate(kinds)}
     for col, op in enumerate(operators):
         op_rows = [r for r in rows if facet(r) == op]
         for row_i, (ylabel, fn) in enumerate(panels):
             ax = axes[row_i][col]
-            for (mode, aware), points in sorted(_series(op_rows, x, fn).items()):
+            for (mode, aware, kind), points in sorted(_series(op_rows, x, fn, variants).items()):
                 colour = colours[mode]
                 xs, ys = zip(*points, strict=True)
                 ax.plot(
@@ -354,9 +374,9 @@ def _figure(
                     ys,
                     styles.get(aware, ":"),
                     color=colour,
-                    marker="o",
+                    marker=markers[kind],
                     markersize=3,
-                    label=f"{mode}, link-aware {aware}",
+                    label=f"{mode}, link-aware {aware}" + (f", {kind}" if kind else ""),
                 )
             ax.set_ylabel(ylabel)
             if ylabel.endswith("%"):
@@ -417,11 +437,40 @@ def least_jitter_per_delay(rows: Sequence[Row]) -> tuple[list[Row], str]:
     return kept, "the least jitter at each delay"
 
 
+def loss_kinds(rows: Sequence[Row]) -> Callable[[Row], Sequence[str]]:
+    """The loss plot's lines of a row: its kind of loss (``burst_label``), and every kind in
+    ``rows`` for a loss-free row (loss 0 is where each line starts). Empty labels when all the
+    loss is independent (then the axis says so)."""
+    kinds = sorted({burst_label(r) for r in rows if r["loss"]})
+    if kinds in ([], ["independent"]):
+        return lambda r: ("",)
+    return lambda r: (burst_label(r),) if r["loss"] else tuple(kinds)
+
+
+def remove_stale_plots(out_dir: Path, written: Sequence[str]) -> list[str]:
+    """Remove the plots of ``PLOT_FILES`` (and their temporaries) that this report did not
+    write: an earlier grid's, run into the same directory. No other file is touched. Returns
+    the names removed."""
+    removed = []
+    for name in PLOT_FILES:
+        for stale in (name, Path(name).stem + ".tmp.png"):
+            path = out_dir / stale
+            if stale in written or not (path.is_file() or path.is_symlink()):
+                continue
+            path.unlink(missing_ok=True)
+            removed.append(stale)
+    return removed
+
+
 def write_plots(rows: Sequence[Row], out_dir: Path) -> list[str]:
-    """The plots of the module docstring; returns the file names written."""
+    """The plots of the module docstring; returns the file names written. The other plots of
+    ``PLOT_FILES`` are removed (``remove_stale_plots``)."""
     written: list[str] = []
     plain, jitter_note = least_jitter_per_delay([r for r in rows if _plain_link(r)])
     delay: Key = COLUMNS["delay"][1]
+    lossy = [r for r in rows if r["transport"] == "udp" and not r.get("outages")]
+    kinds = loss_kinds(lossy)
+    bursty = any(r["loss"] and r["burst"] > 1 for r in lossy)
     figures: list[tuple[str, Sequence[Row], Key, str, list[Any], str]] = [
         (
             "outcome_vs_delay.png",
@@ -454,13 +503,9 @@ def write_plots(rows: Sequence[Row], out_dir: Path) -> list[str]:
         ),
         (
             "outcome_vs_loss.png",
-            [
-                r
-                for r in rows
-                if r["transport"] == "udp" and not r.get("outages") and r["burst"] <= 1
-            ],
+            lossy,
             lambda r: r["loss"],
-            "loss (%), independent, each direction",
+            "loss (%), each direction" if bursty else "loss (%), independent, each direction",
             [
                 ("reached %", _rate("reached")),
                 ("hold time (s)", lambda g: _mean(r["hold_s"] for r in g)),
@@ -482,6 +527,7 @@ def write_plots(rows: Sequence[Row], out_dir: Path) -> list[str]:
     facets: dict[str, Key] = {
         "hold_vs_outage.png": lambda r: f"{r['operator']}, {r['transport'].upper()}",
     }
+    lines: dict[str, Callable[[Row], Sequence[str]]] = {"outcome_vs_loss.png": kinds}
     for name, subset, x, xlabel, panels, title in figures:
         if name == "hold_vs_outage.png" and not any(r.get("outages") for r in subset):
             continue
@@ -489,6 +535,8 @@ def write_plots(rows: Sequence[Row], out_dir: Path) -> list[str]:
             continue
         assert name in PLOT_FILES, name
         facet = facets.get(name, COLUMNS["operator"][1])
-        if _figure(subset, x, xlabel, panels, out_dir / name, title, facet):
+        variants = lines.get(name, lambda r: ("",))
+        if _figure(subset, x, xlabel, panels, out_dir / name, title, facet, variants):
             written.append(name)
+    remove_stale_plots(out_dir, written)
     return written

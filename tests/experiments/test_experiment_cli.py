@@ -68,6 +68,22 @@ def test_a_grid_jittered_at_every_delay_still_gets_its_delay_plots(tmp_path):
         assert f"]({name})" in report
 
 
+def test_a_rerun_with_another_grid_leaves_no_plot_of_the_earlier_one(tmp_path):
+    """Outside check: the loss plot of an earlier grid stayed beside the new report in the same
+    out dir (report.md did not link it, but a user saw it); files not ours are left alone."""
+    out = tmp_path / "out"
+    lossy = TINY.replace("[[sweep]]", 'transport = "udp"\n[[sweep]]\nloss = [0, 5]')
+    assert experiment(write_grid(tmp_path, lossy), out) == 0
+    assert (out / "outcome_vs_loss.png").exists()
+    (out / "mine.png").write_bytes(b"the user's")
+    assert experiment(write_grid(tmp_path), out) == 0
+    report = (out / "report.md").read_text()
+    pngs = sorted(p.name for p in out.glob("*.png"))
+    assert pngs == ["hold_vs_delay.png", "mine.png", "outcome_vs_delay.png", "time_vs_delay.png"]
+    assert all(f"]({name})" in report for name in pngs if name != "mine.png")
+    assert (out / "mine.png").read_bytes() == b"the user's"
+
+
 def test_the_delay_plots_take_the_least_jitter_at_each_delay():
     from egc_experiments.report import least_jitter_per_delay
 
