@@ -4,7 +4,10 @@
                     [--scenario FILE] [--stats FILE.json] [--duration S] [--quiet]
 
 Prints a ready line on stderr once listening, and per-direction counts when it stops (SIGINT,
-SIGTERM or ``--duration``; exit 0). Bad input gives one line on stderr and exit 2.
+SIGTERM or ``--duration``; exit 0): forwarded, dropped, delay percentiles and send errors
+(sends the system refused, e.g. ECONNREFUSED from a target with nothing on its UDP port, or no
+route); ``--stats`` writes the same as JSON (``send_errors`` in each direction, and at the top
+level by direction). Bad input gives one line on stderr and exit 2.
 
 Our ``udp/`` transport is two links on one port number (``egc_common.transport``): best-effort
 datagrams on UDP and Zenoh's reliable control traffic on TCP. So a ``udp/`` relay also relays

@@ -649,7 +649,10 @@ class DirectionStats:
     """Counts and delay percentiles of one direction, from the delays actually observed (ms).
 
     Percentiles are None when nothing was forwarded. ``late_*`` is the relay's scheduling
-    lateness (release time minus planned arrival), when measured.
+    lateness (release time minus planned arrival), when measured. ``send_errors``: the sends of
+    this direction the system reported as failed (``ECONNREFUSED`` after an ICMP port
+    unreachable from the far end, no route to host, a full buffer); a datagram whose send failed
+    at once is in neither ``forwarded`` nor ``dropped`` (the link model's losses).
     """
 
     forwarded: int
@@ -661,6 +664,7 @@ class DirectionStats:
     late_p50_ms: float | None = None
     late_p99_ms: float | None = None
     late_max_ms: float | None = None
+    send_errors: int = 0
 
     @classmethod
     def from_samples(
@@ -669,25 +673,27 @@ class DirectionStats:
         dropped: int,
         delays_ms: Iterable[float],
         lateness_ms: Iterable[float] = (),
+        send_errors: int = 0,
     ) -> DirectionStats:
         """Summarise the observed delays (and scheduling lateness) of one direction."""
         delays = sorted(delays_ms)
         late = sorted(lateness_ms)
-        p: dict[str, float] = {}
-        if delays:
-            p = {
-                "p50_ms": percentile(delays, 50),
-                "p90_ms": percentile(delays, 90),
-                "p99_ms": percentile(delays, 99),
-                "max_ms": delays[-1],
-            }
-        if late:
-            p |= {
-                "late_p50_ms": percentile(late, 50),
-                "late_p99_ms": percentile(late, 99),
-                "late_max_ms": late[-1],
-            }
-        return cls(forwarded, dropped, **p)
+
+        def pct(values: list[float], q: float) -> float | None:
+            return percentile(values, q) if values else None
+
+        return cls(
+            forwarded,
+            dropped,
+            p50_ms=pct(delays, 50),
+            p90_ms=pct(delays, 90),
+            p99_ms=pct(delays, 99),
+            max_ms=delays[-1] if delays else None,
+            late_p50_ms=pct(late, 50),
+            late_p99_ms=pct(late, 99),
+            late_max_ms=late[-1] if late else None,
+            send_errors=send_errors,
+        )
 
     @property
     def loss_pct(self) -> float:
@@ -708,6 +714,7 @@ class DirectionStats:
             "late_p50_ms": self.late_p50_ms,
             "late_p99_ms": self.late_p99_ms,
             "late_max_ms": self.late_max_ms,
+            "send_errors": self.send_errors,
         }
 
     def line(self, name: str) -> str:
@@ -723,4 +730,4 @@ class DirectionStats:
         )
         if self.late_p99_ms is not None:
             text += f"; late p99 {self.late_p99_ms:.3f} max {ms(self.late_max_ms)} ms"
-        return text
+        return text + f"; send errors {self.send_errors}"

@@ -149,7 +149,12 @@ def new_event_loop() -> asyncio.AbstractEventLoop:
 
 
 class Recorder:
-    """Per-direction counts and a uniform sample (reservoir) of delays and lateness, in ms."""
+    """Per-direction counts and a uniform sample (reservoir) of delays and lateness, in ms.
+
+    ``send_errors``: sends of this direction that failed (``DirectionStats``); on a connected
+    UDP socket the kernel reports an ICMP error for an earlier datagram on the next send or
+    receive, so the receive side counts those for the direction that sent through that socket.
+    """
 
     def __init__(self, seed: int) -> None:
         self.forwarded = 0
@@ -178,7 +183,9 @@ class Recorder:
 
     def stats(self) -> DirectionStats:
         """The summary; the maxima are exact even when the reservoir is full."""
-        s = DirectionStats.from_samples(self.forwarded, self.dropped, self.delays_ms, self.late_ms)
+        s = DirectionStats.from_samples(
+            self.forwarded, self.dropped, self.delays_ms, self.late_ms, self.send_errors
+        )
         if not self.forwarded:
             return s
         return DirectionStats(
@@ -191,6 +198,7 @@ class Recorder:
             s.late_p50_ms,
             s.late_p99_ms,
             self.max_late_ms,
+            self.send_errors,
         )
 
 
@@ -236,8 +244,8 @@ class Lane:
             return
         due = arrival + self._t0
         if due <= now and not self._heap:
-            self._deliver(data)
-            self._rec.record(0.0, 0.0)
+            if self._deliver(data):
+                self._rec.record(0.0, 0.0)
             return
         self._enqueue(due, now, data)
         self.queued_bytes += len(data)
@@ -280,8 +288,8 @@ class Lane:
                     self._on_eof()
                 return
             self.queued_bytes -= len(data)
-            self._deliver(data)
-            self._rec.record(now - read_at, now - due)
+            if self._deliver(data):
+                self._rec.record(now - read_at, now - due)
         if self._pressed and not self._full(now, 0.5):
             self._pressed = False
             assert self._on_pressure is not None
@@ -289,11 +297,14 @@ class Lane:
         if heap:
             self._arm(heap[0][0])
 
-    def _deliver(self, data: bytes) -> None:
+    def _deliver(self, data: bytes) -> bool:
+        """Send ``data``; False (and a send error counted) when the system refuses it."""
         try:
             self._send(data)
         except OSError:
             self._rec.send_errors += 1
+            return False
+        return True
 
     def close(self) -> None:
         """Forget what is queued and stop the timer."""
@@ -501,8 +512,10 @@ class _UdpFlow:
                 data = recv(MAX_DATAGRAM)
             except BlockingIOError:
                 return
-            except OSError:  # e.g. ICMP port unreachable from the target: nothing to forward
-                self.relay.recorders["down"].send_errors += 1
+            except OSError:
+                # ICMP port unreachable (or another error) for a datagram sent up to the
+                # target through this connected socket: an up send error, nothing to forward.
+                self.relay.recorders["up"].send_errors += 1
                 return
             push(data, time.monotonic())
 
@@ -602,7 +615,9 @@ class Relay:
             except BlockingIOError:
                 return
             except OSError:
-                self.recorders["up"].send_errors += 1
+                # An error queued on the listen socket concerns what it sent: the down
+                # direction's datagrams to a client.
+                self.recorders["down"].send_errors += 1
                 return
             flow = flows.get(client)
             if flow is None:

@@ -184,6 +184,32 @@ def test_udp_loss_rate_and_seeded_repeatability(tmp_path: Path) -> None:
     assert received[0] == received[1]  # same seed, same datagrams lost
 
 
+def test_udp_send_errors_are_counted_per_direction_and_printed(tmp_path: Path) -> None:
+    """Outside check: datagrams to a target with nothing on its port (ECONNREFUSED from the ICMP
+    port unreachable) were left out of the summary printed at exit (and counted, in the JSON
+    only, for the wrong direction)."""
+    from egc_common.transport import free_port
+
+    closed = free_port("udp")  # nothing listens here
+    stats_file = tmp_path / "stats.json"
+    with link(
+        "--listen", "udp/127.0.0.1:0", "--connect", f"udp/127.0.0.1:{closed}", "--udp-only",
+        "--stats", str(stats_file), "--quiet",
+    ) as relay:  # fmt: skip
+        udp_send(relay.port, 40, 0.005).close()
+        time.sleep(0.2)
+        err = relay.stop()
+    up = re.search(r"^link: up: forwarded (\d+), .*; send errors (\d+)$", err, re.MULTILINE)
+    down = re.search(r"^link: down: .*; send errors (\d+)$", err, re.MULTILINE)
+    assert up is not None and down is not None, err
+    forwarded, errors = int(up.group(1)), int(up.group(2))
+    assert errors >= 10 and forwarded + errors >= 40, err  # each refused once, ICMP or send
+    assert int(down.group(1)) == 0, err
+    stats = json.loads(stats_file.read_text())
+    assert stats["up"]["send_errors"] == errors and stats["down"]["send_errors"] == 0
+    assert stats["send_errors"] == {"up": errors, "down": 0}  # the earlier key, kept
+
+
 def test_udp_outage_drops_and_tcp_outage_delays() -> None:
     sink = UdpSink(echo=False)
     with link(

@@ -355,3 +355,30 @@ def test_direction_stats() -> None:
     empty = DirectionStats.from_samples(0, 0, [])
     assert empty.p50_ms is None and empty.to_dict()["loss_pct"] == 0.0
     assert "p50 -" in empty.line("down")
+
+
+def test_a_refused_send_is_a_send_error_not_a_forwarded_packet() -> None:
+    """The relay's lane: a send the system refuses (ECONNREFUSED, no route) is counted as a send
+    error of its direction and shown in the summary; it was counted as forwarded before."""
+    from egc_experiments.relay import Lane, Recorder
+
+    refuse = [False, True, False]
+
+    def send(data: bytes) -> None:
+        if refuse.pop(0):
+            raise ConnectionRefusedError(111, "Connection refused")
+
+    recorder = Recorder(seed=0)
+    model = LinkModel(Schedule.constant(parse_spec("")), seed=1, ordered=False)
+    lane = Lane(None, model, 0.0, send, recorder)  # type: ignore[arg-type]  # delay 0: no timer
+    for _ in range(3):
+        lane.push(b"x", 0.0)
+    stats = recorder.stats()
+    assert (stats.forwarded, stats.dropped, stats.send_errors) == (2, 0, 1)
+    assert stats.line("up").endswith("; send errors 1")
+    assert stats.to_dict()["send_errors"] == 1
+    assert (
+        DirectionStats.from_samples(0, 0, [], send_errors=3)
+        .line("down")
+        .endswith("; send errors 3")
+    )
