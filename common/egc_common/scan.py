@@ -8,6 +8,7 @@ the driver's declaration (``no_return_is_free``); the filter treats unknown as a
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -93,11 +94,10 @@ class Scan:
             )
             if self.extra_xy_m is not None and len(self.extra_xy_m):
                 xy = np.concatenate((xy, np.asarray(self.extra_xy_m, np.float64).reshape(-1, 2)))
-            cached = obstacle_points(
-                xy,
-                seen_ahead_m=self.range_max_m + self.mount_x_m,
-                seen_behind_m=self.range_max_m - self.mount_x_m,
+            ahead_m, behind_m = _seen_along_axis_cached(
+                self.angles_rad.tobytes(), self.range_max_m, self.mount_x_m, self.mount_y_m
             )
+            cached = obstacle_points(xy, seen_ahead_m=ahead_m, seen_behind_m=behind_m)
             for array in (cached.xy, cached.x, cached.y, cached.r2):
                 array.flags.writeable = False
             object.__setattr__(self, "_obstacles", cached)
@@ -118,8 +118,10 @@ class ObstaclePoints:
     x: FloatArray
     y: FloatArray
     r2: FloatArray  # squared distance of each point from the origin of {R}
-    # How far ahead of and behind {R}'s origin the sensor sees (its range_max from where it
-    # sits): what lies beyond was not seen, free or not. inf when unknown (points only).
+    # How far ahead of and behind {R}'s origin the sensor sees along {R}'s x axis (its
+    # range_max from where it sits, or less where the axis runs into a direction no beam looks
+    # at: ``seen_along_axis_m``): what lies beyond was not seen, free or not. inf when unknown
+    # (points only).
     seen_ahead_m: float = math.inf
     seen_behind_m: float = math.inf
     count: int = field(init=False)  # len(xy), without asking numpy on the command path
@@ -304,6 +306,88 @@ def too_close_points(
         _, first = np.unique(np.round(out / 0.005), axis=0, return_index=True)
         out = out[np.sort(first)]
     return out
+
+
+# A gap between neighbouring beams wider than this many median beam spacings is a blind
+# sector: no beam looks there (a 270-degree laser behind itself, a 180-degree one's back half).
+BLIND_GAP_SPACINGS = 3.0
+_FULL_TURN = 2.0 * math.pi
+
+
+def blind_sectors(angles_rad: npt.ArrayLike) -> tuple[tuple[float, float], ...]:
+    """The directions no beam of a scan looks at: (start, width) in rad, start in [0, 2 pi),
+    counter-clockwise, as seen from the laser (beam angles in {R}).
+
+    Between two neighbouring beams whose directions are more than ``BLIND_GAP_SPACINGS``
+    median spacings apart, what lies more than half a spacing from either beam is blind. Any
+    beam order and sweep direction; a scan of fewer than two beams looks only along its beam.
+    """
+    a = np.asarray(angles_rad, dtype=np.float64).reshape(-1)
+    if a.size >= 2:
+        d = np.diff(a)
+        lo, hi = float(d.min()), float(d.max())
+        small, large = min(abs(lo), abs(hi)), max(abs(lo), abs(hi))
+        # The usual scan: one sweep in one direction, evenly spaced, all the way round.
+        one_sweep = (lo > 0.0 or hi < 0.0) and large <= BLIND_GAP_SPACINGS * small
+        if one_sweep and abs(float(a[-1] - a[0])) + large >= _FULL_TURN:
+            return ()
+    if a.size < 2:
+        half = math.radians(0.5)
+        start = (float(a[0]) if a.size else 0.0) + half
+        return ((start % _FULL_TURN, _FULL_TURN - 2.0 * half),)
+    b = np.sort(np.mod(a, _FULL_TURN))
+    gaps = np.diff(np.concatenate((b, [b[0] + _FULL_TURN])))
+    spacing = float(np.median(gaps))
+    wide = np.flatnonzero(gaps > BLIND_GAP_SPACINGS * spacing)
+    return tuple(
+        ((float(b[i]) + 0.5 * spacing) % _FULL_TURN, float(gaps[i]) - spacing) for i in wide
+    )
+
+
+def seen_along_axis_m(
+    angles_rad: npt.ArrayLike,
+    range_max_m: float,
+    mount_x_m: float = 0.0,
+    mount_y_m: float = 0.0,
+    step_m: float = 0.01,
+) -> tuple[float, float]:
+    """How far ahead of and behind {R}'s origin a laser sees along {R}'s x axis (m).
+
+    Its range_max from where it sits (``range_max +- mount_x``), but only up to the first
+    place on the axis that lies in one of its ``blind_sectors`` as seen from the laser: what
+    the laser does not look at is not known to be free. A 270-degree laser facing forward sees
+    nothing straight behind (0 m behind), one mounted backwards nothing straight ahead. The
+    axis is sampled every ``step_m`` (at most 2,000 samples a side) from the origin, or from
+    the laser's own x where that lies farther out (the stretch between them is the robot's).
+    """
+    ahead_m, behind_m = range_max_m + mount_x_m, range_max_m - mount_x_m
+    sectors = blind_sectors(angles_rad)
+    if not sectors:
+        return ahead_m, behind_m
+    seen = []
+    for sign, reach in ((1.0, ahead_m), (-1.0, behind_m)):
+        x0 = max(0.0, sign * mount_x_m)
+        if reach <= x0:
+            seen.append(max(reach, 0.0))
+            continue
+        n = min(2000, max(1, math.ceil((reach - x0) / step_m)))
+        x = np.linspace(x0, reach, n + 1)
+        bearing = np.mod(np.arctan2(-mount_y_m, sign * x - mount_x_m), _FULL_TURN)
+        blind = np.zeros(x.size, dtype=bool)
+        for start, width in sectors:
+            blind |= np.mod(bearing - start, _FULL_TURN) < width
+        first = np.flatnonzero(blind)
+        seen.append(reach if first.size == 0 else float(x[max(int(first[0]) - 1, 0)]))
+    return seen[0], seen[1]
+
+
+@functools.lru_cache(maxsize=32)
+def _seen_along_axis_cached(
+    angles: bytes, range_max_m: float, mount_x_m: float, mount_y_m: float
+) -> tuple[float, float]:
+    """``seen_along_axis_m`` once per laser geometry: a sensor's scans all share theirs."""
+    a = np.frombuffer(angles, dtype=np.float64)
+    return seen_along_axis_m(a, range_max_m, mount_x_m, mount_y_m)
 
 
 def obstacle_points(

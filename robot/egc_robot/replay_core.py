@@ -22,6 +22,7 @@ any other scan without a valid reading is unknown, which the filters treat as a 
 from __future__ import annotations
 
 import bisect
+import functools
 import itertools
 import math
 import statistics
@@ -33,7 +34,12 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from egc_common.profiles import RobotProfile
-from egc_common.scan import ObstaclePoints, obstacle_points, too_close_points
+from egc_common.scan import (
+    ObstaclePoints,
+    obstacle_points,
+    seen_along_axis_m,
+    too_close_points,
+)
 
 from egc_robot import pipeline
 from egc_robot.pipeline import PipelineConfig, PipelineResult
@@ -88,6 +94,10 @@ class ScanPoints:
     free_if_empty: bool
     closest_m: float | None  # nearest valid reading, None when there is none
     range_max_m: float = math.inf  # the laser's reach: nothing beyond it was seen
+    # How far it sees straight ahead and behind (range_max, or less through a blind sector:
+    # ``egc_common.scan.seen_along_axis_m``).
+    seen_ahead_m: float = math.inf
+    seen_behind_m: float = math.inf
 
 
 @dataclass(frozen=True, slots=True)
@@ -174,6 +184,15 @@ def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
+@functools.lru_cache(maxsize=16)
+def _seen_along_axis(
+    angle_min_rad: float, angle_increment_rad: float, beams: int, range_max_m: float
+) -> tuple[float, float]:
+    """``seen_along_axis_m`` once per laser geometry (a log's scans all share one)."""
+    angles = angle_min_rad + angle_increment_rad * np.arange(beams, dtype=np.float64)
+    return seen_along_axis_m(angles, range_max_m)
+
+
 def scan_points(scan: LogScan, footprint_half_m: tuple[float, float] | None = None) -> ScanPoints:
     """REP 117 ranges to points in {R}: finite readings within [range_min, range_max], plus
     ``-inf`` readings as obstacles at range_min (and, given the footprint's half length and
@@ -195,7 +214,10 @@ def scan_points(scan: LogScan, footprint_half_m: tuple[float, float] | None = No
         xy = np.concatenate((xy, near))
     free = rr_m.size == 0 and r.size > 0 and bool(np.all(np.isposinf(r)))
     closest = float(rr_m.min()) if rr_m.size else None
-    return ScanPoints(xy, free, closest, float(scan.range_max_m))
+    ahead_m, behind_m = _seen_along_axis(
+        scan.angle_min_rad, scan.angle_increment_rad, r.size, float(scan.range_max_m)
+    )
+    return ScanPoints(xy, free, closest, float(scan.range_max_m), ahead_m, behind_m)
 
 
 def velocities_from_poses(
@@ -285,8 +307,9 @@ class Replayer:
         """One scan through the pipeline with the command in effect; without a command the scan
         is only measured. Returns the verdict, the pipeline's result (None without a command),
         the obstacle points it saw and the filter's memory for the next scan."""
-        reach = points.range_max_m
-        obstacles = obstacle_points(points.xy_m, seen_ahead_m=reach, seen_behind_m=reach)
+        obstacles = obstacle_points(
+            points.xy_m, seen_ahead_m=points.seen_ahead_m, seen_behind_m=points.seen_behind_m
+        )
         if command is None:
             verdict = ScanVerdict(
                 scan.log_ns, scan.stamp_ns, False, 0.0, 0.0, 0.0, 0.0, "none", points.closest_m

@@ -246,8 +246,8 @@ _DIRECTIONS = (
 
 def blind_directions(angles_rad: npt.ArrayLike) -> list[str]:
     """Which of ahead, left, behind and right no beam of a scan looks at (beam angles in {R};
-    a direction counts as seen within 1.5 beam gaps of a beam). What the laser does not see
-    counts as free, so the driver says so once (README, "what the laser does not cover")."""
+    a direction counts as seen within 1.5 beam gaps of a beam), for the driver's one line
+    about it (README, "what the laser does not look at")."""
     a = np.sort(np.mod(np.asarray(angles_rad, dtype=np.float64).reshape(-1), 2.0 * math.pi))
     if a.size < 2:
         return [name for name, _ in _DIRECTIONS]

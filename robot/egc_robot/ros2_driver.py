@@ -192,8 +192,9 @@ class Ros2Driver:
                 blind = blind_directions(result.angles_rad)
                 if blind:
                     log.warning(
-                        "the laser does not look %s: what it does not see counts as free "
-                        "(README: mount it to cover the direction you drive in)",
+                        "the laser does not look %s: in shared mode the robot will not drive "
+                        "straight into what it does not see (README: mount it to cover the "
+                        "directions you drive in)",
                         " or ".join(blind),
                     )
             age_ns = self._node.get_clock().now().nanoseconds - (

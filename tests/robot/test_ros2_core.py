@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from egc_common.messages import Odometry
 from egc_common.profiles import get_profile
-from egc_common.scan import Scan, footprint_exit_m
+from egc_common.scan import Scan, blind_sectors, footprint_exit_m, seen_along_axis_m
 from egc_robot.pipeline import PipelineConfig, step_command
 from egc_robot.ros2_core import (
     LaserPose,
@@ -469,3 +469,73 @@ def test_one_informative_beam_among_nan_is_a_scan(reading):
     ranges = np.full(90, math.nan, np.float32)
     ranges[45] = reading
     assert isinstance(scan_from_message(ScanMessage(0, -1.0, 0.02, 0.05, 10.0, ranges), None), Scan)
+
+
+@pytest.mark.parametrize("filter_name", ["egc", "ek-egc", "assist", "dwa"])
+@pytest.mark.parametrize(
+    "fov_deg, mount, ahead",
+    [
+        (270.0, (0.0, 0.0, 0.0), False),  # facing forward: reversing into the blind cone
+        (270.0, (0.15, 0.05, 0.0), False),
+        (180.0, (0.2, 0.0, 0.0), False),  # a Pioneer's SICK: nothing at all behind
+        (270.0, (0.0, 0.0, math.pi), True),  # mounted backwards: driving forward blind
+    ],
+)
+@pytest.mark.parametrize("y_o", [0.0, 0.4])
+def test_the_robot_does_not_drive_into_what_its_laser_does_not_look_at(
+    fov_deg, mount, ahead, y_o, filter_name
+):
+    """Closed loop, a post in the direction no beam looks at, every beam elsewhere +inf (free
+    per REP 117), the stick held full towards the post. What the laser did not cover counted
+    as free: the sweep found no point and the Jackal backed into the post at full speed (an
+    outside check drove a robot into a wall through such a blind cone). Now the speed that way
+    is capped to what the laser sees along the axis (nothing), while it still turns in place and
+    drives the way it looks."""
+    profile = get_profile("jackal")
+    half = profile.half_size_m
+    cfg = PipelineConfig(profile, filter=filter_name, no_return_is_free=True)
+    beams = int(fov_deg) * 2 + 1
+    inc = math.radians(fov_deg) / (beams - 1)
+    beam = -0.5 * math.radians(fov_deg) + inc * np.arange(beams)
+    laser = LaserPose(*mount)
+    sign = 1.0 if ahead else -1.0
+    post = (sign * 0.9, 0.0, 0.2)
+    pose, cmd, dt = (0.0, 0.0, 0.0), (0.0, 0.0), 0.05
+    for _ in range(100):
+        ranges = _ranges_to_post(pose, mount[:2], mount[2] + beam, post, 0.05)
+        scan = scan_from_laser(ranges, beam[0], inc, 0.05, 10.0, laser, 0, half)
+        assert isinstance(scan, Scan)
+        out = step_command(cfg, sign, y_o, "shared", scan.obstacles(), cmd, dt)
+        cmd = (out.v_cmd_mps, out.w_cmd_radps)
+        assert sign * cmd[0] <= 1e-12, cmd  # never towards what it cannot see
+        x, y, th = pose
+        pose = (x + cmd[0] * dt * math.cos(th), y + cmd[0] * dt * math.sin(th), th + cmd[1] * dt)
+        assert _gap_to_footprint(pose, post, half) > 0.0, (pose, cmd)
+    ranges = np.full(beams, INF)
+    ranges[0] = 5.0
+    scan = scan_from_laser(ranges, beam[0], inc, 0.05, 10.0, laser, 0, half)
+    assert isinstance(scan, Scan)
+    turn = step_command(cfg, 0.0, 1.0, "shared", scan.obstacles(), (0.0, 0.0), dt)
+    assert turn.w_cmd_radps > 0.0  # turning in place is not travel
+    away = step_command(cfg, -sign, 0.0, "shared", scan.obstacles(), (0.0, 0.0), dt)
+    assert -sign * away.v_cmd_mps > 0.0  # the way it looks, it drives
+
+
+def test_blind_sectors_and_what_a_laser_sees_along_the_axis():
+    full = np.linspace(-math.pi, math.pi, 720, endpoint=False)
+    assert blind_sectors(full) == () and blind_sectors(full[::-1]) == ()
+    assert blind_sectors(np.random.default_rng(3).permutation(full)) == ()
+    front = np.linspace(-0.75 * math.pi, 0.75 * math.pi, 541)
+    ((start, width),) = blind_sectors(front)
+    spacing = 1.5 * math.pi / 540
+    assert start == pytest.approx(0.75 * math.pi + 0.5 * spacing)
+    assert width == pytest.approx(0.5 * math.pi - spacing)
+    assert seen_along_axis_m(full, 10.0, 0.2) == (10.2, 9.8)
+    assert seen_along_axis_m(front, 10.0) == (10.0, 0.0)
+    assert seen_along_axis_m(front + math.pi, 10.0) == (0.0, 10.0)
+    assert seen_along_axis_m(front, 10.0, -0.2)[1] == pytest.approx(0.2, abs=0.011)
+    # Mounted to the side, the axis behind it stays in view until it crosses -135 degrees.
+    assert seen_along_axis_m(front, 10.0, 0.1, 0.15)[1] == pytest.approx(0.05, abs=0.011)
+    two_lasers = np.concatenate((front[:100], front[-100:]))  # a gap straight ahead as well
+    assert seen_along_axis_m(two_lasers, 10.0) == (0.0, 0.0)
+    assert seen_along_axis_m([0.0], 5.0) == (5.0, 0.0)
