@@ -395,7 +395,11 @@ def _figure(
     if handles:
         fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8)
     fig.suptitle(title)
-    fig.tight_layout(rect=(0, 0.1, 1, 0.97))
+    # Room under the axes for the legend's rows (about 0.2 in each at 8 pt), so that it does not
+    # cover the x axis's label.
+    rows = math.ceil(len(handles) / 2)
+    bottom = min(0.5, (0.15 + 0.2 * rows) / fig.get_figheight()) if handles else 0.02
+    fig.tight_layout(rect=(0, bottom, 1, 0.97))
     tmp = path.with_name(path.stem + ".tmp.png")
     fig.savefig(tmp, dpi=100)
     plt.close(fig)
