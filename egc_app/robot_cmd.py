@@ -21,9 +21,11 @@ flags. Tables and keys (units in the names):
     [ros2]     scan, odom, cmd, cmd_type, namespace, laser_pose ("X,Y,YAW" or [x, y, yaw]),
                laser_upside_down (flags --ros-scan ... --laser-upside-down override them)
 
-With ``--driver ros2``, ``pipeline.no_return_is_free`` defaults to true: REP 117's ``+inf`` means
-nothing within range_max, and the driver never delivers a scan without any information
-(``egc_robot.ros2_core``).
+``pipeline.no_return_is_free`` unset (the default): each scan's sensor says whether a beam with no
+return means free. The simulator's lidar says so, the ROS 2 driver says so for REP 117 scans
+(``+inf`` means nothing within range_max; a scan without any information is never delivered,
+``egc_robot.ros2_core``), an ``egc/<robot>/scan`` message carries the flag. Set it to force one
+reading for every scan.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ import dataclasses
 import gc
 import json
 import logging
+import os
 import math
 import signal
 import threading
@@ -215,29 +218,39 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
         ros2_settings(config_mod.section(cfg, "ros2", SECTIONS["ros2"]), {})
         profile = get_profile(args.profile)
         horizon = pipe.get("horizon_s")
-        free = _flag(pipe, "no_return_is_free", getattr(args, "driver", None) == "ros2")
-        filter_tables = {"no_return_is_free": free}
+        # Unset: each scan's sensor declares it (the simulator's lidar and the ROS 2 driver's
+        # REP 117 scans do; an egc/<robot>/scan message carries the flag).
+        free_setting = (
+            None if "no_return_is_free" not in pipe else _flag(pipe, "no_return_is_free", False)
+        )
         dwa_table = cfg.get("dwa", {})
         assist_table = cfg.get("assist", {})
         if not isinstance(dwa_table, dict) or not isinstance(assist_table, dict):
             raise UsageError("[dwa] and [assist] must be tables")
-        pipeline = PipelineConfig(
-            profile=profile,
-            mapping=JoystickMapping(
-                gamma_v=_number(pipe, "gamma_v", 1.0), gamma_w=_number(pipe, "gamma_w", 1.0)
-            ),
-            filter=args.filter,
-            horizon_s=None if horizon is None else _number(pipe, "horizon_s", 0.0),
-            no_return_is_free=free,
-            dwa=DwaParams.from_mapping(filter_tables | dwa_table, profile),
-            assist=AssistParams.from_mapping(filter_tables | assist_table, profile),
-        )
+
+        def pipeline_config(free: bool) -> PipelineConfig:
+            filter_tables = {"no_return_is_free": free}
+            return PipelineConfig(
+                profile=profile,
+                mapping=JoystickMapping(
+                    gamma_v=_number(pipe, "gamma_v", 1.0), gamma_w=_number(pipe, "gamma_w", 1.0)
+                ),
+                filter=args.filter,
+                horizon_s=None if horizon is None else _number(pipe, "horizon_s", 0.0),
+                no_return_is_free=free,
+                dwa=DwaParams.from_mapping(filter_tables | dwa_table, profile),
+                assist=AssistParams.from_mapping(filter_tables | assist_table, profile),
+            )
+
+        pipeline = pipeline_config(bool(free_setting))
+        pipeline_if_free = pipeline_config(True) if free_setting is None else None
         rate_hz = args.rate_hz if args.rate_hz is not None else _number(robot, "rate_hz", 20.0)
         if not 1.0 <= rate_hz <= 1000.0:
             raise UsageError("--rate-hz must be within [1, 1000]")
         defaults = ControllerConfig(pipeline)
         return ControllerConfig(
             pipeline=pipeline,
+            pipeline_if_free=pipeline_if_free,
             max_command_age_s=_number(safety, "max_command_age_s", defaults.max_command_age_s),
             max_command_age_filtered_s=_number(
                 safety, "max_command_age_filtered_s", defaults.max_command_age_filtered_s
@@ -327,16 +340,38 @@ def _open_driver(args: argparse.Namespace, cfg: dict[str, Any], session: Any) ->
     )
 
 
+def _check_output_path(option: str, path: str | None) -> None:
+    """A file this run will write: its directory must exist and be writable, so a typo is one
+    line now, not a traceback when the run ends (or a directory made at the root)."""
+    if path is None:
+        return
+    target = Path(path)
+    parent = target.parent
+    if target.is_dir():
+        raise UsageError(f"{option} {path}: is a directory")
+    if not parent.is_dir():
+        raise UsageError(f"{option} {path}: directory {parent} does not exist")
+    existed = target.exists()
+    try:  # the one reliable check (root passes os.access; /proc and read-only mounts do not)
+        with target.open("a", encoding="utf-8"):
+            pass
+    except OSError as exc:
+        raise UsageError(f"{option} {path}: not writable ({exc.strerror})") from None
+    if not existed:
+        target.unlink(missing_ok=True)
+
+
 def _open_recorder(args: argparse.Namespace) -> Recorder | None:
     if args.record is None:
         return None
     from egc_robot.blackbox import BlackBox
 
+    _check_output_path("--record", args.record)
     try:
         recorder: Recorder = BlackBox(
             args.record, args.robot, scan_decimation=args.record_scan_every
         )
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, RuntimeError) as exc:  # rerun's "Failed to create file"
         raise UsageError(f"cannot record to {args.record}: {exc}") from None
     return recorder
 
@@ -359,11 +394,20 @@ def run(args: argparse.Namespace) -> int:
         # DESIGN 11: a zero twist in HOLD; a ROS 2 base brakes at its own limits.
         controller_config = dataclasses.replace(controller_config, hold_ramp=False)
     rate_hz = 1.0 / controller_config.nominal_period_s
+    _check_output_path("--summary", args.summary)
+    recorder = _open_recorder(args)  # a bad path: one line, before any session or driver opens
     session = open_session(options_from_args(args))
+    try:
+        driver = _open_driver(args, cfg, session)
+    except BaseException:
+        # The session's threads would keep the process alive, deaf to SIGTERM: close it.
+        session.close()
+        if recorder is not None:
+            recorder.close()
+        raise
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    driver = _open_driver(args, cfg, session)
     stats = RunStats()
     node = RobotNode(
         session,
@@ -371,7 +415,7 @@ def run(args: argparse.Namespace) -> int:
         RobotController(controller_config, time.monotonic_ns()),
         driver,
         rate_hz,
-        recorder=_open_recorder(args),
+        recorder=recorder,
         stats=stats,
         clock_id=monotonic_clock_id(),
     )
@@ -401,5 +445,10 @@ def run(args: argparse.Namespace) -> int:
         summary["seq_missing"] = missing
         log.info("stopped: %s", json.dumps(summary))
         if args.summary:
-            Path(args.summary).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+            try:
+                Path(args.summary).write_text(
+                    json.dumps(summary, indent=2) + "\n", encoding="utf-8"
+                )
+            except OSError as exc:  # checked at the start; the disk may have filled since
+                log.error("could not write the summary to %s: %s", args.summary, exc)
     return 0

@@ -91,6 +91,9 @@ class ControllerConfig:
     """DESIGN 8 parameters (seconds) around the command pipeline's configuration."""
 
     pipeline: PipelineConfig
+    # The pipeline for scans whose sensor declares "no return is free" (REP 117's +inf), when
+    # the robot's configuration leaves that to the sensor; None: ``pipeline`` for every scan.
+    pipeline_if_free: PipelineConfig | None = None
     max_command_age_s: float = 0.3  # direct mode (DESIGN 8)
     max_command_age_filtered_s: float = 1.0  # shared mode: the filter judges every cycle
     command_timeout_s: float = 0.25
@@ -200,6 +203,7 @@ class _OperatorTrack:
 class _Scan:
     points: ObstaclePoints  # checked when the scan arrives, not on every command
     rx_ns: int
+    no_return_is_free: bool = False  # the sensor's declaration (Scan.no_return_is_free)
 
 
 @dataclass(slots=True)
@@ -417,7 +421,7 @@ class RobotController:
         """The newest scan; its arrival time decides freshness (scan_timeout)."""
         if self._unreported is not None:
             self._report()
-        self._scan = _Scan(scan.obstacles(), now_ns)
+        self._scan = _Scan(scan.obstacles(), now_ns, scan.no_return_is_free)
         self._telemetry_xy = None  # decimated for the telemetry when it is built
 
     def on_odometry(self, odometry: Odometry) -> None:
@@ -530,8 +534,11 @@ class RobotController:
             self._last_drive_ns = self._command_rx_ns  # the gap is timed from this command
             if filter_name != self._memory_filter:
                 self._filter_memory, self._memory_filter = None, filter_name
+            pipeline = cfg.pipeline
+            if scan.no_return_is_free and cfg.pipeline_if_free is not None:
+                pipeline = cfg.pipeline_if_free
             result = step_command(
-                cfg.pipeline,
+                pipeline,
                 cmd.x,
                 cmd.y,
                 cmd.mode,

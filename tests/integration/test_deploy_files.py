@@ -38,6 +38,23 @@ def test_robot_toml_matches_the_defaults():
     assert (c.blind_time_direct_s, c.blind_time_filtered_s) == (0.5, 1.0)
 
 
+def test_no_return_is_free_follows_each_scan_unless_set(tmp_path):
+    """Outside check: `robot --driver sim` read the simulator's lidar (no return = +inf, free)
+    as unknown, so in a room larger than the laser's reach the robot stood still, "EGC
+    stopped"; unset, the setting now follows each scan's own declaration."""
+    args = argparse.Namespace(profile="jackal", filter="egc", rate_hz=None, driver="sim")
+    unset = build_controller_config(args, config_mod.load(None))
+    assert unset.pipeline.no_return_is_free is False
+    assert unset.pipeline_if_free is not None and unset.pipeline_if_free.no_return_is_free
+    assert unset.pipeline_if_free.settings.dwa.no_return_is_free
+    assert unset.pipeline_if_free.settings.assist.no_return_is_free
+    for value in (False, True):
+        forced = build_controller_config(
+            args, config_mod.load(None, [f"pipeline.no_return_is_free={str(value).lower()}"])
+        )
+        assert forced.pipeline.no_return_is_free is value and forced.pipeline_if_free is None
+
+
 def test_robot_config_switches_the_turn_cap_off(tmp_path):
     path = tmp_path / "robot.toml"
     path.write_text("[link]\nlatency_turn_cap = false\n")

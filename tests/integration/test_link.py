@@ -455,3 +455,38 @@ def test_robot_and_operator_as_clients_of_a_router(port, procs, tmp_path):
     finally:
         observer.close()
         router.close()
+
+
+def test_the_in_process_simulator_drives_where_its_laser_sees_nothing(
+    port, procs, observer, tmp_path
+):
+    """Outside check: `robot --driver sim` in a room wider than the laser's 10 m reach stood
+    still for 29 s, "EGC stopped": the simulator's lidar declares no return free (+inf), the
+    robot's setting defaulted to unknown. Unset, the setting follows each scan's declaration."""
+    room = tmp_path / "room.toml"
+    walls = [
+        ((-0.1, -0.1), (24.1, -0.1)),
+        ((-0.1, 24.1), (24.1, 24.1)),
+        ((-0.1, -0.1), (-0.1, 24.1)),
+        ((24.1, -0.1), (24.1, 24.1)),
+    ]
+    room.write_text(
+        'name = "room"\nresolution_m = 0.05\nbounds_m = [-0.2, -0.2, 24.2, 24.2]\n'
+        "start = { x_m = 12.0, y_m = 12.0, yaw_rad = 0.0 }\n"
+        + "".join(
+            f"[[segments]]\nfrom_m = [{a[0]}, {a[1]}]\nto_m = [{b[0]}, {b[1]}]\nthickness_m = 0.2\n"
+            for a, b in walls
+        )
+    )
+    args = robot_args(port, "--map", str(room), "--profile", "jackal")
+    args[args.index("zenoh")] = "sim"
+    procs.start("robot", *args)
+    observer.wait_for("robot telemetry", observer.last_telemetry, 15)
+    observer.start_operator(x=0.0)
+    observer.wait_state("DRIVING", timeout_s=15)
+    observer.stick["x"] = 0.5
+    moving = observer.wait_for(
+        "moving", lambda: next((t for t in observer.telemetry() if t.v_cmd > 0.3), None), 10
+    )
+    assert moving.limiter != "egc"
+    finish(procs, observer)
