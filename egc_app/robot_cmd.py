@@ -35,7 +35,6 @@ import dataclasses
 import gc
 import json
 import logging
-import os
 import math
 import signal
 import threading

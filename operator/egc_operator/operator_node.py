@@ -56,7 +56,7 @@ from egc_common.transport import command_publisher, payload_bytes
 from egc_operator.clock_sync import ClockSync
 from egc_operator.command_source import CommandSource
 from egc_operator.prediction import CommandHistory, SentCommand
-from egc_operator.status_line import Status, StatusLine, status_of
+from egc_operator.status_line import Episode, Status, StatusLine, status_of
 from egc_operator.via_route import Route, RoutePlanner, active_index
 
 log = logging.getLogger("egc.operator")
@@ -68,8 +68,12 @@ VIA_UNTAKEN_NS = 3_000_000_000
 _RELEASE_AFTER_END_NS = 300_000_000
 _CLOCK_TIMEOUT_S = 3.0  # above the round trip of a satellite link (2 x 500 ms + jitter)
 _START_WAIT_NS = 10 * NS_PER_S  # a script starts when the robot is seen, or after this
-_MAP_TIMEOUT_S = 1.0
-_MAP_ATTEMPTS = 10  # a robot that serves no map is asked this often, then left alone
+# The map is one large reply (a 500 x 500 grid is ~30 kB): over a 500 ms +- 100 ms link it
+# takes a round trip of 1.2 s and more, and TCP's slow start adds round trips on top. A
+# 1 s timeout never got it there (issue 12 drives at 500 ms), so allow well above that.
+_MAP_TIMEOUT_S = 6.0
+_MAP_RETRY_S = 1.0  # a query that got no map is repeated after this
+_MAP_ATTEMPTS = 10  # a present robot that serves no map is asked this often, then left alone
 _GOAL_POLL_S = 0.05  # the goal thread looks at the route this often (and at once on a press)
 
 
@@ -148,7 +152,10 @@ class OperatorNode:
         self._state: StateMessage | None = None
         self._robot_alive = False
         self._telemetry_rx_ns: int | None = None  # our clock, when the newest telemetry came
-        self._map_attempts_left = 0 if view is None else _MAP_ATTEMPTS
+        # The robot's current state and reason from telemetry: since when, and its link
+        # figures' peaks (the status line's HOLD and resume texts).
+        self._episode = Episode()
+        self.map_received = False
         self.published = 0
         self._filter_default = filter_default
         self._planner = RoutePlanner(route)
@@ -184,6 +191,7 @@ class OperatorNode:
         with self._lock:
             self._telemetry = t
             self._telemetry_rx_ns = self._clock()
+            self._episode.update(t)
             synced = self._sync.synchronised
             received = self._sync.robot_now(self._clock()) if synced else None
         if self._view is not None:
@@ -204,11 +212,22 @@ class OperatorNode:
     def _on_robot_alive(self, sample: zenoh.Sample) -> None:
         alive = sample.kind == zenoh.SampleKind.PUT
         with self._lock:
+            changed = alive != self._robot_alive
             self._robot_alive = alive
+            if changed:
+                # A robot that went away (or a new one, after a restart or a long outage) says
+                # nothing about the one that is there now: forget its state and figures. The
+                # arrival time stays, for "no telemetry for N s".
+                self._state = None
+                self._telemetry = None
+                self._episode = Episode()
         text = "robot present" if alive else "robot gone (its liveliness token was withdrawn)"
         log.info("%s", text)
         if self._view is not None:
             self._view.on_text("INFO" if alive else "WARN", text)
+            presence = getattr(self._view, "on_robot_presence", None)
+            if presence is not None:  # OperatorView; other views need not have it
+                presence(alive)
 
     # -- clock sync thread --------------------------------------------------------------------
 
@@ -242,35 +261,50 @@ class OperatorNode:
                 if stop.is_set():
                     return
                 log.debug("clock query failed: %s", exc)
-            if self._map_attempts_left > 0 and not stop.is_set():
-                self._map_attempts_left -= 1
-                self._fetch_map()
             with self._lock:
                 synced = self._sync.synchronised
             stop.wait(1.0 if synced else 0.1)
 
-    def _fetch_map(self) -> None:
-        """The robot's static map (``egc/<robot>/map``) for the view's world frame, once."""
+    def _map_loop(self, stop: threading.Event) -> None:
+        """The robot's static map (``egc/<robot>/map``) for the view's world frame, once.
+
+        Its own thread: a query waits up to ``_MAP_TIMEOUT_S`` for a reply that crosses a slow
+        link, and must hold back neither the commands nor the clock sync. Asked again every
+        ``_MAP_RETRY_S`` while none came, counting only the attempts made while the robot is
+        present (a robot that serves no map is left alone after ``_MAP_ATTEMPTS``).
+        """
+        attempts = 0
+        while not stop.is_set() and attempts < _MAP_ATTEMPTS:
+            with self._lock:
+                present = self._robot_alive
+            if present:
+                attempts += 1
+                if self._fetch_map(stop):
+                    return
+            stop.wait(_MAP_RETRY_S)
+
+    def _fetch_map(self, stop: threading.Event) -> bool:
+        """One map query; True once the view has the map."""
         try:
-            replies = list(self._session.get(keys.world_map(self._robot), timeout=_MAP_TIMEOUT_S))
+            replies = self._session.get(keys.world_map(self._robot), timeout=_MAP_TIMEOUT_S)
+            for reply in replies:
+                ok = reply.ok
+                world = None if ok is None else decode_map(payload_bytes(ok))
+                if isinstance(world, Rejection):
+                    log.warning("rejected map from the robot: %s", world)
+                elif world is not None and self._view is not None and not stop.is_set():
+                    self._view.set_world(
+                        world.blocked,
+                        world.resolution_m,
+                        (world.origin_x_m, world.origin_y_m),
+                        world.goal,
+                    )
+                    self.map_received = True
+                    log.info("map %d x %d cells from the robot", *world.blocked.shape)
+                    return True
         except Exception as exc:  # a closing session
             log.debug("map query failed: %s", exc)
-            return
-        for reply in replies:
-            ok = reply.ok
-            world = None if ok is None else decode_map(payload_bytes(ok))
-            if isinstance(world, Rejection):
-                log.warning("rejected map from the robot: %s", world)
-            elif world is not None and self._view is not None:
-                self._view.set_world(
-                    world.blocked,
-                    world.resolution_m,
-                    (world.origin_x_m, world.origin_y_m),
-                    world.goal,
-                )
-                self._map_attempts_left = 0
-                log.info("map %d x %d cells from the robot", *world.blocked.shape)
-                return
+        return False
 
     # -- the publishing loop --------------------------------------------------------------------
 
@@ -284,6 +318,10 @@ class OperatorNode:
             target=self._goal_loop, args=(stop,), name="via-points", daemon=True
         )
         goal_thread.start()
+        if self._view is not None:
+            threading.Thread(
+                target=self._map_loop, args=(stop,), name="world-map", daemon=True
+            ).start()
         pressed = {"next": False, "clear": False}
         opened = self._clock()
         start: int | None = None  # a script's time 0: when the robot is first seen
@@ -423,10 +461,11 @@ class OperatorNode:
             latest = self._sync.latest
             synced = self._sync.synchronised
             rx = self._telemetry_rx_ns
-        now = self._clock()
-        rtt_ms = None if latest is None else latest.rtt_ns / 1e6
-        age_s = None if rx is None else (now - rx) / NS_PER_S
-        status = status_of(command, t, s, rtt_ms, synced, alive, age_s)
+            episode = self._episode
+            now = self._clock()
+            rtt_ms = None if latest is None else latest.rtt_ns / 1e6
+            age_s = None if rx is None else (now - rx) / NS_PER_S
+            status = status_of(command, t, s, rtt_ms, synced, alive, age_s, episode)
         pending = self._route_pending_since_ns
         if (
             pending is not None

@@ -28,6 +28,11 @@ RESUME_WINDOW_S = 2.0
 # Telemetry comes every control cycle (20 Hz and more); older than this, the robot is silent.
 TELEMETRY_STALE_S = 0.5
 MAX_COMMAND_AGE_MS = {"direct": 300, "shared": 1000}
+COMMAND_TIMEOUT_MS = 250.0  # DESIGN 8: a gap shorter than this cannot have tripped the watchdog
+# "ramping up" after a short-gap resume: said this long, and up to RAMP_MAX_S while the robot
+# reports that its acceleration limit acts (the robot keeps the reason while it drives on).
+RAMP_SHOWN_S = 1.5
+RAMP_MAX_S = 3.0
 # Telemetry limiter values that name the filter of DESIGN 6 that changed the command.
 FILTER_LIMITERS = frozenset(name for name in FILTER_NAMES if name != "none")
 # ... and those that mean an obstacle changed it: a filter or the footprint sweep.
@@ -69,6 +74,10 @@ class Status:
     robot_present: bool = True  # its liveliness token is held
     # This operator's via points have gone out for a while and the robot never echoed them.
     via_untaken: bool = False
+    # The robot's current state and reason, from its telemetry (``Episode``): the largest
+    # command gap it reported since they began, and for how long (robot clock) they hold.
+    episode_gap_ms: float | None = None
+    episode_s: float | None = None
 
 
 def _seconds(ms: float) -> str:
@@ -87,18 +96,23 @@ def latency_cap_text(v_lim: float | None, w_lim: float | None) -> str:
 def _hold(s: Status, reason: str) -> str:
     r = reason.lower()
     if r == "command timeout":
-        gap = s.cmd_gap_max_ms if s.cmd_gap_max_ms is not None else s.cmd_age_ms
+        # The gap that tripped the watchdog: the largest the robot reported during this HOLD
+        # (the open gap grows while no command arrives). The window's figure alone drops to the
+        # burst's 0.1 s once queued commands arrive after an outage; a gap below the watchdog's
+        # timeout cannot be the one that tripped it, so no number rather than a wrong one.
+        known = [g for g in (s.episode_gap_ms, s.cmd_gap_max_ms, s.cmd_age_ms) if g is not None]
+        gap = max(known) if known else None
+        if gap is not None and gap < COMMAND_TIMEOUT_MS:
+            gap = None
         what = "link gap" if gap is None else f"link gap (no command for {_seconds(gap)})"
         if gap is not None and gap > RESUME_WINDOW_S * 1000.0:
             return f"HOLD: {what} - centre the stick to drive again"
         return f"HOLD: {what} - keep the stick, it resumes"
     if r == "stale commands":
+        # The robot does not report the age of the commands it rejected, and its age figures
+        # are of the accepted ones (younger than the limit by definition): no number.
         limit = MAX_COMMAND_AGE_MS.get(s.mode)
-        age = s.cmd_age_p50_ms if s.cmd_age_p50_ms is not None else s.cmd_age_ms
-        details = [] if age is None else [f"{age:.0f} ms old"]
-        if limit is not None:
-            details.append(f"limit {limit} ms in {s.mode} mode")
-        why = f" ({', '.join(details)})" if details else ""
+        why = "" if limit is None else f" (older than the limit, {limit} ms in {s.mode} mode)"
         return f"HOLD: commands arrive too late{why} - keep the stick, it resumes"
     if r == "deadman released":
         return "HOLD: deadman released - hold it and centre the stick to drive"
@@ -130,8 +144,10 @@ def _driving(s: Status, reason: str) -> str:
         if limiter == "sweep":
             return "SLOWED: obstacle next to the footprint (sweep check)"
         return f"SLOWED: obstacle ({which})"
-    if "resum" in reason.lower():
-        return "DRIVING: resumed after a link gap, ramping up"
+    if "resum" in reason.lower() and s.episode_s is not None:
+        ramping = s.episode_s < RAMP_SHOWN_S or (s.episode_s < RAMP_MAX_S and limiter == "limits")
+        if ramping:
+            return "DRIVING: resumed after a link gap, ramping up"
     if limiter == "limits":
         return "DRIVING (at the robot's speed/acceleration limits)"
     return "DRIVING"
@@ -141,10 +157,17 @@ def situation(s: Status) -> str:
     """What the robot does and why, in an operator's words (the status line's first part)."""
     state = s.robot_state
     age = s.telemetry_age_s
-    if age is not None and age > TELEMETRY_STALE_S:
-        gone = "robot or link silent" if s.robot_present else "its session ended"
+    if not s.robot_present or (age is not None and age > TELEMETRY_STALE_S):
+        # A withdrawn liveliness token says so at once: the robot's last figures are not its
+        # present ones, however young they are.
+        gone = (
+            "robot or link silent"
+            if s.robot_present
+            else "robot gone: its session ended or the link dropped"
+        )
+        for_age = "" if age is None else f" for {age:.1f} s"
         return (
-            f"NO TELEMETRY for {age:.1f} s ({gone}) - the view is old; the robot stops when "
+            f"NO TELEMETRY{for_age} ({gone}) - the view is old; the robot stops when "
             "your commands stop reaching it"
         )
     if state is None:
@@ -243,6 +266,38 @@ class StatusLine:
             self._stream.flush()
 
 
+class Episode:
+    """The robot's current state and reason as its telemetry says them (not thread-safe).
+
+    Since when (the robot's clock) they hold, and the largest command gap the robot reported
+    since then: the status line's HOLD text names the gap that tripped the watchdog even after
+    the queued commands of an outage came in as a burst, and says "ramping up" only just after
+    a resume (the robot keeps that reason for as long as it drives on).
+    """
+
+    def __init__(self) -> None:
+        self.key: tuple[str, str | None] | None = None
+        self.since_ns = 0
+        self.newest_ns = 0
+        self.gap_ms: float | None = None
+
+    def update(self, t: Telemetry) -> None:
+        if t.stamp_ns < self.newest_ns:
+            return  # an older cycle that came late
+        key = (t.state, t.reason)
+        if key != self.key:
+            self.key, self.since_ns, self.gap_ms = key, t.stamp_ns, None
+        self.newest_ns = t.stamp_ns
+        if t.cmd_gap_max_ms is not None:
+            self.gap_ms = max(self.gap_ms or 0.0, t.cmd_gap_max_ms)
+
+    def of(self, state: str | None, reason: str | None) -> tuple[float | None, float | None]:
+        """(largest gap ms, seconds) of this episode if it is ``state``/``reason``, else Nones."""
+        if self.key is None or self.key != (state, reason):
+            return None, None
+        return self.gap_ms, (self.newest_ns - self.since_ns) / 1e9
+
+
 def status_of(
     command: OperatorCommand,
     telemetry: Telemetry | None,
@@ -251,22 +306,35 @@ def status_of(
     synchronised: bool,
     robot_alive: bool = True,
     telemetry_age_s: float | None = None,
+    episode: Episode | None = None,
 ) -> Status:
-    """The status line's inputs from the newest messages (robot gone: no state shown; telemetry
-    older than TELEMETRY_STALE_S: none of its figures, and nothing said about control)."""
+    """The status line's inputs from the newest messages (robot gone: none of its state, figures
+    or round trip; telemetry older than TELEMETRY_STALE_S: none of its figures, and nothing
+    said about control). Telemetry newer than the state message (sent on change and at 1 Hz)
+    says the state and reason."""
     stale = telemetry_age_s is not None and telemetry_age_s > TELEMETRY_STALE_S
-    t = None if stale else telemetry
+    t = None if stale or not robot_alive else telemetry
     s = state if robot_alive and not stale else None
+    robot_state = None if s is None else s.state
+    reason = None if s is None else s.reason
+    controller = None if s is None else s.operator
+    rejected = None if s is None else s.rejected
+    if t is not None and t.reason is not None and (s is None or t.stamp_ns > s.stamp_ns):
+        robot_state, reason = t.state, t.reason
+        if s is None:
+            controller, rejected = t.operator, t.rejected
+    in_control = None if robot_state is None else controller == command.op
+    gap_ms, episode_s = (None, None) if episode is None else episode.of(robot_state, reason)
     return Status(
-        rtt_ms=rtt_ms,
+        rtt_ms=rtt_ms if robot_alive else None,
         synchronised=synchronised,
-        robot_state=None if s is None else s.state,
-        reason=None if s is None else s.reason,
+        robot_state=robot_state,
+        reason=reason,
         w_si=None if t is None else t.w_si,
-        rejected=None if s is None else s.rejected,
+        rejected=rejected,
         mode=command.mode,
         deadman=command.deadman,
-        in_control=None if s is None else s.operator == command.op,
+        in_control=in_control,
         limiter=None if t is None else t.limiter,
         filter=None if t is None else t.filter or None,
         v_lim_latency=None if t is None else t.v_lim_latency,
@@ -282,8 +350,10 @@ def status_of(
         goals_left=0 if t is None else t.goals_left,
         held_still=t is not None and held_still(t),
         telemetry_age_s=telemetry_age_s,
-        controller=None if s is None else s.operator,
+        controller=controller,
         robot_present=robot_alive,
+        episode_gap_ms=gap_ms,
+        episode_s=episode_s,
     )
 
 

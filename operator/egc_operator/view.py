@@ -62,16 +62,19 @@ from egc_operator.view_scene import (
     ROBOT_TO_SCREEN,
     SCAN_INK,
     SENT_RED,
+    STALE_GREY,
     TRAJECTORY_TEAL,
     VIA_ORANGE,
     WORLD_TO_SCREEN,
     footprint_half_size,
     ghost_scene,
+    is_stale,
     link_text,
     map_image,
     pose_moved,
     profile_named,
     robot_frame_scene,
+    stale_texts,
     status_changes,
     suggested_vector,
     time_series,
@@ -248,6 +251,12 @@ class OperatorView:
         self._route_frame: str | None = None
         self._via_key: object = None  # what the via points were last drawn from
         self._suggested_drawn = False
+        # Staleness (DESIGN 9): no ghost and no link figures from telemetry that is not the
+        # robot now. ``clock`` is this process's monotonic clock (a test's fake).
+        self.clock = time.monotonic_ns
+        self._rx_ns: int | None = None  # when the newest telemetry arrived (``clock``)
+        self._present = True  # the robot's liveliness token (``on_robot_presence``)
+        self._stale_drawn: tuple[str, str] | None = None  # the stale texts last drawn
         if recording is not None:
             self._log_static(recording)
 
@@ -265,6 +274,8 @@ class OperatorView:
                 return
             if received_ns is not None and received_ns > 0:
                 self._downlink_ms.append((received_ns - t.stamp_ns) / 1e6)
+            self._rx_ns = self.clock()
+            self._stale_drawn = None
             _set_time(rec, t.stamp_ns, t.cycle)
             self._log_robot_frame(rec, t)
             for name, value in time_series(t).items():
@@ -322,11 +333,31 @@ class OperatorView:
             rec.log(paths.LINK_RTT, rr.Scalars(float(rtt_ms)))
             self._log_pending_text(rec)
 
+    def on_robot_presence(self, present: bool) -> None:
+        """The robot's liveliness token came or went (the operator node's liveliness
+        subscriber). Gone: the view says so at once, and draws no ghost and no link figures
+        from its last telemetry. Back (a restart, or after a long outage): the old robot's
+        telemetry is forgotten."""
+        with self._lock:
+            if present == self._present:
+                return
+            self._present = present
+            self._last = None
+            self._trajectory_end = None
+            self._downlink_ms.clear()
+            self._rejected_seen = 0
+            rec = self._rec
+            now = self._robot_now()
+            if rec is not None and not present and now is not None:
+                self._log_stale(rec, now)
+
     def on_commands(self, history: CommandHistory, robot_now_ns: int) -> None:
         """The operator sent a command at ``robot_now_ns`` (robot clock): redraw the ghost.
 
         ``history`` holds the commands sent, newest last; it is read during the call only. The
-        ghost and the link figures are redrawn at most every ``PREDICTION_PERIOD_NS``.
+        ghost and the link figures are redrawn at most every ``PREDICTION_PERIOD_NS``. While
+        the telemetry is stale (``view_scene.is_stale``) there is no ghost, and the view says
+        how old it is instead of the link figures.
         """
         with self._lock:
             rec = self._rec
@@ -336,6 +367,9 @@ class OperatorView:
             if last is not None and 0 <= robot_now_ns - last < PREDICTION_PERIOD_NS:
                 return
             self._predicted_ns = robot_now_ns
+            if is_stale(self._telemetry_age_s(), self._present):
+                self._log_stale(rec, robot_now_ns)
+                return
             t = self._last
             prediction = None
             uplink_ms = None
@@ -415,6 +449,27 @@ class OperatorView:
             rec.disconnect()
 
     # -- internals -------------------------------------------------------------------------------
+
+    def _telemetry_age_s(self) -> float | None:
+        return None if self._rx_ns is None else (self.clock() - self._rx_ns) / 1e9
+
+    def _log_stale(self, rec: rr.RecordingStream, robot_now_ns: int) -> None:
+        """No telemetry from the robot now: clear the ghost, say so in the robot frame and the
+        link panel (at the robot's time now, after its last telemetry)."""
+        texts = stale_texts(self._telemetry_age_s(), self._present)
+        if texts == self._stale_drawn and not self._ghost_drawn:
+            return
+        _set_time(rec, robot_now_ns, self._cycle)
+        self._log_prediction(rec, None, None)
+        if texts != self._stale_drawn:
+            status, panel = texts
+            anchor = (-0.5, 0.0)
+            rec.log(
+                paths.STATUS,
+                rr.Points2D([anchor], colors=_colour_array(STALE_GREY), labels=[status]),
+            )
+            rec.log(paths.LINK_TEXT, rr.TextDocument(panel))
+            self._stale_drawn = texts
 
     @property
     def _cycle(self) -> int:

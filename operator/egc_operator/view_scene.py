@@ -26,7 +26,7 @@ from egc_common.messages import Circle, Telemetry
 from egc_common.profiles import PROFILES, RobotProfile
 
 from egc_operator.prediction import Prediction
-from egc_operator.status_line import held_still, latency_cap_text
+from egc_operator.status_line import TELEMETRY_STALE_S, held_still, latency_cap_text
 from egc_operator.via_route import Route, active_index
 
 F32 = npt.NDArray[np.float32]
@@ -463,6 +463,38 @@ def _ms(value: float | None, approx: bool = False) -> str:
     if value is None:
         return "--"
     return f"{'~' if approx else ''}{value:.0f} ms"
+
+
+STALE_GREY = (120, 120, 120)
+
+
+def is_stale(telemetry_age_s: float | None, robot_present: bool) -> bool:
+    """The newest telemetry is not the robot now: its liveliness token is gone, or nothing
+    came for longer than ``TELEMETRY_STALE_S`` (a few telemetry periods)."""
+    return not robot_present or (
+        telemetry_age_s is not None and telemetry_age_s > TELEMETRY_STALE_S
+    )
+
+
+def stale_texts(telemetry_age_s: float | None, robot_present: bool) -> tuple[str, str]:
+    """(robot-frame status, link panel) while the telemetry is stale: no prediction and no
+    link figures are shown from it (DESIGN 9: never a prediction as if it were a measurement),
+    only how old the view is."""
+    why = (
+        "robot or link silent"
+        if robot_present
+        else "robot gone: its session ended or the link dropped"
+    )
+    age = "" if telemetry_age_s is None else f" for {telemetry_age_s:.1f} s"
+    head = f"NO TELEMETRY{age} ({why})"
+    old = "" if telemetry_age_s is None else f" ({telemetry_age_s:.1f} s old)"
+    status = f"{head} · the view shows the robot's last telemetry{old}, not the robot now"
+    panel = (
+        f"{head}\n"
+        f"link figures: none current (the last ones{old} are not shown)\n"
+        "ghost: none (no fresh telemetry to predict from)"
+    )
+    return status, panel
 
 
 def link_text(
