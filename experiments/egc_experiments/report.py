@@ -397,8 +397,8 @@ def _figure(
     fig.suptitle(title)
     # Room under the axes for the legend's rows (about 0.2 in each at 8 pt), so that it does not
     # cover the x axis's label.
-    rows = math.ceil(len(handles) / 2)
-    bottom = min(0.5, (0.15 + 0.2 * rows) / fig.get_figheight()) if handles else 0.02
+    legend_rows = math.ceil(len(handles) / 2)
+    bottom = min(0.5, (0.15 + 0.2 * legend_rows) / fig.get_figheight()) if handles else 0.02
     fig.tight_layout(rect=(0, bottom, 1, 0.97))
     tmp = path.with_name(path.stem + ".tmp.png")
     fig.savefig(tmp, dpi=100)
