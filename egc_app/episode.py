@@ -43,7 +43,7 @@ The batch form runs episodes in parallel worker processes (``--jobs``, default: 
 shows a progress bar on stderr and writes one JSON object per line to ``--out`` (or stdout), in
 input order. A suite file holds one JSON object per line with the single-episode options as
 keys: ``map`` (required), ``start`` ([x, y, yaw]), ``goal`` ([x, y]), ``operator``, ``filter``,
-``profile``, ``max_time``, ``goal_tolerance``, ``seed``, ``dt``, ``stall_time``; missing keys
+``profile``, ``max_time``, ``goal_tolerance``, ``seed``, ``dt``, ``stall_time``, ``via``; missing keys
 take the command line's values. ``--random-worlds N`` runs ``random:SEED`` for N seeds from
 ``--seed`` on.
 """
@@ -74,7 +74,7 @@ from egc_robot.pipeline import (
     PipelineResult,
     step_command,
 )
-from egc_robot.safety import decelerate
+from egc_robot.safety import MAX_CONTROL_PERIOD_S, SweepParams, decelerate
 from egc_robot.via_points import DEFAULT_TOLERANCE_M, ViaPoints, advance, to_robot_frame
 from egc_sim.episodes import ControlOutput, EpisodeResult, TraceRow, run_episode
 from egc_sim.grid_world import World
@@ -97,6 +97,7 @@ SUITE_KEYS = {
     "seed",
     "dt",
     "stall_time",
+    "via",
 }
 
 
@@ -216,7 +217,15 @@ def run_settings(
     tolerance = settings.goal_tolerance_m or world.goal_tolerance_m or DEFAULT_GOAL_TOLERANCE_M
     mode = "direct" if settings.filter == "none" else "shared"
     # The simulated lidar declares "no return" as free: within its range it truly is.
-    config = PipelineConfig(profile, filter=settings.filter, no_return_is_free=True)
+    if settings.dt_s > MAX_CONTROL_PERIOD_S:  # the base would lag beyond the sweep's margin
+        raise UsageError(f"--dt must be at most {MAX_CONTROL_PERIOD_S:g} s, got {settings.dt_s:g}")
+    # The sweep's one period at the command before braking is the control period (--dt).
+    config = PipelineConfig(
+        profile,
+        filter=settings.filter,
+        no_return_is_free=True,
+        sweep=SweepParams(period_s=settings.dt_s),
+    )
     try:
         via = episode_via_points(settings.via, world, start, goal, 0.5 * profile.width_m)
         sim = Simulator(world, profile, start, seed=settings.seed)

@@ -63,6 +63,7 @@ from egc_robot.filters.dwa import DwaParams
 from egc_robot.pipeline import FILTERS, PipelineConfig
 from egc_robot.ros2_core import CMD_TYPES, ROS2_KEYS, Ros2Settings, ros2_settings
 from egc_robot.run_stats import RunStats
+from egc_robot.safety import MAX_CONTROL_PERIOD_S, SweepParams
 from egc_robot.zenoh_node import Recorder, RobotNode
 
 log = logging.getLogger("egc.robot")
@@ -237,15 +238,21 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
                 filter=args.filter,
                 horizon_s=None if horizon is None else _number(pipe, "horizon_s", 0.0),
                 no_return_is_free=free,
+                # The sweep's one period at the command before braking: the loop's period
+                # (cycles also run on each command and scan, never further apart than this).
+                sweep=SweepParams(period_s=1.0 / rate_hz),
                 dwa=DwaParams.from_mapping(filter_tables | dwa_table, profile),
                 assist=AssistParams.from_mapping(filter_tables | assist_table, profile),
             )
 
+        rate_hz = args.rate_hz if args.rate_hz is not None else _number(robot, "rate_hz", 20.0)
+        if not 1.0 / MAX_CONTROL_PERIOD_S <= rate_hz <= 1000.0:
+            # Slower, the base lags its commands by more than the footprint sweep's margin.
+            raise UsageError(
+                f"--rate-hz must be within [{1.0 / MAX_CONTROL_PERIOD_S:g}, 1000], got {rate_hz:g}"
+            )
         pipeline = pipeline_config(bool(free_setting))
         pipeline_if_free = pipeline_config(True) if free_setting is None else None
-        rate_hz = args.rate_hz if args.rate_hz is not None else _number(robot, "rate_hz", 20.0)
-        if not 1.0 <= rate_hz <= 1000.0:
-            raise UsageError("--rate-hz must be within [1, 1000]")
         defaults = ControllerConfig(pipeline)
         return ControllerConfig(
             pipeline=pipeline,
