@@ -51,8 +51,11 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import re
 import socket
+import subprocess
+import sys
 import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -257,10 +260,61 @@ def _tcp_first(links: tuple[str, ...]) -> tuple[str, ...]:
     return (f"{locator}#{config_part}", udp)
 
 
-def _one_line(exc: BaseException) -> str:
-    """Zenoh's error text without its source locations, on one line."""
+def _one_line(exc: BaseException | str) -> str:
+    """Zenoh's error text without its source locations and internal endpoint wrappers, on one
+    line: ``Unable to connect to any of [Single(tls/h:1#exit_on_failure=true)]!`` reads
+    ``Unable to connect to any of tls/h:1``."""
     text = re.sub(r"\s+at \S+\.rs:\d+\.?", "", str(exc))
+    text = re.sub(r"#[^,\]\s)]*", "", text)  # an endpoint's configuration part
+    text = re.sub(r"\[((?:Single\([^)]*\)(?:, )?)+)\]!?", _endpoint_list, text)
     return " ".join(text.split()) or type(exc).__name__
+
+
+def _endpoint_list(match: re.Match[str]) -> str:
+    return ", ".join(re.findall(r"Single\(([^)]*)\)", match.group(1)))
+
+
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+# "Can not create a new TLS link bound to IpAddress(...): " / "... TCP link bound to
+# tcp/h:1: [h:1: ": Zenoh's framing around the cause.
+_LINK_PREFIX = re.compile(
+    r"^Can not create a new \S+ link bound to [^:]*(?::\d+)?: \[?(?:\S+:\d+: )?"
+)
+_REASON_PROBE = """import sys, zenoh
+zenoh.init_log_from_env_or("warn")
+try:
+    zenoh.open(zenoh.Config.from_json5(sys.stdin.read())).close()
+except Exception:
+    pass
+"""
+
+
+def zenoh_reason(config: zenoh.Config, timeout_s: float = 10.0) -> str | None:
+    """Why Zenoh could not connect, in its own words, or None.
+
+    Zenoh keeps the cause of a failed connection (a TLS certificate not valid for the name
+    connected to, an expired one, a refused connection) in its log, not in the error it raises,
+    and its log goes to stdout once turned on, where it would mix with a process's own output.
+    So the same configuration is opened once more in a child process with Zenoh's log at warn
+    level, and the first "Unable to connect to X! reason" line is returned as "X: reason".
+    """
+    try:
+        probe = subprocess.run(
+            [sys.executable, "-c", _REASON_PROBE],
+            input=str(config),
+            capture_output=True,
+            text=True,
+            timeout=timeout_s,
+            env={k: v for k, v in os.environ.items() if k != "RUST_LOG"},
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    for line in _ANSI.sub("", probe.stdout).splitlines():
+        found = re.search(r"Unable to connect to (?!any of)(\S+)! (.+)", line)
+        if found:
+            reason = _LINK_PREFIX.sub("", _one_line(found.group(2))).strip("[]. ")
+            return f"{_one_line(found.group(1))}: {reason}"
+    return None
 
 
 _OPEN_NOTICE_S = 2.0
@@ -289,18 +343,22 @@ def open_config(config: zenoh.Config) -> zenoh.Session:
         try:
             endpoints = json.loads(config.get_json("connect/endpoints"))
             peers = ", ".join(str(e).partition("#")[0] for e in endpoints) or "?"
+            udp_pair = "exit_on_failure=true" in str(endpoints)
         except Exception:
-            peers = "?"
+            peers, udp_pair = "?", False
         logging.getLogger("egc.transport").warning(
-            "waiting for the peer to accept at %s (a udp/ endpoint opens on TCP first; is the "
-            "other side up?); Ctrl-C to stop",
+            "waiting for the peer to accept at %s (%sis the other side up?); Ctrl-C to stop",
             peers,
+            "a udp/ endpoint opens on TCP first; " if udp_pair else "",
         )
         while opener.is_alive():
             opener.join(0.1)
     outcome = result[0]
     if isinstance(outcome, BaseException):
-        raise UsageError(f"cannot open zenoh session: {_one_line(outcome)}") from None
+        message = f"cannot open zenoh session: {_one_line(outcome)}"
+        if "Unable to connect" in message and (reason := zenoh_reason(config)) is not None:
+            message += f" ({reason})"
+        raise UsageError(message) from None
     return outcome
 
 
