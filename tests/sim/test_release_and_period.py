@@ -116,5 +116,5 @@ def test_a_longer_control_period_is_swept_as_such(filter_name, seed):
 
 def test_a_control_period_beyond_what_the_sweep_holds_for_is_refused():
     settings = EpisodeSettings(map="random:1", dt_s=0.2)
-    with pytest.raises(UsageError, match="--dt must be at most 0.1 s"):
+    with pytest.raises(UsageError, match=r"--dt must be at most 0\.1 s"):
         run_settings(settings)
