@@ -145,6 +145,10 @@ class RobotNode:
                 keys.alive_operators(robot_id), self._on_liveliness, history=True
             ),
         ]
+        self._transports: set[str] = set()
+        listen = getattr(session.info, "declare_transport_events_listener", None)
+        if listen is not None:  # recent Zenoh 1.x; without it, no such lines in the log
+            self._entities.append(listen(self._on_transport, history=True))
         attach = getattr(driver, "set_scan_listener", None)
         if callable(attach):
             attach(self._on_fresh_scan)
@@ -233,6 +237,32 @@ class RobotNode:
                 operator_id,
                 "alive" if alive else "lost",
                 f" (+{held} more liveliness changes since the last line)" if held else "",
+            )
+
+    def _on_transport(self, event: zenoh.TransportEvent) -> None:
+        """A Zenoh connection to a router or peer opened or closed: the robot's log says so, so
+        that "operators lost" after a router went down has its cause next to it."""
+        try:
+            transport = event.transport
+            name = f"{str(transport.whatami).lower().rsplit('.', 1)[-1]} {str(transport.zid)[:8]}"
+            opened = event.kind == zenoh.SampleKind.PUT
+        except Exception as exc:  # never out of a Zenoh callback
+            log.debug("transport event not understood: %s", exc)
+            return
+        with self._lock:
+            known = name in self._transports
+            if opened:
+                self._transports.add(name)
+            else:
+                self._transports.discard(name)
+            left = len(self._transports)
+        if opened and not known:
+            log.info("Zenoh connection to %s open", name)
+        elif not opened and known:
+            log.warning(
+                "Zenoh connection to %s closed%s",
+                name,
+                "; no Zenoh connection left: no operator can reach this robot" if not left else "",
             )
 
     def _on_clock_query(self, query: zenoh.Query) -> None:

@@ -93,3 +93,27 @@ def test_port_in_use_and_bad_config_are_one_line_and_exit_2(port, procs, tmp_pat
     assert wrong.returncode == 2
     assert wrong.stderr.count("\n") == 1 and "invalid zenoh config" in wrong.stderr
     assert procs.stop("router") == 0
+
+
+def test_the_robot_log_says_when_its_router_goes_and_comes_back(port, procs):
+    """Outside check: a router that went down showed in the robot's log only as "operator ...
+    lost", then HOLD and IDLE, with no word of the cause; nor did its return."""
+    start_router(procs, f"tcp/127.0.0.1:{port}")
+    client = ["--zenoh-mode", "client", "--connect", f"tcp/127.0.0.1:{port}"]
+    procs.start("robot", "robot", "--robot", ROBOT, "--driver", "zenoh", *client)
+    deadline = time.monotonic() + 20
+    while "Zenoh connection to router" not in procs.log("robot"):
+        assert time.monotonic() < deadline, procs.log("robot")
+        time.sleep(0.05)
+    assert "open" in procs.log("robot")
+    assert procs.stop("router") == 0
+    deadline = time.monotonic() + 15
+    while "no Zenoh connection left" not in procs.log("robot"):
+        assert time.monotonic() < deadline, procs.log("robot")
+        time.sleep(0.05)
+    start_router(procs, f"tcp/127.0.0.1:{port}")
+    deadline = time.monotonic() + 30  # the client retries with a growing period
+    while procs.log("robot").count("Zenoh connection to router") < 3:
+        assert time.monotonic() < deadline, procs.log("robot")
+        time.sleep(0.05)
+    assert procs.alive("robot") and procs.stop("robot") == 0, procs.log("robot")
