@@ -12,7 +12,6 @@ none of them has a copy of it. Watchdog, staleness and e-stop are the state mach
 from __future__ import annotations
 
 import enum
-import math
 from dataclasses import dataclass, field
 
 import numpy.typing as npt
@@ -73,6 +72,11 @@ INTERVENING = (Limiter.EGC, Limiter.EK_EGC, Limiter.ASSIST, Limiter.DWA, Limiter
 INTERVENING_NAMES = tuple(limiter.value for limiter in INTERVENING)
 
 
+# The longest prediction horizon kT accepted (s): r_max / v_max is a few seconds on every
+# profile; beyond a minute the predicted point leaves any map.
+MAX_HORIZON_S = 60.0
+
+
 @dataclass(frozen=True, slots=True)
 class PipelineConfig:
     profile: RobotProfile
@@ -89,10 +93,9 @@ class PipelineConfig:
     def __post_init__(self) -> None:
         if self.filter not in FILTERS:
             raise ValueError(f"unknown filter {self.filter!r} (known: {', '.join(FILTERS)})")
-        if self.horizon_s is not None and not (
-            math.isfinite(self.horizon_s) and self.horizon_s > 0
-        ):
-            raise ValueError("horizon must be a positive number of seconds")
+        if self.horizon_s is not None and not 0.0 < self.horizon_s <= MAX_HORIZON_S:
+            # also false for NaN; 1e300 overflowed the prediction and passed every command
+            raise ValueError(f"horizon must be a number of seconds in (0, {MAX_HORIZON_S:g}]")
         p = self.profile
         params = EgcParams.from_profile(p.r_min_m, p.r_max_m, p.v_max_mps, self.horizon_s)
         if self.no_return_is_free:

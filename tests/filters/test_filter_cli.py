@@ -135,3 +135,17 @@ def test_bad_arguments_exit_2_with_one_line():
         timeout=60,
     )
     assert proc.returncode == 2 and "horizon" in proc.stderr
+
+
+@pytest.mark.parametrize("horizon", ["1e300", "61", "nan", "inf", "0"])
+def test_a_horizon_beyond_a_minute_is_refused(horizon):
+    """Outside check: --horizon 1e300 was accepted; numpy overflowed and every command came out
+    'clear', the filter bypassed."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "egc_app", "filter", "--horizon", horizon],
+        input='{"v": 0.1, "w": 0.0, "points": [[0.5, 0.0]]}\n',
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 2 and "horizon must be" in proc.stderr and not proc.stdout
