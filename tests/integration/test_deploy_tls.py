@@ -75,7 +75,10 @@ def openssl(cwd: Path, *args: str) -> None:
 
 
 def make_pki(cwd: Path, ca_cn: str, cns: tuple[str, ...]) -> Path:
-    """deploy/README.md's commands (rsa:2048 for speed): ``ca.pem`` signs ``<cn>.pem``."""
+    """deploy/README.md's commands (rsa:2048 for speed): ``ca.pem`` signs ``<cn>.pem``; the
+    router's certificate names the host the clients dial (``localhost`` here) as its
+    subjectAltName, the clients' say they are clients (an X.509 v3 extension: without one
+    ``openssl x509 -req`` makes a version 1 certificate, which rustls refuses)."""
     cwd.mkdir(parents=True, exist_ok=True)
     openssl(
         cwd,
@@ -83,11 +86,11 @@ def make_pki(cwd: Path, ca_cn: str, cns: tuple[str, ...]) -> Path:
         *("-subj", f"/CN={ca_cn}", "-keyout", "ca-key.pem", "-out", "ca.pem"),
     )
     for cn in cns:
+        ext = "subjectAltName=DNS:localhost" if cn == "router" else "extendedKeyUsage=clientAuth"
         openssl(
             cwd,
             *("req", "-newkey", "rsa:2048", "-nodes", "-subj", f"/CN={cn}"),
-            *("-keyout", f"{cn}-key.pem", "-out", f"{cn}.csr"),
-            *("-addext", "subjectAltName=DNS:localhost"),
+            *("-keyout", f"{cn}-key.pem", "-out", f"{cn}.csr", "-addext", ext),
         )
         openssl(
             cwd,
@@ -487,3 +490,75 @@ def test_no_session_without_a_certificate_of_the_project_ca(pki, port, router, t
             pytest.fail(f"{what}: a session opened")
     # Positive control: the same file with the project's certificate connects.
     zenoh.open(zenoh.Config.from_file(str(ok))).close()
+
+
+class Tokens:
+    """One session's liveliness subscriber on ``key`` (with history): the token keys it holds
+    as alive now, and every key it ever saw declared."""
+
+    def __init__(self, session: zenoh.Session, key: str) -> None:
+        self._lock = threading.Lock()
+        self.alive: set[str] = set()
+        self.seen: set[str] = set()
+        self._sub = session.liveliness().declare_subscriber(key, self._on, history=True)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        with self._lock:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self.alive.add(key)
+                self.seen.add(key)
+            else:
+                self.alive.discard(key)
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+def test_each_role_declares_only_its_own_liveliness_tokens(pki, port, router, tmp_path):
+    """Outside check: a robot certificate declared egc/robot-1/alive/operator/op-robot-1 and
+    the router passed it on (robot-watch-operators allowed liveliness_token ingress on every
+    operator key); by the same rule an operator certificate could declare a robot's token.
+    Forged tokens declared before the watchers subscribe (their history) and after (live)
+    reach no one; the real ones (the positive control) do."""
+    robot_cfg = client_config("robot-tls.json5", pki, port, tmp_path / "robot-tls.json5")
+    op_cfg = operator_config(pki, port, tmp_path / "operator-tls.json5")
+    robot_forger, op_forger = open_client(robot_cfg), open_client(op_cfg)
+    robot_side, op_side = open_client(robot_cfg), open_client(op_cfg)
+    sessions = [robot_forger, op_forger, robot_side, op_side]
+    watchers: list[Tokens] = []
+    tokens: list[Any] = []
+    early_op, late_op = (
+        keys.alive_operator(ROBOT, "op-early"),
+        keys.alive_operator(ROBOT, "op-late"),
+    )
+    robot_token = keys.alive_robot(ROBOT)
+    try:
+        # Forged before anyone watches: a robot certificate's operator token, an operator
+        # certificate's robot token.
+        tokens.append(robot_forger.liveliness().declare_token(early_op))
+        tokens.append(op_forger.liveliness().declare_token(robot_token))
+        time.sleep(0.5)
+        # What the robot process and the operator process watch (egc_robot.zenoh_node,
+        # egc_operator.operator_node).
+        on_robot = Tokens(robot_side, keys.alive_operators(ROBOT))
+        on_operator = Tokens(op_side, robot_token)
+        watchers += [on_robot, on_operator]
+        time.sleep(0.5)
+        tokens.append(robot_forger.liveliness().declare_token(late_op))  # forged, live
+        # Positive control: each role's own tokens, through the same router.
+        real_op = keys.alive_operator(ROBOT, "op-real")
+        tokens.append(op_forger.liveliness().declare_token(real_op))
+        wait_until("the operator's token at the robot", lambda: real_op in on_robot.alive, 5)
+        assert not on_operator.seen, "an operator certificate declared the robot's token"
+        tokens.append(robot_forger.liveliness().declare_token(robot_token))
+        wait_until("the robot's token at the operator", lambda: robot_token in on_operator.alive, 5)
+        time.sleep(0.3)
+        assert on_robot.seen == {real_op}, "a robot certificate declared an operator's token"
+    finally:
+        for token in tokens:
+            token.undeclare()
+        for watcher in watchers:
+            watcher.close()
+        for session in sessions:
+            session.close()
