@@ -320,9 +320,9 @@ def status_of(
     controller = None if s is None else s.operator
     rejected = None if s is None else s.rejected
     if t is not None and t.reason is not None and (s is None or t.stamp_ns > s.stamp_ns):
-        robot_state, reason = t.state, t.reason
+        robot_state, reason, controller = t.state, t.reason, t.operator
         if s is None:
-            controller, rejected = t.operator, t.rejected
+            rejected = t.rejected
     in_control = None if robot_state is None else controller == command.op
     gap_ms, episode_s = (None, None) if episode is None else episode.of(robot_state, reason)
     return Status(

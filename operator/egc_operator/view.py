@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import rerun as rr
+from egc_common.errors import UsageError
 from egc_common.messages import StateMessage, Telemetry
 
 from egc_operator import view_blueprint as paths
@@ -80,9 +81,21 @@ from egc_operator.view_scene import (
     time_series,
     via_scene,
 )
-from egc_operator.viewer_target import ViewerTarget, attach, choose_target
+from egc_operator.viewer_target import (
+    ViewerTarget,
+    attach,
+    check_target,
+    choose_target,
+    default_save_path,
+    reachable,
+    viewer_address,
+)
 
 TRAJECTORY_STEP_M = 0.02
+VIEWER_PROBE_S = 2.0  # how often a streamed view checks that its viewer is still there
+# Recording streams whose viewer never came: kept until the process exits, as dropping one
+# waits 5 s for a last connection attempt.
+_ABANDONED: list[rr.RecordingStream] = []
 MAX_PENDING_TEXT = 100  # text events kept while the robot's clock is unknown (oldest dropped)
 THIN_LINE = rr.Radius.ui_points(1.0)
 THICK_LINE = rr.Radius.ui_points(2.0)
@@ -167,8 +180,12 @@ def open_view(
     """The operator view at the target chosen by ``add_view_arguments``' options.
 
     Prints one line on stderr saying where the view is. Raises ``UsageError`` for a bad
-    combination of options or a malformed URL (the CLI turns it into exit code 2).
+    combination of options, a malformed URL, a file that cannot be written or a web port in use
+    (the CLI turns it into exit code 2), before anything is opened. A viewer that cannot be
+    reached is no error (driving does not need it): the view warns on stderr, once; a spawned
+    viewer that did not start (no usable display) is replaced by the default .rrd file.
     """
+    stamp = time.strftime("%Y%m%d-%H%M%S")
     target = choose_target(
         save=args.save,
         connect=args.connect,
@@ -176,10 +193,23 @@ def open_view(
         no_view=args.no_view,
         env=os.environ,
         robot_id=robot_id,
-        stamp=time.strftime("%Y%m%d-%H%M%S"),
+        stamp=stamp,
     )
+    check_target(target)
     view = _open(target, robot_id, application_id, recording_name)
+    address = viewer_address(target)
+    if target.kind == "spawn" and address is not None:
+        why = reachable(address)
+        if why is not None:
+            view.abandon()
+            fallback = ViewerTarget("save", path=default_save_path(robot_id, stamp))
+            check_target(fallback)
+            view = _open(fallback, robot_id, application_id, recording_name)
+            view.where = f"the spawned viewer did not start ({why}); {view.where}"
+            address = None
     print(f"egc-teleop: {view.where}", file=sys.stderr)
+    if address is not None:
+        view.watch_viewer(address, target.url or f"127.0.0.1:{address[1]}")
     return view
 
 
@@ -216,7 +246,11 @@ def _open(
         return OperatorView(None, robot_id, where="operator view disabled (--no-view)")
     batcher = FILE_BATCHER if target.kind == "save" else None
     rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4(), batcher_config=batcher)
-    where = attach(rec, target, operator_blueprint(robot_id, world_bounds_m=world_bounds_m))
+    try:
+        where = attach(rec, target, operator_blueprint(robot_id, world_bounds_m=world_bounds_m))
+    except (RuntimeError, OSError) as exc:  # e.g. the file or port was taken since the check
+        option = {"save": "--save", "serve_web": "--serve-web", "connect": "--connect"}
+        raise UsageError(f"{option.get(target.kind, 'view')}: {exc}") from None
     rec.send_recording_name(recording_name or f"{robot_id}: operator view")
     return OperatorView(rec, robot_id, where=where)
 
@@ -257,6 +291,8 @@ class OperatorView:
         self._rx_ns: int | None = None  # when the newest telemetry arrived (``clock``)
         self._present = True  # the robot's liveliness token (``on_robot_presence``)
         self._stale_drawn: tuple[str, str] | None = None  # the stale texts last drawn
+        self._viewer_missing: str | None = None  # why the viewer cannot be reached, if not
+        self._watch_stop = threading.Event()
         if recording is not None:
             self._log_static(recording)
 
@@ -342,7 +378,8 @@ class OperatorView:
             if present == self._present:
                 return
             self._present = present
-            self._last = None
+            if present:  # a new robot (or one back from a long outage): its own telemetry
+                self._last = None
             self._trajectory_end = None
             self._downlink_ms.clear()
             self._rejected_seen = 0
@@ -440,13 +477,55 @@ class OperatorView:
 
         Text events still waiting for a robot time (no robot was ever heard) go at time 0.
         """
+        self._watch_stop.set()
         with self._lock:
             rec, self._rec = self._rec, None
             if rec is not None:
                 self._log_pending_text(rec, at_ns=self._robot_now() or 0)
-        if rec is not None:
-            rec.flush()
+        if rec is None:
+            return
+        # A viewer that went away must not end the run with a traceback: the driving is done.
+        missing = self._viewer_missing is not None
+        try:
+            rec.flush(timeout_sec=1.0) if missing else rec.flush()
             rec.disconnect()
+        except Exception as exc:  # Rerun raises RuntimeError when its gRPC sink cannot connect
+            print(
+                f"egc-teleop: warning: the view did not reach the viewer ({exc}); "
+                "nothing was saved (--save FILE.rrd keeps a view)",
+                file=sys.stderr,
+            )
+
+    def abandon(self) -> None:
+        """Drop the recording without waiting for its viewer (one that never came)."""
+        with self._lock:
+            rec, self._rec = self._rec, None
+        if rec is not None:
+            _ABANDONED.append(rec)
+
+    def watch_viewer(self, address: tuple[str, int], url: str) -> None:
+        """Check every ``VIEWER_PROBE_S`` that the viewer at ``address`` accepts connections;
+        say once on stderr when it does not (and when it is back). Rerun buffers the view for
+        it meanwhile; the driving never waits for it."""
+
+        def watch() -> None:
+            while True:
+                why = reachable(address)
+                if why is not None and self._viewer_missing is None:
+                    print(
+                        f"egc-teleop: warning: no viewer answers at {url} ({why}); the view "
+                        "is not shown (driving goes on; start a viewer there, or use --save "
+                        "FILE.rrd to keep the view)",
+                        file=sys.stderr,
+                        flush=True,
+                    )
+                elif why is None and self._viewer_missing is not None:
+                    print(f"egc-teleop: viewer at {url} reachable again", file=sys.stderr)
+                self._viewer_missing = why
+                if self._watch_stop.wait(VIEWER_PROBE_S):
+                    return
+
+        threading.Thread(target=watch, name="viewer-watch", daemon=True).start()
 
     # -- internals -------------------------------------------------------------------------------
 

@@ -487,8 +487,8 @@ def stale_texts(telemetry_age_s: float | None, robot_present: bool) -> tuple[str
     )
     age = "" if telemetry_age_s is None else f" for {telemetry_age_s:.1f} s"
     head = f"NO TELEMETRY{age} ({why})"
-    old = "" if telemetry_age_s is None else f" ({telemetry_age_s:.1f} s old)"
-    status = f"{head} · the view shows the robot's last telemetry{old}, not the robot now"
+    old = "" if telemetry_age_s is None else f", {telemetry_age_s:.1f} s old,"
+    status = f"{head} · this view is the robot's last telemetry{old} not the robot now"
     panel = (
         f"{head}\n"
         f"link figures: none current (the last ones{old} are not shown)\n"
