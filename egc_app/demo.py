@@ -178,6 +178,13 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--duration must be positive")
     if args.save is not None and args.no_view:
         raise UsageError("--save and --no-view exclude each other")
+    if args.save is not None:
+        if not args.save.endswith(".rrd"):
+            raise UsageError(f"--save needs a .rrd file name, got {args.save!r}")
+        # Before the robot starts: the operator would refuse it only once the robot is up.
+        from egc_operator.viewer_target import check_writable  # imports Rerun
+
+        check_writable(Path(args.save), "--save")
     linked = args.up is not None or args.down is not None or args.scenario is not None
     proto = args.transport
     endpoint = f"{proto}/127.0.0.1:{free_port(proto)}"

@@ -242,7 +242,19 @@ def run(args: argparse.Namespace) -> int:
         )
     route = _route(args)
     source = _open_source(args, cfg)
-    session = open_session(options_from_args(args))
+    # The view first: a --save file that cannot be written or a --serve-web port in use is a
+    # usage error (exit 2) before anything connects or drives.
+    try:
+        view: View = view_mod.open_view(args, robot_id)
+    except BaseException:
+        source.close()
+        raise
+    try:
+        session = open_session(options_from_args(args))
+    except BaseException:
+        view.close()
+        source.close()
+        raise
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
@@ -250,7 +262,6 @@ def run(args: argparse.Namespace) -> int:
         timer = threading.Timer(args.duration, stop.set)
         timer.daemon = True
         timer.start()
-    view: View = view_mod.open_view(args, robot_id)
     offset_ns = round(args.clock_offset_s * 1e9)
     node = OperatorNode(
         session,

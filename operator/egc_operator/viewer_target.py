@@ -7,11 +7,20 @@ Rules (issue 5): ``--save FILE.rrd`` -> file; ``--connect URL`` -> a running vie
 ``--serve-web PORT`` -> the web viewer on PORT with the data on gRPC port PORT + 1; otherwise a
 local viewer is spawned when a display exists (``DISPLAY`` or ``WAYLAND_DISPLAY``), and without
 one the view is saved to ``egc-operator-<robot>-<time>.rrd`` in the working directory.
+
+``check_target`` refuses, before anything starts, what cannot work: a ``--save`` file that cannot
+be written (a missing directory is not created: it is most likely a typo), a ``--serve-web``
+port already in use. A viewer that is not there (``--connect``, or a spawned viewer that could
+not open a window) is not an error: driving does not depend on it, the view says so (see
+``reachable`` and ``OperatorView``).
 """
 
 from __future__ import annotations
 
+import errno
+import os
 import shutil
+import socket
 import sys
 import urllib.parse
 from collections.abc import Mapping
@@ -97,6 +106,79 @@ def choose_target(
     return ViewerTarget("save", path=default_save_path(robot_id, stamp), defaulted=True)
 
 
+def check_writable(path: Path, option: str = "--save") -> None:
+    """Raise UsageError unless ``path`` can be written: its directory exists (it is not
+    created) and a file can be created there (or the existing file opened for writing)."""
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.exists():
+        raise UsageError(f"{option} {path}: directory {parent} does not exist (create it first)")
+    if not parent.is_dir():
+        raise UsageError(f"{option} {path}: {parent} is not a directory")
+    if path.is_dir():
+        raise UsageError(f"{option} {path}: is a directory")
+    existed = path.exists()
+    try:
+        with open(path, "ab"):
+            pass
+    except OSError as exc:
+        reason = exc.strerror or os.strerror(exc.errno or errno.EIO)
+        raise UsageError(f"{option} {path}: cannot write there ({reason})") from None
+    if not existed:
+        path.unlink(missing_ok=True)
+
+
+def port_free(port: int) -> bool:
+    """Nothing listens on TCP ``port`` (a server of ours could bind it)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind(("0.0.0.0", port))
+        except OSError:
+            return False
+    return True
+
+
+def check_target(target: ViewerTarget) -> None:
+    """Raise UsageError for a target that cannot work (see the module docstring)."""
+    if target.kind == "save" and target.path is not None:
+        check_writable(target.path)
+    if target.kind == "serve_web" and target.web_port is not None:
+        for port, what in ((target.web_port, "web viewer"), (target.grpc_port, "its data")):
+            if port is not None and not port_free(port):
+                raise UsageError(
+                    f"--serve-web {target.web_port}: port {port} ({what}) is already in use"
+                )
+
+
+DEFAULT_VIEWER_PORT = 9876  # where rr.spawn's viewer listens
+
+
+def viewer_address(target: ViewerTarget) -> tuple[str, int] | None:
+    """(host, port) of the viewer a connect or spawn target streams to; None for the others."""
+    if target.kind == "spawn":
+        return "127.0.0.1", DEFAULT_VIEWER_PORT
+    if target.kind == "connect" and target.url is not None:
+        parsed = urllib.parse.urlsplit(
+            target.url.replace("rerun+", "", 1).replace("rerun", "http", 1)
+        )
+        try:
+            port = parsed.port
+        except ValueError:
+            return None
+        default = 443 if parsed.scheme == "https" else DEFAULT_VIEWER_PORT
+        return parsed.hostname or "127.0.0.1", port or default
+    return None
+
+
+def reachable(address: tuple[str, int], timeout_s: float = 0.5) -> str | None:
+    """None when something accepts a TCP connection at ``address``, else why not."""
+    try:
+        with socket.create_connection(address, timeout=timeout_s):
+            return None
+    except OSError as exc:
+        return exc.strerror or str(exc) or type(exc).__name__
+
+
 def _rerun_executable() -> str | None:
     """The viewer binary of the installed rerun-sdk, also when the venv is not on PATH."""
     beside = Path(sys.executable).parent / "rerun"
@@ -107,7 +189,6 @@ def attach(rec: rr.RecordingStream, target: ViewerTarget, blueprint: rrb.Bluepri
     """Connect ``rec`` to ``target`` with ``blueprint`` as default layout; say where, in a line."""
     if target.kind == "save":
         assert target.path is not None
-        target.path.parent.mkdir(parents=True, exist_ok=True)
         rec.save(target.path, default_blueprint=blueprint)
         why = "no display (DISPLAY/WAYLAND_DISPLAY unset); " if target.defaulted else ""
         return f"{why}operator view saved to {target.path.resolve()} (open it with: rerun {target.path})"

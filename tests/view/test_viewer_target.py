@@ -87,7 +87,7 @@ def test_arguments_parse() -> None:
 
 
 def test_open_view_saves_and_says_where(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    out = tmp_path / "sub" / "op.rrd"
+    out = tmp_path / "op.rrd"
     view = open_view(_args("--save", str(out)), "sim")
     view.on_telemetry(telemetry(0))
     view.close()

@@ -1,0 +1,111 @@
+"""A viewer that is not there, and view files that cannot be written (outside check).
+
+- ``operator --connect rerun+http://127.0.0.1:<closed port>/proxy`` said the view was streamed,
+  drove the whole run, then ended with ``RuntimeError: gRPC has been unable to connect for 6s``
+  and exit 1; so did a spawned viewer that could not open a window (no X server).
+- ``--save /proc/x.rrd``, ``--save <a file>/x.rrd``, ``demo --save``, ``episode --record`` to such
+  paths and ``--serve-web`` on a port in use ended in tracebacks; ``--save /nonexistent/x.rrd``
+  silently created the directory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from egc_common.errors import UsageError
+from egc_common.transport import free_tcp_port
+from egc_operator.view import add_view_arguments, open_view
+
+from tests.view.conftest import telemetry
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _args(*argv: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser()
+    add_view_arguments(parser)
+    return parser.parse_args(list(argv))
+
+
+def test_a_viewer_that_is_not_there_is_said_once_and_closing_does_not_raise(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    url = f"rerun+http://127.0.0.1:{free_tcp_port()}/proxy"
+    view = open_view(_args("--connect", url), "sim")
+    for k in range(20):
+        view.on_telemetry(telemetry(k))
+    view.close()  # raised RuntimeError (gRPC unable to connect)
+    err = capsys.readouterr().err
+    assert err.count(f"warning: no viewer answers at {url}") == 1
+    assert "Traceback" not in err
+
+
+@pytest.mark.parametrize("kind", ["proc", "under_a_file", "missing_dir", "a_directory"])
+def test_an_unwritable_save_path_is_a_usage_error(tmp_path: Path, kind: str) -> None:
+    a_file = tmp_path / "a-file"
+    a_file.write_text("x")
+    path = {
+        "proc": Path("/proc/egc-x.rrd"),
+        "under_a_file": a_file / "x.rrd",
+        "missing_dir": tmp_path / "missing" / "x.rrd",
+        "a_directory": tmp_path / "dir.rrd",
+    }[kind]
+    if kind == "a_directory":
+        path.mkdir()
+    with pytest.raises(UsageError, match=r"^--save "):
+        open_view(_args("--save", str(path)), "sim")
+    assert not (tmp_path / "missing").exists()  # no directory made for it
+
+
+def test_a_web_port_in_use_is_a_usage_error() -> None:
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        with pytest.raises(UsageError, match=f"port {port} .* already in use"):
+            open_view(_args("--serve-web", str(port)), "sim")
+
+
+def _cli(*argv: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "egc_app.cli", *argv],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, **(env or {})},
+    )
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["operator", "--script", "demo", "--duration", "1", "--save", "/proc/egc-x.rrd"],
+        ["demo", "--duration", "1", "--save", "/proc/egc-x.rrd"],
+        ["episode", "--map", "hallway", "--record", "/proc/egc-x.rrd"],
+    ],
+    ids=["operator", "demo", "episode"],
+)
+def test_the_commands_refuse_an_unwritable_view_file_in_one_line(argv: list[str]) -> None:
+    done = _cli(*argv)
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "/proc/egc-x.rrd" in lines[0], done.stderr
+
+
+def test_the_operator_drives_on_and_exits_0_without_its_viewer(tmp_path: Path) -> None:
+    url = f"rerun+http://127.0.0.1:{free_tcp_port()}/proxy"
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    done = _cli(
+        "operator", "--script", "demo", "--duration", "2", "--no-status", "--connect", url,
+        "--zenoh-connect", endpoint,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "Traceback" not in done.stderr
+    assert done.stderr.count("warning: no viewer answers at") == 1
