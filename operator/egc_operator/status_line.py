@@ -157,6 +157,8 @@ def situation(s: Status) -> str:
     """What the robot does and why, in an operator's words (the status line's first part)."""
     state = s.robot_state
     age = s.telemetry_age_s
+    if not s.robot_present and age is None:
+        return "robot: not seen yet (waiting for its liveliness token)"
     if not s.robot_present or (age is not None and age > TELEMETRY_STALE_S):
         # A withdrawn liveliness token says so at once: the robot's last figures are not its
         # present ones, however young they are.

@@ -108,3 +108,8 @@ def test_a_robot_gone_shows_none_of_its_figures_at_once() -> None:
     line = format_status(gone)
     assert "rtt" not in line and "cmd age" not in line and "gap max" not in line
     assert "in control" not in line
+
+
+def test_a_robot_not_seen_yet_is_not_called_gone() -> None:
+    waiting = status_of(COMMAND, None, None, None, False, robot_alive=False)
+    assert situation(waiting) == "robot: not seen yet (waiting for its liveliness token)"
