@@ -57,6 +57,7 @@ import socket
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -320,13 +321,15 @@ def zenoh_reason(config: zenoh.Config, timeout_s: float = 10.0) -> str | None:
 _OPEN_NOTICE_S = 2.0
 
 
-def open_config(config: zenoh.Config) -> zenoh.Session:
+def open_config(config: zenoh.Config, give_up_s: float | None = None) -> zenoh.Session:
     """Open a session on ``config``; a failure (e.g. a port in use) is one UsageError line.
 
     ``zenoh.open`` blocks while a ``udp/`` connect waits for its TCP half (``_tcp_first``), and
     Python handles Ctrl-C only between bytecodes of the main thread: a process connecting to a
     peer that was not up sat silent and deaf to Ctrl-C. So it opens in a helper thread while
     this one waits in short steps (Ctrl-C ends the wait) and says, once, what it waits for.
+    ``give_up_s``: stop waiting after that long (a run with a ``--duration`` must not outlive
+    it waiting for a peer that never came: an outside check waited 12 minutes) with a UsageError.
     """
     result: list[zenoh.Session | BaseException] = []
 
@@ -337,8 +340,9 @@ def open_config(config: zenoh.Config) -> zenoh.Session:
             result.append(exc)
 
     opener = threading.Thread(target=open_it, name="zenoh-open", daemon=True)
+    started = time.monotonic()
     opener.start()
-    opener.join(_OPEN_NOTICE_S)
+    opener.join(_OPEN_NOTICE_S if give_up_s is None else min(_OPEN_NOTICE_S, give_up_s))
     if opener.is_alive():
         try:
             endpoints = json.loads(config.get_json("connect/endpoints"))
@@ -352,6 +356,10 @@ def open_config(config: zenoh.Config) -> zenoh.Session:
             "a udp/ endpoint opens on TCP first; " if udp_pair else "",
         )
         while opener.is_alive():
+            if give_up_s is not None and time.monotonic() - started >= give_up_s:
+                raise UsageError(
+                    f"gave up after {give_up_s:g} s: the peer at {peers} never accepted"
+                )
             opener.join(0.1)
     outcome = result[0]
     if isinstance(outcome, BaseException):
@@ -362,9 +370,9 @@ def open_config(config: zenoh.Config) -> zenoh.Session:
     return outcome
 
 
-def open_session(options: ZenohOptions) -> zenoh.Session:
+def open_session(options: ZenohOptions, give_up_s: float | None = None) -> zenoh.Session:
     """Open a session; a failure (e.g. a port in use) becomes one clear UsageError line."""
-    return open_config(build_config(options))
+    return open_config(build_config(options), give_up_s)
 
 
 def command_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:

@@ -250,7 +250,7 @@ def run(args: argparse.Namespace) -> int:
         source.close()
         raise
     try:
-        session = open_session(options_from_args(args))
+        session = open_session(options_from_args(args), give_up_s=args.duration)
     except BaseException:
         view.close()
         source.close()

@@ -1,0 +1,27 @@
+"""An operator with ``--duration`` does not outlive it waiting for a peer that never comes
+(outside check: with a udp/ endpoint and nothing listening, ``--duration 5`` was ignored and
+the process waited until killed, once for 12 minutes)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+
+import pytest
+from egc_common.transport import free_tcp_port
+
+pytestmark = pytest.mark.integration
+
+
+def test_a_udp_peer_that_never_accepts_ends_the_run_at_its_duration():
+    port = free_tcp_port()
+    cmd = [sys.executable, "-m", "egc_app.cli", "operator", "--no-view", "--script", "demo"]
+    cmd += ["--zenoh-connect", f"udp/127.0.0.1:{port}", "--duration", "3"]
+    t0 = time.monotonic()
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    took = time.monotonic() - t0
+    assert done.returncode == 2, done.stderr
+    assert "gave up after 3 s" in done.stderr and "never accepted" in done.stderr
+    assert "exit_on_failure" not in done.stderr
+    assert took < 20, took  # interpreter start-up and imports, then 3 s of waiting
