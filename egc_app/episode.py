@@ -609,7 +609,10 @@ def run_batch(
                 yield _run_one_safely(s)
                 bar.update()
             return
-        ctx = multiprocessing.get_context("fork" if sys.platform == "linux" else "spawn")
+        # Not fork: workers forked from a process with other threads (a Zenoh runtime, a test
+        # harness's servers) can inherit a lock held at that instant and hang; a batch in CI
+        # hung so with two of its three episodes done. The fork server starts clean.
+        ctx = multiprocessing.get_context("forkserver" if sys.platform == "linux" else "spawn")
         with ctx.Pool(min(jobs, len(settings))) as pool:
             for summary in pool.imap(_run_one_safely, settings):
                 yield summary

@@ -24,11 +24,12 @@ def _robot(*args: str) -> subprocess.CompletedProcess[str]:
     [
         ("--record", "/proc/egc-x.rrd", "not writable"),
         ("--summary", "/proc/egc-x.json", "not writable"),
-        ("--record", "/nonexistent-egc-dir/x.rrd", "does not exist"),
+        ("--record", "{tmp}/no-such-dir/x.rrd", "does not exist"),
         ("--summary", "/", "is a directory"),
     ],
 )
-def test_an_unwritable_output_is_one_line_and_exit_2(option, path, says):
+def test_an_unwritable_output_is_one_line_and_exit_2(option, path, says, tmp_path):
+    path = path.format(tmp=tmp_path)  # never a real directory left behind by an older robot
     done = _robot(option, path)
     assert done.returncode == 2, done.stderr
     errors = [line for line in done.stderr.splitlines() if "error:" in line]
