@@ -440,9 +440,18 @@ def run(args: argparse.Namespace) -> int:
     try:
         node.run(stop)
     finally:
-        node.shutdown()
-        driver.close()
-        session.close()
+        # Each step even if one before it fails: a Zenoh close that times out (a peer or router
+        # gone at the same moment: "close operation timed out") ended the process with a
+        # traceback and without its summary.
+        for what, step in (
+            ("stop the node", node.shutdown),
+            ("close the driver", driver.close),
+            ("close the Zenoh session", session.close),
+        ):
+            try:
+                step()
+            except Exception as exc:
+                log.error("could not %s: %s", what, exc)
         summary = stats.summary()
         summary["accepted"] = node.controller.counters.accepted
         summary["rejected"] = dict(node.controller.counters.rejected)
