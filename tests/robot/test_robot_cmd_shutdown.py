@@ -5,7 +5,6 @@ the process ended with a traceback, without its --summary)."""
 from __future__ import annotations
 
 import json
-import os
 import signal
 import threading
 
@@ -32,15 +31,19 @@ def test_a_session_close_that_times_out_still_leaves_the_summary(tmp_path, monke
     monkeypatch.setattr(
         robot_cmd, "open_session", lambda options: _CloseTimesOut(real_open(options))
     )
+    real_run = robot_cmd.RobotNode.run
+
+    def run_briefly(node: robot_cmd.RobotNode, stop: threading.Event) -> None:
+        threading.Timer(0.5, stop.set).start()  # as SIGINT would, without a signal
+        real_run(node, stop)
+
+    monkeypatch.setattr(robot_cmd.RobotNode, "run", run_briefly)
     summary = tmp_path / "robot.json"
-    timer = threading.Timer(1.5, os.kill, (os.getpid(), signal.SIGINT))
-    timer.start()
     previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         argv = ["robot", "--robot", "shut", "--listen", loopback_endpoint(free_tcp_port())]
         code = cli.main([*argv, "--summary", str(summary)])
     finally:
-        timer.cancel()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     assert code == 0
