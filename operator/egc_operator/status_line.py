@@ -29,10 +29,13 @@ RESUME_WINDOW_S = 2.0
 TELEMETRY_STALE_S = 0.5
 MAX_COMMAND_AGE_MS = {"direct": 300, "shared": 1000}
 COMMAND_TIMEOUT_MS = 250.0  # DESIGN 8: a gap shorter than this cannot have tripped the watchdog
-# "ramping up" after a short-gap resume: said this long, and up to RAMP_MAX_S while the robot
-# reports that its acceleration limit acts (the robot keeps the reason while it drives on).
+# "ramping up" after a short-gap resume: said this long at most (the robot keeps the reason
+# while it drives on), and no longer once the robot's speed has reached its reference since the
+# resume (``Episode.reached_ref``). A ``limits`` limiter later on is not the resume's ramp (an
+# acceleration after an EGC slowdown looks the same), so it does not stretch the text.
 RAMP_SHOWN_S = 1.5
-RAMP_MAX_S = 3.0
+# |v_cmd| within this of |v_ref| (m/s): the ramp is done.
+RAMP_DONE_MPS = 0.02
 # Telemetry limiter values that name the filter of DESIGN 6 that changed the command.
 FILTER_LIMITERS = frozenset(name for name in FILTER_NAMES if name != "none")
 # ... and those that mean an obstacle changed it: a filter or the footprint sweep.
@@ -78,6 +81,8 @@ class Status:
     # command gap it reported since they began, and for how long (robot clock) they hold.
     episode_gap_ms: float | None = None
     episode_s: float | None = None
+    # Since they began, the robot's speed has reached its reference (a resume's ramp is over).
+    episode_ramped: bool = False
 
 
 def _seconds(ms: float) -> str:
@@ -100,13 +105,17 @@ def _hold(s: Status, reason: str) -> str:
         # (the open gap grows while no command arrives). The window's figure alone drops to the
         # burst's 0.1 s once queued commands arrive after an outage; a gap below the watchdog's
         # timeout cannot be the one that tripped it, so no number rather than a wrong one.
-        known = [g for g in (s.episode_gap_ms, s.cmd_gap_max_ms, s.cmd_age_ms) if g is not None]
+        # Only the robot's gap figures: the command age counts from when the operator sent it,
+        # so it adds the uplink delay (at 800 ms one way a 1.5 s outage read as 2.1 s).
+        known = [g for g in (s.episode_gap_ms, s.cmd_gap_max_ms) if g is not None]
         gap = max(known) if known else None
         if gap is not None and gap < COMMAND_TIMEOUT_MS:
             gap = None
         what = "link gap" if gap is None else f"link gap (no command for {_seconds(gap)})"
+        # Whether the short-gap resume applies is the robot's decision: when it wants a centred
+        # stick its reason says so ("waiting for a centred stick"), not this one.
         if gap is not None and gap > RESUME_WINDOW_S * 1000.0:
-            return f"HOLD: {what} - centre the stick to drive again"
+            return f"HOLD: {what} - keep the stick; the robot says if it needs it centred"
         return f"HOLD: {what} - keep the stick, it resumes"
     if r == "stale commands":
         # The robot does not report the age of the commands it rejected, and its age figures
@@ -144,10 +153,9 @@ def _driving(s: Status, reason: str) -> str:
         if limiter == "sweep":
             return "SLOWED: obstacle next to the footprint (sweep check)"
         return f"SLOWED: obstacle ({which})"
-    if "resum" in reason.lower() and s.episode_s is not None:
-        ramping = s.episode_s < RAMP_SHOWN_S or (s.episode_s < RAMP_MAX_S and limiter == "limits")
-        if ramping:
-            return "DRIVING: resumed after a link gap, ramping up"
+    ramp_s = s.episode_s if "resum" in reason.lower() else None
+    if ramp_s is not None and ramp_s < RAMP_SHOWN_S and not s.episode_ramped:
+        return "DRIVING: resumed after a link gap, ramping up"
     if limiter == "limits":
         return "DRIVING (at the robot's speed/acceleration limits)"
     return "DRIVING"
@@ -191,7 +199,10 @@ def situation(s: Status) -> str:
 
 
 def link_figures(s: Status) -> str:
-    """The link in numbers: round trip, command age p50/p90, gap max, loss (known ones)."""
+    """The link in numbers: round trip, command age p50/p90, gap max, loss (known ones).
+
+    The round trip is left out with the telemetry figures when the robot is silent (the last
+    clock reply is as old as the silence) and once the robot's liveliness changed."""
     parts = ["link --" if s.rtt_ms is None else f"rtt {s.rtt_ms:5.1f} ms"]
     if not s.synchronised:
         parts[0] += " (clock not synced)"
@@ -282,6 +293,7 @@ class Episode:
         self.since_ns = 0
         self.newest_ns = 0
         self.gap_ms: float | None = None
+        self.reached_ref = False  # the speed reached its reference since the key changed
 
     def update(self, t: Telemetry) -> None:
         if t.stamp_ns < self.newest_ns:
@@ -289,15 +301,22 @@ class Episode:
         key = (t.state, t.reason)
         if key != self.key:
             self.key, self.since_ns, self.gap_ms = key, t.stamp_ns, None
+            self.reached_ref = False
         self.newest_ns = t.stamp_ns
         if t.cmd_gap_max_ms is not None:
             self.gap_ms = max(self.gap_ms or 0.0, t.cmd_gap_max_ms)
+        if abs(t.v_ref) > RAMP_DONE_MPS and abs(t.v_cmd) >= abs(t.v_ref) - RAMP_DONE_MPS:
+            self.reached_ref = True
 
     def of(self, state: str | None, reason: str | None) -> tuple[float | None, float | None]:
         """(largest gap ms, seconds) of this episode if it is ``state``/``reason``, else Nones."""
         if self.key is None or self.key != (state, reason):
             return None, None
         return self.gap_ms, (self.newest_ns - self.since_ns) / 1e9
+
+    def ramped(self, state: str | None, reason: str | None) -> bool:
+        """The speed reached its reference during this episode (``state``/``reason``)."""
+        return self.key is not None and self.key == (state, reason) and self.reached_ref
 
 
 def status_of(
@@ -323,12 +342,15 @@ def status_of(
     rejected = None if s is None else s.rejected
     if t is not None and t.reason is not None and (s is None or t.stamp_ns > s.stamp_ns):
         robot_state, reason, controller = t.state, t.reason, t.operator
-        if s is None:
-            rejected = t.rejected
+    if t is not None and (s is None or t.stamp_ns > s.stamp_ns):
+        # The count only grows: the newest message's (the telemetry's, when it is newer than the
+        # state message), never an older count beside a newer state.
+        rejected = t.rejected if rejected is None else max(rejected, t.rejected)
     in_control = None if robot_state is None else controller == command.op
     gap_ms, episode_s = (None, None) if episode is None else episode.of(robot_state, reason)
     return Status(
-        rtt_ms=rtt_ms if robot_alive else None,
+        # a silent robot's round trip is as old as its silence: left out like its figures
+        rtt_ms=rtt_ms if robot_alive and not stale else None,
         synchronised=synchronised,
         robot_state=robot_state,
         reason=reason,
@@ -356,6 +378,7 @@ def status_of(
         robot_present=robot_alive,
         episode_gap_ms=gap_ms,
         episode_s=episode_s,
+        episode_ramped=episode is not None and episode.ramped(robot_state, reason),
     )
 
 

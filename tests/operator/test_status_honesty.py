@@ -19,11 +19,11 @@ MS = 1_000_000
 COMMAND = OperatorCommand(1, 1, 1.0, 0.0, "shared", True, False, False, "op", 0)
 
 
-def _t(k: int, state: str, reason: str, **extra: object) -> Telemetry:
+def _t(k: int, state: str, reason: str, v_cmd: float = 0.3, **extra: object) -> Telemetry:
     values: dict[str, object] = {"reason": reason, "operator": "op"}
     values.update(extra)
     return Telemetry(
-        k, 10_000 * MS + k * 50 * MS, state, "shared", 0.3, 0.0, 0.3, 0.0, 1.0, **values
+        k, 10_000 * MS + k * 50 * MS, state, "shared", 0.3, 0.0, v_cmd, 0.0, 1.0, **values
     )  # type: ignore[arg-type]
 
 
@@ -66,23 +66,70 @@ def test_a_stale_commands_hold_shows_no_age_of_the_accepted_ones() -> None:
 def test_ramping_up_is_said_only_just_after_the_resume() -> None:
     episode = sl.Episode()
     seen = []
-    for k in range(200):  # 10 s driving on with the reason kept
-        t = _t(k, "DRIVING", "resumed after a link gap", limiter="none")
+    for k in range(200):  # 10 s driving on with the reason kept, the base ramping up for 1 s
+        v = min(0.3, 0.015 * k)
+        t = _t(k, "DRIVING", "resumed after a link gap", limiter="none", v_cmd=v)
         episode.update(t)
         seen.append(_line(t, episode))
     assert seen[0] == "DRIVING: resumed after a link gap, ramping up"
-    assert seen[int(1.4 / 0.05)] == "DRIVING: resumed after a link gap, ramping up"
-    assert seen[int(1.6 / 0.05)] == "DRIVING"
-    assert set(seen[40:]) == {"DRIVING"}
-    # still at the acceleration limit: said a little longer, never past RAMP_MAX_S
+    assert seen[int(0.9 / 0.05)] == "DRIVING: resumed after a link gap, ramping up"
+    # the speed reached its reference at 1 s: the ramp is over
+    assert set(seen[int(1.0 / 0.05) :]) == {"DRIVING"}
+
+
+def test_a_later_acceleration_limit_is_not_called_the_resume_s_ramp() -> None:
+    """Outside check: 'resumed after a link gap, ramping up' stayed up to 3 s while the limiter
+    was ``limits``, which may be an acceleration after an EGC slowdown, not the resume."""
     limited = sl.Episode()
     texts = []
-    for k in range(100):
-        t = _t(k, "DRIVING", "resumed after a link gap", limiter="limits")
+    for k in range(100):  # never at its reference: still at most RAMP_SHOWN_S
+        t = _t(k, "DRIVING", "resumed after a link gap", limiter="limits", v_cmd=0.1)
         limited.update(t)
         texts.append(_line(t, limited))
-    assert texts[int(2.5 / 0.05)] == "DRIVING: resumed after a link gap, ramping up"
-    assert texts[int(3.5 / 0.05)] == "DRIVING (at the robot's speed/acceleration limits)"
+    assert texts[int(1.4 / 0.05)] == "DRIVING: resumed after a link gap, ramping up"
+    assert texts[int(1.6 / 0.05)] == "DRIVING (at the robot's speed/acceleration limits)"
+    assert texts[int(2.5 / 0.05)] == "DRIVING (at the robot's speed/acceleration limits)"
+    # ramped up, slowed by the filter, then accelerating at the limit again: not the resume
+    again = sl.Episode()
+    frames = [_t(0, "DRIVING", "resumed after a link gap", v_cmd=0.0, limiter="limits")]
+    frames += [_t(4, "DRIVING", "resumed after a link gap", v_cmd=0.3, limiter="none")]
+    frames += [_t(8, "DRIVING", "resumed after a link gap", v_cmd=0.05, limiter="egc")]
+    frames += [_t(12, "DRIVING", "resumed after a link gap", v_cmd=0.1, limiter="limits")]
+    for t in frames:
+        again.update(t)
+    assert _line(frames[-1], again) == "DRIVING (at the robot's speed/acceleration limits)"
+
+
+def test_a_link_gap_hold_names_no_command_age_and_never_says_centre_on_its_own() -> None:
+    """Outside check at 800 ms one way: a 1.5 s outage showed 'link gap (no command for 2.1 s) -
+    centre the stick to drive again | ... gap max 1307 ms' (the command age, which counts the
+    uplink delay) while the robot resumed on its own."""
+    episode = sl.Episode()
+    t = _t(1, "HOLD", "command timeout", cmd_gap_max_ms=1307.0, cmd_age_ms=2107.0)
+    episode.update(t)
+    text = _line(t, episode)
+    assert text == "HOLD: link gap (no command for 1.3 s) - keep the stick, it resumes"
+    assert "2.1" not in text
+    # a gap longer than the resume window: the robot decides, and says so in its reason
+    long = _t(2, "HOLD", "command timeout", cmd_gap_max_ms=2600.0, cmd_age_ms=3400.0)
+    episode.update(long)
+    assert "centre the stick" not in _line(long, episode)
+    wants = _t(3, "HOLD", "waiting for a centred stick")
+    episode.update(wants)
+    assert _line(wants, episode) == "HOLD: centre the stick to drive"
+
+
+def test_the_rejected_count_is_the_newest_one() -> None:
+    """Outside check: a stale-commands HOLD taken from newer telemetry showed 'rejected 0' from
+    the older state message while the robot had rejected commands."""
+    older = StateMessage(9_000 * MS, "DRIVING", "fresh centred command", "op", 0)
+    t = _t(1, "HOLD", "stale commands", rejected=12)
+    status = status_of(COMMAND, t, older, 300.0, True, True, 0.05)
+    assert status.reason == "stale commands" and status.rejected == 12
+    assert "rejected 12" in format_status(status)
+    # a state message newer than the telemetry: its own (newer) count
+    newer = StateMessage(20_000 * MS, "HOLD", "stale commands", "op", 15)
+    assert status_of(COMMAND, t, newer, 300.0, True, True, 0.05).rejected == 15
 
 
 def test_newer_telemetry_says_the_state_when_the_state_message_lags() -> None:
