@@ -155,7 +155,12 @@ class OperatorNode:
         # The robot's current state and reason from telemetry: since when, and its link
         # figures' peaks (the status line's HOLD and resume texts).
         self._episode = Episode()
+        # Counts the robot's (re)appearances (liveliness PUTs): the map is fetched again for
+        # each, and a clock reply to a query sent before one is not this robot's.
+        self._robot_epoch = 0
+        self._map_wake = threading.Event()
         self.map_received = False
+        self.maps_received = 0
         self.published = 0
         self._filter_default = filter_default
         self._planner = RoutePlanner(route)
@@ -212,15 +217,21 @@ class OperatorNode:
     def _on_robot_alive(self, sample: zenoh.Sample) -> None:
         alive = sample.kind == zenoh.SampleKind.PUT
         with self._lock:
-            changed = alive != self._robot_alive
+            # A PUT while the robot is present is another token: a new robot session.
+            changed = alive != self._robot_alive or alive
             self._robot_alive = alive
             if changed:
                 # A robot that went away (or a new one, after a restart or a long outage) says
-                # nothing about the one that is there now: forget its state and figures. The
+                # nothing about the one that is there now: forget its state and figures, and
+                # its round trip and clock (a restarted robot's clock is another one). The
                 # arrival time stays, for "no telemetry for N s".
                 self._state = None
                 self._telemetry = None
                 self._episode = Episode()
+                self._sync = ClockSync()
+                self._robot_epoch += 1
+        if alive:
+            self._map_wake.set()  # its map, again (a restarted robot may serve another one)
         text = "robot present" if alive else "robot gone (its liveliness token was withdrawn)"
         log.info("%s", text)
         if self._view is not None:
@@ -235,6 +246,8 @@ class OperatorNode:
         key = keys.clock(self._robot)
         while not stop.is_set():
             try:
+                with self._lock:
+                    epoch = self._robot_epoch
                 sent = self._clock()
                 replies = self._session.get(
                     key,
@@ -252,7 +265,13 @@ class OperatorNode:
                             payload
                         )
                         with self._lock:
-                            sample = self._sync.add(sent, stamp, received, same_clock=same)
+                            # asked before the robot (re)appeared: the old robot's round trip
+                            current = epoch == self._robot_epoch
+                            sample = (
+                                self._sync.add(sent, stamp, received, same_clock=same)
+                                if current
+                                else None
+                            )
                         if sample is not None and self._view is not None:
                             # the view wants the offset from this process's monotonic clock
                             skew = self._clock() - time.monotonic_ns()
@@ -266,22 +285,33 @@ class OperatorNode:
             stop.wait(1.0 if synced else 0.1)
 
     def _map_loop(self, stop: threading.Event) -> None:
-        """The robot's static map (``egc/<robot>/map``) for the view's world frame, once.
+        """The robot's static map (``egc/<robot>/map``) for the view's world frame, once per
+        appearance of the robot: again after a restart or a long outage (a liveliness PUT), and
+        it replaces the map the view has.
 
         Its own thread: a query waits up to ``_MAP_TIMEOUT_S`` for a reply that crosses a slow
         link, and must hold back neither the commands nor the clock sync. Asked again every
         ``_MAP_RETRY_S`` while none came, counting only the attempts made while the robot is
-        present (a robot that serves no map is left alone after ``_MAP_ATTEMPTS``).
+        present (a robot that serves no map is left alone after ``_MAP_ATTEMPTS``, until it
+        appears again).
         """
+        done_epoch: int | None = None  # the appearance whose map came (or was given up on)
+        asked_epoch: int | None = None  # the appearance ``attempts`` counts for
         attempts = 0
-        while not stop.is_set() and attempts < _MAP_ATTEMPTS:
+        while not stop.is_set():
             with self._lock:
-                present = self._robot_alive
-            if present:
-                attempts += 1
-                if self._fetch_map(stop):
-                    return
-            stop.wait(_MAP_RETRY_S)
+                present, epoch = self._robot_alive, self._robot_epoch
+            if not present or epoch == done_epoch:
+                self._map_wake.wait(_MAP_RETRY_S)
+                self._map_wake.clear()
+                continue
+            if epoch != asked_epoch:
+                asked_epoch, attempts = epoch, 0
+            attempts += 1
+            if self._fetch_map(stop) or attempts >= _MAP_ATTEMPTS:
+                done_epoch = epoch  # one that reappeared during the query is asked again
+            else:
+                stop.wait(_MAP_RETRY_S)
 
     def _fetch_map(self, stop: threading.Event) -> bool:
         """One map query; True once the view has the map."""
@@ -300,6 +330,7 @@ class OperatorNode:
                         world.goal,
                     )
                     self.map_received = True
+                    self.maps_received += 1
                     log.info("map %d x %d cells from the robot", *world.blocked.shape)
                     return True
         except Exception as exc:  # a closing session

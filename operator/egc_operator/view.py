@@ -373,7 +373,8 @@ class OperatorView:
         """The robot's liveliness token came or went (the operator node's liveliness
         subscriber). Gone: the view says so at once, and draws no ghost and no link figures
         from its last telemetry. Back (a restart, or after a long outage): the old robot's
-        telemetry is forgotten."""
+        telemetry is forgotten. Either way its round trip is (the new one's comes with the next
+        clock reply)."""
         with self._lock:
             if present == self._present:
                 return
@@ -383,6 +384,7 @@ class OperatorView:
             self._trajectory_end = None
             self._downlink_ms.clear()
             self._rejected_seen = 0
+            self._rtt_ms = None  # the old robot's round trip (the uplink's "rtt/2" estimate)
             rec = self._rec
             now = self._robot_now()
             if rec is not None and not present and now is not None:

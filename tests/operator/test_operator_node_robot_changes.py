@@ -143,3 +143,71 @@ def test_a_robot_that_goes_and_comes_back_leaves_none_of_its_old_state(
         token.undeclare()
         for entity in entities:
             entity.undeclare()
+
+
+def test_a_restarted_robot_s_map_replaces_the_old_one(session: zenoh.Session) -> None:
+    """Outside check: after a robot restart the view kept the old robot's map (the map thread
+    ended after the first map)."""
+    maps = {"served": MapMessage(1, 0.05, -1.0, -2.0, np.eye(40, dtype=bool), goal=(3.0, 1.0))}
+
+    def on_map(query: zenoh.Query) -> None:
+        query.reply(keys.world_map(ROBOT), maps["served"].encode())
+
+    entities = [
+        _clock_queryable(session),
+        session.declare_queryable(keys.world_map(ROBOT), on_map),
+    ]
+    token = session.liveliness().declare_token(keys.alive_robot(ROBOT))
+    view = MapView()
+    node = OperatorNode(session, ROBOT, "op1", Stick(), view=view)
+    stop = threading.Event()
+    runner = threading.Thread(target=node.run, args=(stop,))
+    runner.start()
+    try:
+        wait_for(lambda: len(view.maps) == 1, 10.0)
+        token.undeclare()  # the robot is killed ...
+        wait_for(lambda: not node._robot_alive, 5.0)
+        # ... and restarted on another map
+        maps["served"] = MapMessage(1, 0.1, 0.0, 0.0, np.zeros((30, 50), dtype=bool), goal=None)
+        token = session.liveliness().declare_token(keys.alive_robot(ROBOT))
+        wait_for(lambda: len(view.maps) == 2, 10.0)
+        assert view.maps[-1] == ((30, 50), 0.1, (0.0, 0.0), None)
+        time.sleep(1.5)  # asked once per appearance, not over and over
+        assert len(view.maps) == 2
+    finally:
+        stop.set()
+        runner.join(timeout=10)
+        node.close()
+        token.undeclare()
+        for entity in entities:
+            entity.undeclare()
+
+
+def test_a_restarted_robot_shows_no_round_trip_of_the_old_one(session: zenoh.Session) -> None:
+    """Outside check: after a restart the first lines for the new robot repeated the killed
+    robot's rtt for 1-2 s (the clock sync was kept across the restart)."""
+    clock = _clock_queryable(session)
+    token = session.liveliness().declare_token(keys.alive_robot(ROBOT))
+    node = OperatorNode(session, ROBOT, "op1", Stick())
+    stop = threading.Event()
+    runner = threading.Thread(target=node.run, args=(stop,))
+    runner.start()
+    command = OperatorCommand(1, HOUR, 0.5, 0.25, "shared", True, False, False, "op1")
+    try:
+        wait_for(lambda: node._status_of(command).rtt_ms is not None)
+        token.undeclare()
+        clock.undeclare()  # the robot is killed: no more clock replies ...
+        wait_for(lambda: not node._robot_alive, 5.0)
+        token = session.liveliness().declare_token(keys.alive_robot(ROBOT))  # ... restarted
+        wait_for(lambda: node._robot_alive, 5.0)
+        back = node._status_of(command)
+        assert back.rtt_ms is None and not back.synchronised
+        assert "rtt" not in format_status(back)
+        clock = _clock_queryable(session)  # the new robot answers: its own round trip
+        wait_for(lambda: node._status_of(command).rtt_ms is not None, 5.0)
+    finally:
+        stop.set()
+        runner.join(timeout=10)
+        node.close()
+        token.undeclare()
+        clock.undeclare()

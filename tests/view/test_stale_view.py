@@ -126,3 +126,17 @@ def test_a_robot_gone_is_said_at_once_and_a_new_one_starts_afresh(tmp_path: Path
     rec = read_recording(path)
     assert not _ghost_cleared(rec)
     assert _last_label(rec["/" + paths.STATUS]).startswith("DRIVING")
+
+
+def test_a_robot_gone_or_back_leaves_no_round_trip_behind(tmp_path: Path) -> None:
+    """Outside check: after a restart the old robot's rtt stayed in use (the uplink's
+    '~ (rtt/2)' estimate) until the new robot's first clock reply."""
+    view = _open(tmp_path)[0]
+    view.on_link(400.0, 0)
+    assert view._rtt_ms == 400.0
+    view.on_robot_presence(False)
+    assert view._rtt_ms is None
+    view.on_link(400.0, 0)  # a reply that was under way
+    view.on_robot_presence(True)
+    assert view._rtt_ms is None
+    view.close()
