@@ -205,7 +205,17 @@ def open_view(
             fallback = ViewerTarget("save", path=default_save_path(robot_id, stamp))
             check_target(fallback)
             view = _open(fallback, robot_id, application_id, recording_name)
-            view.where = f"the spawned viewer did not start ({why}); {view.where}"
+            assert fallback.path is not None
+            view.flush()
+            if fallback.path.exists():
+                view.where = f"the spawned viewer did not start ({why}); {view.where}"
+            else:  # never claim a file that is not there
+                view.abandon()
+                view = OperatorView(None, robot_id)
+                view.where = (
+                    f"the spawned viewer did not start ({why}) and the view could not be "
+                    f"saved to {fallback.path.resolve()}; no view (use --save FILE.rrd)"
+                )
             address = None
     print(f"egc-teleop: {view.where}", file=sys.stderr)
     if address is not None:

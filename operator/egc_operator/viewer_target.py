@@ -191,7 +191,9 @@ def attach(rec: rr.RecordingStream, target: ViewerTarget, blueprint: rrb.Bluepri
         assert target.path is not None
         rec.save(target.path, default_blueprint=blueprint)
         why = "no display (DISPLAY/WAYLAND_DISPLAY unset); " if target.defaulted else ""
-        return f"{why}operator view saved to {target.path.resolve()} (open it with: rerun {target.path})"
+        # the full path twice: the hint must work from any directory, not only this one
+        where = target.path.resolve()
+        return f"{why}operator view saved to {where} (open it with: rerun {where})"
     if target.kind == "connect":
         assert target.url is not None
         rec.connect_grpc(target.url, default_blueprint=blueprint)

@@ -109,3 +109,32 @@ def test_the_operator_drives_on_and_exits_0_without_its_viewer(tmp_path: Path) -
     assert done.returncode == 0, done.stderr
     assert "Traceback" not in done.stderr
     assert done.stderr.count("warning: no viewer answers at") == 1
+
+
+def test_a_spawned_viewer_that_did_not_start_names_a_file_that_is_there(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Outside check (DISPLAY=:77, no --save): 'the spawned viewer did not start (...);
+    operator view saved to .../egc-operator-....rrd', and the file was not found: the hint to
+    open it named the file relative to the operator's working directory."""
+    import rerun as rr
+    from egc_operator import view as view_mod
+
+    monkeypatch.setenv("DISPLAY", ":77")
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setattr(rr, "spawn", lambda **_: None)  # a viewer that never opens a window
+    monkeypatch.setattr(view_mod, "reachable", lambda *_: "Connection refused")
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    monkeypatch.chdir(run_dir)
+    view = open_view(_args(), "sim")
+    for k in range(5):
+        view.on_telemetry(telemetry(k))
+    view.close()
+    err = capsys.readouterr().err
+    assert "the spawned viewer did not start (Connection refused)" in err, err
+    named = [word.strip("()") for word in err.split() if word.strip("()").endswith(".rrd")]
+    assert named, err
+    monkeypatch.chdir(tmp_path)  # read from elsewhere, as whoever follows the hint does
+    for name in named:
+        assert Path(name).is_file() and Path(name).stat().st_size > 0, (name, err)
