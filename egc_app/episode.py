@@ -218,7 +218,7 @@ def run_settings(
     mode = "direct" if settings.filter == "none" else "shared"
     # The simulated lidar declares "no return" as free: within its range it truly is.
     if settings.dt_s > MAX_CONTROL_PERIOD_S:  # the base would lag beyond the sweep's margin
-        raise UsageError(f"--dt must be at most {MAX_CONTROL_PERIOD_S:g} s, got {settings.dt_s:g}")
+        raise UsageError(f"--dt must be at most {MAX_CONTROL_PERIOD_S:g} s, got {settings.dt_s!r}")
     # The sweep's one period at the command before braking is the control period (--dt).
     config = PipelineConfig(
         profile,

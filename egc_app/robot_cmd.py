@@ -249,7 +249,7 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
         if not 1.0 / MAX_CONTROL_PERIOD_S <= rate_hz <= 1000.0:
             # Slower, the base lags its commands by more than the footprint sweep's margin.
             raise UsageError(
-                f"--rate-hz must be within [{1.0 / MAX_CONTROL_PERIOD_S:g}, 1000], got {rate_hz:g}"
+                f"--rate-hz must be within [{1.0 / MAX_CONTROL_PERIOD_S:g}, 1000], got {rate_hz!r}"
             )
         pipeline = pipeline_config(bool(free_setting))
         pipeline_if_free = pipeline_config(True) if free_setting is None else None
@@ -351,10 +351,14 @@ def _check_output_path(option: str, path: str | None) -> None:
     line now, not a traceback when the run ends (or a directory made at the root)."""
     if path is None:
         return
+    if not path:
+        raise UsageError(f"{option}: an empty path")
     target = Path(path)
     parent = target.parent
     if target.is_dir():
         raise UsageError(f"{option} {path}: is a directory")
+    if parent.exists() and not parent.is_dir():
+        raise UsageError(f"{option} {path}: {parent} is not a directory")
     if not parent.is_dir():
         raise UsageError(f"{option} {path}: directory {parent} does not exist")
     existed = target.exists()
@@ -426,7 +430,7 @@ def run(args: argparse.Namespace) -> int:
         clock_id=monotonic_clock_id(),
     )
     log.info(
-        "robot %r ready: driver %s, profile %s, filter %s, %.0f Hz",
+        "robot %r ready: driver %s, profile %s, filter %s, %.6g Hz",
         args.robot,
         args.driver,
         args.profile,

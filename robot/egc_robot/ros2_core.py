@@ -261,6 +261,22 @@ def blind_directions(angles_rad: npt.ArrayLike) -> list[str]:
     return blind
 
 
+def unseen_directions(scan: Scan) -> list[str]:
+    """``blind_directions``, plus ahead or behind where the robot's own reach along its axis
+    (``Scan.obstacles``: seen from where the laser sits) stops short of range_max: a laser
+    mounted off the origin can look at a direction from the origin and still not see the axis
+    there (a 270-degree laser at (0.2, 0.2), yawed 45 degrees, sees nothing straight behind)."""
+    blind = blind_directions(scan.angles_rad)
+    points = scan.obstacles()
+    for name, seen_m, full_m in (
+        ("ahead", points.seen_ahead_m, scan.range_max_m + scan.mount_x_m),
+        ("behind", points.seen_behind_m, scan.range_max_m - scan.mount_x_m),
+    ):
+        if seen_m < full_m and name not in blind:
+            blind.append(name)
+    return blind
+
+
 def cmd_topic_warning(topic: str, cmd_type: str, subscriber_types: Sequence[str]) -> str | None:
     """What is wrong with who listens to our command topic, in one line (None: a subscriber
     takes our type). ROS 2 does not connect a publisher and a subscriber of different types, so

@@ -44,11 +44,11 @@ from egc_robot.drivers import SensorUpdate
 from egc_robot.ros2_core import (
     Rejected,
     Ros2Settings,
-    blind_directions,
     cmd_topic_warning,
     command_is_finite,
     odometry_from_ros,
     scan_from_laser,
+    unseen_directions,
 )
 
 log = logging.getLogger("egc.robot.ros2")
@@ -189,7 +189,7 @@ class Ros2Driver:
             result.obstacles()  # prepared here, off the command path
             if not self._coverage_logged:
                 self._coverage_logged = True
-                blind = blind_directions(result.angles_rad)
+                blind = unseen_directions(result)
                 if blind:
                     log.warning(
                         "the laser does not look %s: in shared mode the robot will not drive "

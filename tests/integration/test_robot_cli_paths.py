@@ -48,3 +48,14 @@ def test_a_driver_that_fails_to_open_leaves_no_process_behind():
     process exits instead of hanging on Zenoh's threads."""
     done = _robot("--map", "/nonexistent-egc-world.toml")
     assert done.returncode == 2 and "world file not found" in done.stderr
+
+
+def test_a_file_in_the_way_and_an_empty_path_are_named_as_such(tmp_path):
+    """Outside check: a regular file as the directory read 'directory ... does not exist', and
+    an empty path 'is a directory'."""
+    blocker = tmp_path / "afile"
+    blocker.write_text("")
+    done = _robot("--record", str(blocker / "x.rrd"))
+    assert done.returncode == 2 and "is not a directory" in done.stderr, done.stderr
+    done = _robot("--summary", "")
+    assert done.returncode == 2 and "an empty path" in done.stderr, done.stderr

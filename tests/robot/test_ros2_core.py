@@ -24,6 +24,7 @@ from egc_robot.ros2_core import (
     quaternion_from_yaw,
     ros2_settings,
     scan_from_laser,
+    unseen_directions,
     yaw_from_quaternion,
 )
 from hypothesis import given
@@ -539,3 +540,27 @@ def test_blind_sectors_and_what_a_laser_sees_along_the_axis():
     two_lasers = np.concatenate((front[:100], front[-100:]))  # a gap straight ahead as well
     assert seen_along_axis_m(two_lasers, 10.0) == (0.0, 0.0)
     assert seen_along_axis_m([0.0], 5.0) == (5.0, 0.0)
+
+
+def test_the_unseen_directions_are_those_of_the_laser_where_it_sits():
+    """Outside check: a 270-degree laser at (0.2, 0.2), yawed 45 degrees, kept the robot from
+    reversing (nothing seen behind along the axis) but the driver's line did not say so: the
+    directions were judged from the origin."""
+    beams = np.linspace(-0.75 * math.pi, 0.75 * math.pi, 541)
+    half = get_profile("jackal").half_size_m
+    laser = LaserPose(0.2, 0.2, 0.25 * math.pi)
+    scan = scan_from_laser(
+        np.full(541, 5.0), beams[0], beams[1] - beams[0], 0.05, 10.0, laser, 0, half
+    )
+    assert isinstance(scan, Scan)
+    assert blind_directions(scan.angles_rad) == []  # from the origin something looks back
+    assert unseen_directions(scan) == ["behind"]
+    centred = scan_from_laser(
+        np.full(541, 5.0), beams[0], beams[1] - beams[0], 0.05, 10.0, HERE, 0, half
+    )
+    assert isinstance(centred, Scan) and unseen_directions(centred) == ["behind"]
+    full = np.linspace(-math.pi, math.pi, 720, endpoint=False)
+    everywhere = scan_from_laser(
+        np.full(720, 5.0), -math.pi, full[1] - full[0], 0.05, 10.0, laser, 0, half
+    )
+    assert isinstance(everywhere, Scan) and unseen_directions(everywhere) == []
