@@ -39,6 +39,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from egc_common.cli_args import check_writable
 from egc_common.errors import UsageError
 from egc_common.transport import free_port
 
@@ -182,9 +183,7 @@ def run(args: argparse.Namespace) -> int:
         if not args.save.endswith(".rrd"):
             raise UsageError(f"--save needs a .rrd file name, got {args.save!r}")
         # Before the robot starts: the operator would refuse it only once the robot is up.
-        from egc_operator.viewer_target import check_writable  # imports Rerun
-
-        check_writable(Path(args.save), "--save")
+        check_writable(args.save, "--save")
     linked = args.up is not None or args.down is not None or args.scenario is not None
     proto = args.transport
     endpoint = f"{proto}/127.0.0.1:{free_port(proto)}"

@@ -62,6 +62,7 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from egc_common.cli_args import check_writable
 from egc_common.errors import UsageError
 from egc_common.messages import Telemetry
 from egc_common.profiles import PROFILES, get_profile
@@ -479,16 +480,6 @@ class EpisodeRecorder:
         self.view.close()
 
 
-def _check_record_path(path: str) -> None:
-    """``--record``: a file that can be written, checked before the episode runs (its
-    directory is not created)."""
-    try:  # Rerun is imported only when a recording is asked for
-        from egc_operator.viewer_target import check_writable
-    except ImportError:
-        return  # EpisodeRecorder says the view is missing
-    check_writable(Path(path), "--record")
-
-
 def run(args: argparse.Namespace) -> int:
     base = _settings_from_args(args)
     if args.batch or args.random_worlds is not None:
@@ -498,7 +489,7 @@ def run(args: argparse.Namespace) -> int:
     if not base.map:
         raise UsageError("--map is required (a map.yaml, a .toml world or a built-in name)")
     if args.record:
-        _check_record_path(args.record)
+        check_writable(args.record, "--record")
     _, summary = run_settings(base, record_path=args.record)
     if args.json:
         print(json.dumps(summary, allow_nan=False))

@@ -44,6 +44,7 @@ from typing import Any
 
 from egc_common import config as config_mod
 from egc_common import keys
+from egc_common.cli_args import check_writable
 from egc_common.clock_id import monotonic_clock_id
 from egc_common.errors import UsageError
 from egc_common.joystick import JoystickMapping
@@ -346,37 +347,12 @@ def _open_driver(args: argparse.Namespace, cfg: dict[str, Any], session: Any) ->
     )
 
 
-def _check_output_path(option: str, path: str | None) -> None:
-    """A file this run will write: its directory must exist and be writable, so a typo is one
-    line now, not a traceback when the run ends (or a directory made at the root)."""
-    if path is None:
-        return
-    if not path:
-        raise UsageError(f"{option}: an empty path")
-    target = Path(path)
-    parent = target.parent
-    if target.is_dir():
-        raise UsageError(f"{option} {path}: is a directory")
-    if parent.exists() and not parent.is_dir():
-        raise UsageError(f"{option} {path}: {parent} is not a directory")
-    if not parent.is_dir():
-        raise UsageError(f"{option} {path}: directory {parent} does not exist")
-    existed = target.exists()
-    try:  # the one reliable check (root passes os.access; /proc and read-only mounts do not)
-        with target.open("a", encoding="utf-8"):
-            pass
-    except OSError as exc:
-        raise UsageError(f"{option} {path}: not writable ({exc.strerror})") from None
-    if not existed:
-        target.unlink(missing_ok=True)
-
-
 def _open_recorder(args: argparse.Namespace) -> Recorder | None:
     if args.record is None:
         return None
     from egc_robot.blackbox import BlackBox
 
-    _check_output_path("--record", args.record)
+    check_writable(args.record, "--record")
     try:
         recorder: Recorder = BlackBox(
             args.record, args.robot, scan_decimation=args.record_scan_every
@@ -404,7 +380,8 @@ def run(args: argparse.Namespace) -> int:
         # DESIGN 11: a zero twist in HOLD; a ROS 2 base brakes at its own limits.
         controller_config = dataclasses.replace(controller_config, hold_ramp=False)
     rate_hz = 1.0 / controller_config.nominal_period_s
-    _check_output_path("--summary", args.summary)
+    if args.summary is not None:
+        check_writable(args.summary, "--summary")
     recorder = _open_recorder(args)  # a bad path: one line, before any session or driver opens
     session = open_session(options_from_args(args))
     try:

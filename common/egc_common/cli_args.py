@@ -8,7 +8,12 @@ list), not an option. argparse's own pattern accepts a single number only.
 from __future__ import annotations
 
 import argparse
+import errno
+import os
 import re
+from pathlib import Path
+
+from egc_common.errors import UsageError
 
 NEGATIVE_NUMBERS = re.compile(r"^-\d[\d.eE+\-]*(,[\-+]?[\d.eE+\-]+)*$|^-\.\d")
 
@@ -17,3 +22,33 @@ def numbers_are_values(parser: argparse.ArgumentParser) -> argparse.ArgumentPars
     """Make ``parser`` take ``-12.5,8.5,0`` as a value (see the module docstring)."""
     parser._negative_number_matcher = NEGATIVE_NUMBERS  # argparse's hook for this very check
     return parser
+
+
+def check_writable(path: str | Path, option: str) -> None:
+    """Raise UsageError unless ``path`` can be written: its directory exists (it is not
+    created) and a file can be created there (or the existing file opened for writing).
+
+    Every output file of every command is checked this way before anything starts, so a typo
+    is one line now, not a traceback when the run ends (or a directory made at the root).
+    Opening the file is the one reliable check: root passes ``os.access`` where /proc and
+    read-only mounts refuse the file.
+    """
+    if isinstance(path, str) and not path:
+        raise UsageError(f"{option}: an empty path")
+    target = Path(path)
+    parent = target.parent
+    if target.is_dir():
+        raise UsageError(f"{option} {path}: is a directory")
+    if parent.exists() and not parent.is_dir():
+        raise UsageError(f"{option} {path}: {parent} is not a directory")
+    if not parent.is_dir():
+        raise UsageError(f"{option} {path}: directory {parent} does not exist (create it first)")
+    existed = target.exists()
+    try:
+        with target.open("ab"):
+            pass
+    except OSError as exc:
+        reason = exc.strerror or os.strerror(exc.errno or errno.EIO)
+        raise UsageError(f"{option} {path}: not writable ({reason})") from None
+    if not existed:
+        target.unlink(missing_ok=True)

@@ -17,8 +17,6 @@ not open a window) is not an error: driving does not depend on it, the view says
 
 from __future__ import annotations
 
-import errno
-import os
 import shutil
 import socket
 import sys
@@ -30,6 +28,7 @@ from typing import Literal
 
 import rerun as rr
 import rerun.blueprint as rrb
+from egc_common.cli_args import check_writable
 from egc_common.errors import UsageError
 
 Kind = Literal["spawn", "serve_web", "connect", "save", "none"]
@@ -106,27 +105,6 @@ def choose_target(
     return ViewerTarget("save", path=default_save_path(robot_id, stamp), defaulted=True)
 
 
-def check_writable(path: Path, option: str = "--save") -> None:
-    """Raise UsageError unless ``path`` can be written: its directory exists (it is not
-    created) and a file can be created there (or the existing file opened for writing)."""
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.exists():
-        raise UsageError(f"{option} {path}: directory {parent} does not exist (create it first)")
-    if not parent.is_dir():
-        raise UsageError(f"{option} {path}: {parent} is not a directory")
-    if path.is_dir():
-        raise UsageError(f"{option} {path}: is a directory")
-    existed = path.exists()
-    try:
-        with open(path, "ab"):
-            pass
-    except OSError as exc:
-        reason = exc.strerror or os.strerror(exc.errno or errno.EIO)
-        raise UsageError(f"{option} {path}: cannot write there ({reason})") from None
-    if not existed:
-        path.unlink(missing_ok=True)
-
-
 def port_free(port: int) -> bool:
     """Nothing listens on TCP ``port`` (a server of ours could bind it)."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
@@ -141,7 +119,7 @@ def port_free(port: int) -> bool:
 def check_target(target: ViewerTarget) -> None:
     """Raise UsageError for a target that cannot work (see the module docstring)."""
     if target.kind == "save" and target.path is not None:
-        check_writable(target.path)
+        check_writable(target.path, "--save")
     if target.kind == "serve_web" and target.web_port is not None:
         for port, what in ((target.web_port, "web viewer"), (target.grpc_port, "its data")):
             if port is not None and not port_free(port):
