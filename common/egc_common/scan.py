@@ -94,7 +94,7 @@ class Scan:
             )
             if self.extra_xy_m is not None and len(self.extra_xy_m):
                 xy = np.concatenate((xy, np.asarray(self.extra_xy_m, np.float64).reshape(-1, 2)))
-            ahead_m, behind_m = _seen_along_axis_cached(
+            ahead_m, behind_m = seen_along_axis_cached(
                 self.angles_rad.tobytes(), self.range_max_m, self.mount_x_m, self.mount_y_m
             )
             cached = obstacle_points(xy, seen_ahead_m=ahead_m, seen_behind_m=behind_m)
@@ -235,6 +235,14 @@ def footprint_exit_m(
         ty = np.where(s != 0.0, (np.copysign(half_w_m, s) - mount_y_m) / s, np.inf)
     out: FloatArray = np.minimum(tx, ty)
     return out
+
+
+def carries_information(ranges_m: FloatArray, range_min_m: float, range_max_m: float) -> bool:
+    """Whether a scan says anything (REP 117): a valid reading, or a +-inf beam (nothing within
+    range_max, an object nearer than range_min). All NaN, all out of range, or no beams: no."""
+    with np.errstate(invalid="ignore"):
+        valid = (ranges_m >= range_min_m) & (ranges_m <= range_max_m)
+    return bool((valid | (np.abs(ranges_m) == np.inf)).any())
 
 
 def too_close_readings(
@@ -382,10 +390,11 @@ def seen_along_axis_m(
 
 
 @functools.lru_cache(maxsize=32)
-def _seen_along_axis_cached(
+def seen_along_axis_cached(
     angles: bytes, range_max_m: float, mount_x_m: float, mount_y_m: float
 ) -> tuple[float, float]:
-    """``seen_along_axis_m`` once per laser geometry: a sensor's scans all share theirs."""
+    """``seen_along_axis_m`` once per laser geometry (the beam angles' float64 bytes): a
+    sensor's scans all share theirs, a live one's and a log's alike."""
     a = np.frombuffer(angles, dtype=np.float64)
     return seen_along_axis_m(a, range_max_m, mount_x_m, mount_y_m)
 

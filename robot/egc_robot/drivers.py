@@ -16,7 +16,7 @@ from typing import Protocol
 
 import numpy as np
 from egc_common.messages import BaseCommand, Odometry, Rejection, RejectReason, ScanMessage
-from egc_common.scan import Scan, too_close_readings
+from egc_common.scan import Scan, carries_information, too_close_readings
 
 
 @dataclass(frozen=True, slots=True)
@@ -57,11 +57,7 @@ def scan_from_message(
     and the robot holds (``scan_timeout``).
     """
     ranges = message.ranges_m.astype(np.float64)
-    with np.errstate(invalid="ignore"):
-        informative = (np.abs(ranges) == np.inf) | (
-            (ranges >= message.range_min_m) & (ranges <= message.range_max_m)
-        )
-    if not informative.any():
+    if not carries_information(ranges, message.range_min_m, message.range_max_m):
         return Rejection(
             RejectReason.NO_INFORMATION,
             f"{ranges.size} beams, none valid, none +-inf (all NaN or out of range)",

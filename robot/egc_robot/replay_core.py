@@ -22,7 +22,6 @@ any other scan without a valid reading is unknown, which the filters treat as a 
 from __future__ import annotations
 
 import bisect
-import functools
 import itertools
 import math
 import statistics
@@ -37,7 +36,7 @@ from egc_common.profiles import RobotProfile
 from egc_common.scan import (
     ObstaclePoints,
     obstacle_points,
-    seen_along_axis_m,
+    seen_along_axis_cached,
     too_close_points,
 )
 
@@ -184,15 +183,6 @@ def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
-@functools.lru_cache(maxsize=16)
-def _seen_along_axis(
-    angle_min_rad: float, angle_increment_rad: float, beams: int, range_max_m: float
-) -> tuple[float, float]:
-    """``seen_along_axis_m`` once per laser geometry (a log's scans all share one)."""
-    angles = angle_min_rad + angle_increment_rad * np.arange(beams, dtype=np.float64)
-    return seen_along_axis_m(angles, range_max_m)
-
-
 def scan_points(scan: LogScan, footprint_half_m: tuple[float, float] | None = None) -> ScanPoints:
     """REP 117 ranges to points in {R}: finite readings within [range_min, range_max], plus
     ``-inf`` readings as obstacles at range_min (and, given the footprint's half length and
@@ -214,9 +204,7 @@ def scan_points(scan: LogScan, footprint_half_m: tuple[float, float] | None = No
         xy = np.concatenate((xy, near))
     free = rr_m.size == 0 and r.size > 0 and bool(np.all(np.isposinf(r)))
     closest = float(rr_m.min()) if rr_m.size else None
-    ahead_m, behind_m = _seen_along_axis(
-        scan.angle_min_rad, scan.angle_increment_rad, r.size, float(scan.range_max_m)
-    )
+    ahead_m, behind_m = seen_along_axis_cached(angles.tobytes(), float(scan.range_max_m), 0.0, 0.0)
     return ScanPoints(xy, free, closest, float(scan.range_max_m), ahead_m, behind_m)
 
 

@@ -43,7 +43,7 @@ from egc_common.ros2_topics import (
     DEFAULT_SCAN_TOPIC,
     default_topic,
 )
-from egc_common.scan import Scan, too_close_readings
+from egc_common.scan import Scan, carries_information, too_close_readings
 
 # Bounds on what a scan from the network may be; beyond them it is rejected, not processed.
 MAX_BEAMS = 100_000
@@ -216,10 +216,7 @@ def scan_from_laser(
     sign = -1.0 if pose.upside_down else 1.0
     angles = pose.yaw_rad + sign * beam_angles
     r, extra = too_close_readings(r, angles, range_min_m, pose.x_m, pose.y_m, footprint_half_m)
-    free = r == np.inf
-    with np.errstate(invalid="ignore"):
-        valid = (r >= range_min_m) & (r <= range_max_m)  # False for NaN and +inf
-    if not (free.any() or valid.any()):
+    if not carries_information(r, range_min_m, range_max_m):
         return Rejected(
             "no_information", f"{r.size} beams, none valid, none +inf (all NaN or out of range)"
         )

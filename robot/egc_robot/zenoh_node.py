@@ -60,36 +60,11 @@ class Recorder(Protocol):
     def close(self) -> None: ...
 
 
-class RejectionLog:
-    """Logs each rejection reason at most once per second, with the count since the last line."""
-
-    def __init__(self) -> None:
-        self._last_ns: dict[str, int] = {}
-        self._pending: Counter[str] = Counter()
-
-    def log(self, verdict: CommandVerdict, total: int, now_ns: int) -> None:
-        assert verdict.rejection is not None
-        reason = verdict.rejection.reason.value
-        last = self._last_ns.get(reason)
-        if last is not None and now_ns - last < _LOG_PERIOD_NS:
-            self._pending[reason] += 1
-            return
-        more = self._pending.pop(reason, 0)
-        self._last_ns[reason] = now_ns
-        log.warning(
-            "rejected command (%s) from %s: %s%s [rejected so far: %d]",
-            reason,
-            verdict.command.op if verdict.command is not None else "?",
-            verdict.rejection.detail,
-            f" (+{more} more {reason} since the last line)" if more else "",
-            total,
-        )
-
-
 class EventLog:
-    """At most one line per second per kind of event (liveliness, via points), with the count of
-    the lines held back: a peer declaring thousands of tokens, or sending thousands of routes,
-    must not flood the log (an outside check got 10,000 and 7,188 lines)."""
+    """At most one line per second per kind of event (liveliness, via points, each rejection
+    reason), with the count of the lines held back: a peer declaring thousands of tokens, or
+    sending thousands of routes, must not flood the log (an outside check got 10,000 and 7,188
+    lines)."""
 
     def __init__(self) -> None:
         self._last_ns: dict[str, int] = {}
@@ -103,6 +78,28 @@ class EventLog:
             return None
         self._last_ns[kind] = now_ns
         return self._held.pop(kind, 0)
+
+
+class RejectionLog:
+    """Logs each rejection reason at most once per second, with the count since the last line."""
+
+    def __init__(self) -> None:
+        self._events = EventLog()
+
+    def log(self, verdict: CommandVerdict, total: int, now_ns: int) -> None:
+        assert verdict.rejection is not None
+        reason = verdict.rejection.reason.value
+        more = self._events.allow(reason, now_ns)
+        if more is None:
+            return
+        log.warning(
+            "rejected command (%s) from %s: %s%s [rejected so far: %d]",
+            reason,
+            verdict.command.op if verdict.command is not None else "?",
+            verdict.rejection.detail,
+            f" (+{more} more {reason} since the last line)" if more else "",
+            total,
+        )
 
 
 class RobotNode:
