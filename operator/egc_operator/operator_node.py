@@ -159,8 +159,6 @@ class OperatorNode:
         # each, and a clock reply to a query sent before one is not this robot's.
         self._robot_epoch = 0
         self._map_wake = threading.Event()
-        self.map_received = False
-        self.maps_received = 0
         self.published = 0
         self._filter_default = filter_default
         self._planner = RoutePlanner(route)
@@ -329,8 +327,6 @@ class OperatorNode:
                         (world.origin_x_m, world.origin_y_m),
                         world.goal,
                     )
-                    self.map_received = True
-                    self.maps_received += 1
                     log.info("map %d x %d cells from the robot", *world.blocked.shape)
                     return True
         except Exception as exc:  # a closing session
