@@ -33,7 +33,6 @@ import itertools
 import json
 import math
 import os
-import re
 import subprocess
 import sys
 import time
@@ -46,6 +45,7 @@ from typing import Any
 from egc_common.errors import UsageError
 from egc_common.profiles import get_profile
 from egc_robot.pipeline import FILTERS
+from egc_sim.mrpb_tests import TESTS_FILE, parse_tests
 from egc_sim.route import plan_route
 from egc_sim.worlds import load_world
 
@@ -65,7 +65,6 @@ SUITE_PROFILE = {"hallway": "pioneer3dx", "mrpb": "pioneer3dx", "random": "jacka
 SUITE_VIA = {"hallway": "goal", "mrpb": "route", "random": "goal"}
 CODE_DIRS = ("robot/egc_robot", "sim_robot/egc_sim", "common/egc_common")
 CODE_FILES = ("egc_app/episode.py",)
-_TEST_RE = re.compile(r'name="(initial|goal)_pose_([xya])" default="([-0-9.eE+]+)"')
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,20 +85,16 @@ def mrpb_tests(
     mrpb_dir: Path = MRPB_DIR,
 ) -> list[tuple[str, Path, tuple[float, ...], tuple[float, ...]]]:
     """(name, map.yaml, start (x, y, yaw), goal (x, y)) of every MRPB test, in map order."""
-    out = []
-    for tests in sorted(mrpb_dir.glob("*/tests.txt")):
-        values: dict[tuple[str, str], float] = {}
-        number = 0
-        for kind, axis, value in _TEST_RE.findall(tests.read_text(encoding="utf-8")):
-            values[(kind, axis)] = float(value)
-            if (kind, axis) == ("goal", "a"):
-                number += 1
-                start = (values["initial", "x"], values["initial", "y"], values["initial", "a"])
-                goal = (values["goal", "x"], values["goal", "y"])
-                out.append(
-                    (f"{tests.parent.name}#{number}", tests.parent / "map.yaml", start, goal)
-                )
-    return out
+    return [
+        (
+            f"{tests.parent.name}#{number}",
+            tests.parent / "map.yaml",
+            test.start_pose,
+            test.goal_xy_m,
+        )
+        for tests in sorted(mrpb_dir.glob(f"*/{TESTS_FILE}"))
+        for number, test in enumerate(parse_tests(tests.read_text(encoding="utf-8")), start=1)
+    ]
 
 
 def _route_length(settings: EpisodeSettings) -> float:

@@ -17,6 +17,9 @@ channel in too, in scale mode it leaves it out) and ``c' = 255 - c`` when ``nega
 ``p = (255 - c') / 255``; the cell is **occupied** if ``p > occupied_thresh``, **free** if
 ``p < free_thresh``, and **unknown** otherwise. (In scale mode map_server gives the in-between
 cells a value 1-99; the simulator, which needs a yes/no answer, treats them as unknown.)
+
+A ``tests.txt`` beside the YAML (MRPB's start/goal tests, ``egc_sim.mrpb_tests``) gives the
+world its suggested start and goal: those of the first complete test.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ import yaml
 from PIL import Image, UnidentifiedImageError
 
 from egc_sim.grid_world import BoolGrid, World, WorldError, read_world_text
+from egc_sim.mrpb_tests import read_tests_beside
 
 MODES = ("trinary", "scale")
 REQUIRED_KEYS = ("image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
@@ -134,6 +138,8 @@ def load_map_yaml(path: str | Path) -> World:
 
     pixels = read_image(p.parent / image_name)
     occupied, unknown = classify_pixels(pixels, bool(negate), occupied_thresh, free_thresh, mode)
+    # MRPB ships its start/goal tests beside the map: the first one is the map's suggestion.
+    first = next(iter(read_tests_beside(p)), None)
     return World(
         name=p.parent.name if p.stem == "map" else p.stem,
         occupancy=occupied[::-1] | unknown[::-1],
@@ -141,4 +147,6 @@ def load_map_yaml(path: str | Path) -> World:
         resolution_m=resolution,
         origin_x_m=float(origin[0]),
         origin_y_m=float(origin[1]),
+        start_pose=None if first is None else first.start_pose,
+        goal=None if first is None else first.goal_xy_m,
     )

@@ -5,11 +5,13 @@ from __future__ import annotations
 import json
 
 import egc_robot.pipeline
+import numpy as np
 import pytest
 from egc_sim.episodes import OUTCOMES
 
 import egc_app.episode as episode
 from egc_app.cli import main
+from tests.sim.helpers import write_map_yaml
 
 PINNED = {
     "reached",
@@ -107,13 +109,33 @@ def test_stall_time_ends_a_deadlocked_episode(capsys):
         (["--map", "random:1", "--operator", "nope.csv"], "joystick file"),
         (["--random-worlds", "2", "--record", "out.rrd"], "single episode"),
         ([], "--map is required"),
-        (["--map", "office02"], "no start pose"),
     ],
 )
 def test_bad_arguments_exit_2_with_one_line(capsys, argv, message):
     code, out, err = run_cli(capsys, *argv, "--json")
     assert code == 2 and out == ""
     assert len(err.strip().splitlines()) == 1 and message in err
+
+
+def test_a_map_without_a_start_asks_for_one(tmp_path, capsys):
+    free = np.full((40, 40), 254, dtype=np.uint8)
+    map_yaml = write_map_yaml(tmp_path, free)  # no tests.txt beside it: no suggested start
+    code, out, err = run_cli(capsys, "--map", str(map_yaml), "--json")
+    assert code == 2 and out == ""
+    assert err.strip().splitlines() == [
+        f"egc-teleop episode: error: map {str(map_yaml)!r} suggests no start pose: "
+        "give --start X,Y,YAW"
+    ]
+
+
+def test_an_mrpb_map_starts_at_its_first_test(capsys):
+    # office02's tests.txt: test 1 starts at (-12.547, 8.542, 0) with its goal at (13.059, 1.702)
+    code, out, _ = run_cli(
+        capsys, "--map", "office02", "--operator", "forward", "--max-time", "1", "--json"
+    )
+    result = json.loads(out)
+    assert code == 0 and not result["collided"]
+    assert result["start"][:2] == pytest.approx([-12.547, 8.542], abs=0.01)
 
 
 def test_argparse_errors_exit_2(capsys):
