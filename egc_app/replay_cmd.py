@@ -14,7 +14,10 @@ writes it to ``--summary``) and saves the Rerun recording (``--record``) on the 
 timeline (``bag_time``, the recorder's receive time; ``stamp``, the scans' header stamps).
 
 A log that cannot be replayed (missing, not a bag, truncated, without the topics it needs, a
-topic of the wrong type) is one line on stderr naming the problem and exit code 2.
+topic of the wrong type, every scan corrupt) is one line on stderr naming the problem and exit
+code 2. A scan no sensor could have sent (``replay_core.scan_fault``: garbage from a damaged
+storage file) is skipped and counted (``scans_corrupt``), with one line on stderr. A folder
+without ``metadata.yaml`` that holds one ``.mcap``, ``.db3`` or ``.bag`` file replays that file.
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ from egc_robot.replay_core import (
     Replayer,
     ScanVerdict,
     VelocitySample,
+    scan_fault,
     scan_points,
     summarize,
     velocities_from_poses,
@@ -57,6 +61,7 @@ COMMAND_TYPES = (TWIST, TWIST_STAMPED)
 DEFAULT_SCAN_TOPIC = "/scan"
 DEFAULT_CMD_TOPIC = "/cmd_vel"
 DEFAULT_ODOM_TOPIC = "/odom"
+LOG_SUFFIXES = (".mcap", ".db3", ".bag")  # files a folder without metadata.yaml may hold
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -112,6 +117,7 @@ def run(args: argparse.Namespace) -> int:
     path = Path(args.log)
     if not path.exists():
         raise UsageError(f"{path}: no such file or directory")
+    path = log_file_in(path)
     for out in (args.record, args.summary):
         if out is not None and not Path(out).resolve().parent.is_dir():
             raise UsageError(f"{out}: its folder does not exist")
@@ -129,6 +135,31 @@ def run(args: argparse.Namespace) -> int:
             f"recording saved: {args.record} (open it with: rerun {args.record})", file=sys.stderr
         )
     return 0
+
+
+def log_file_in(path: Path) -> Path:
+    """``path`` itself, unless it is a folder without ``metadata.yaml`` (a ROS 2 bag whose
+    metadata was lost, or a folder holding a log): then its only ``.mcap``, ``.db3`` or
+    ``.bag`` file, said on stderr; UsageError when it holds none or several."""
+    if not path.is_dir() or (path / "metadata.yaml").exists():
+        return path
+    found = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in LOG_SUFFIXES)
+    if not found:
+        raise UsageError(
+            f"{path}: not a ROS 2 bag (no metadata.yaml) and no .mcap, .db3 or .bag file in it"
+        )
+    if len(found) > 1:
+        names = ", ".join(p.name for p in found)
+        raise UsageError(
+            f"{path}: no metadata.yaml and several log files ({names}): give one file, or "
+            "restore metadata.yaml to replay them as one bag"
+        )
+    print(
+        f"egc-teleop replay: {path} has no metadata.yaml: replaying its only log file, "
+        f"{found[0].name}",
+        file=sys.stderr,
+    )
+    return found[0]
 
 
 @contextlib.contextmanager
@@ -263,6 +294,10 @@ def _scans(reader: Any, topic: str) -> Iterator[LogScan]:
     connections = [c for c in reader.connections if c.topic == topic]
     for conn, log_ns, raw in reader.messages(connections=connections):
         m = reader.deserialize(raw, conn.msgtype)
+        # A damaged log's ranges may hold signalling NaNs: casting them is no warning here
+        # (scan_fault judges the values).
+        with np.errstate(invalid="ignore"):
+            ranges = np.asarray(m.ranges, dtype=np.float64)
         yield LogScan(
             log_ns,
             _stamp_ns(m),
@@ -270,7 +305,7 @@ def _scans(reader: Any, topic: str) -> Iterator[LogScan]:
             float(m.angle_increment),
             float(m.range_min),
             float(m.range_max),
-            np.asarray(m.ranges, dtype=np.float64),
+            ranges,
         )
 
 
@@ -303,6 +338,8 @@ def replay(
 
             recorder = ReplayRecording(record, path.name, replayer, topics.scan, topics.command)
         verdicts: list[ScanVerdict] = []
+        corrupt = 0
+        first_corrupt: tuple[int, str] | None = None  # index on the topic, why
         memory: object | None = None
         bar = tqdm(
             total=total or None,
@@ -314,7 +351,13 @@ def replay(
         )
         try:
             footprint = replayer.config.profile.half_size_m
-            for scan in _scans(reader, topics.scan):
+            for index, scan in enumerate(_scans(reader, topics.scan)):
+                fault = scan_fault(scan)
+                if fault is not None:
+                    corrupt += 1
+                    first_corrupt = first_corrupt or (index, fault)
+                    bar.update()
+                    continue
                 points = scan_points(scan, footprint)
                 command = track.at(scan.log_ns)
                 verdict, result, obstacles, memory = replayer.step(scan, points, command, memory)
@@ -326,6 +369,19 @@ def replay(
             bar.close()
             if recorder is not None:
                 recorder.close()
+    if first_corrupt is not None:
+        index, why = first_corrupt
+        what = f"{corrupt} of {corrupt + len(verdicts)} scans on {topics.scan!r}"
+        if not verdicts:
+            raise UsageError(
+                f"{path}: every scan is corrupt, nothing to replay ({what}; "
+                f"first, index {index}: {why})"
+            )
+        print(
+            f"egc-teleop replay: skipped {what} as corrupt, fields no sensor sends "
+            f"(first, index {index}: {why})",
+            file=sys.stderr,
+        )
     if not verdicts:
         raise UsageError(f"{path}: topic {topics.scan!r} has no scans")
     kind = "odometry poses" if topics.command_type == ODOMETRY else "twist"
@@ -336,6 +392,7 @@ def replay(
         "command_source": kind,
         "command_messages": command_messages,
         "scans_without_command": sum(1 for v in verdicts if not v.has_command),
+        "scans_corrupt": corrupt,
     }
     summary = summarize(verdicts, replayer.config.filter, replayer.config.profile.name, extra)
     out = summary.as_dict()

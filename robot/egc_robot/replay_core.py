@@ -17,6 +17,10 @@ Scans follow REP 117: ``+inf`` nothing within range_max (free), ``NaN`` no infor
 outside [range_min, range_max] are dropped. A scan whose every beam is ``+inf`` is free space;
 any other scan without a valid reading is unknown, which the filters treat as a reason to stop
 (DESIGN 5.9).
+
+A scan whose fields no sensor could have sent (``scan_fault``: a non-finite or absurd angle or
+range limit, range_min above range_max, a finite negative reading, or a finite one far beyond
+any sensor's reach) is a damaged log, not a reading: the IO layer skips and counts it.
 """
 
 from __future__ import annotations
@@ -50,6 +54,10 @@ MOVING = 0.01  # |v| (m/s) or |w| (rad/s) above this is a moving command
 MAX_GAP_S = 1.0  # a gap between scans (or poses) longer than this is not driving time
 ODOMETRY_MAX_AGE_S = 1.0  # a pose-derived velocity older than this is not known any more
 _NS = 1_000_000_000
+# Sanity bounds for ``scan_fault``: far beyond any real laser, well short of garbage floats.
+MAX_REACH_M = 1e6  # no sensor's range_max, nor a reading, is longer
+MAX_REACH_FACTOR = 1000.0  # no reading is longer than this many times range_max
+MAX_TURN_RAD = 4.0 * math.pi  # no scan starts, or sweeps, beyond two full turns
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -206,6 +214,47 @@ def scan_points(scan: LogScan, footprint_half_m: tuple[float, float] | None = No
     closest = float(rr_m.min()) if rr_m.size else None
     ahead_m, behind_m = seen_along_axis_cached(angles.tobytes(), float(scan.range_max_m), 0.0, 0.0)
     return ScanPoints(xy, free, closest, float(scan.range_max_m), ahead_m, behind_m)
+
+
+def scan_fault(scan: LogScan) -> str | None:
+    """Why ``scan`` cannot have come from a sensor, or None when it could.
+
+    A damaged log (bytes overwritten in a storage file without checksums) deserializes into
+    a scan whose numbers are garbage floats. Faults: angle_min or angle_increment not finite,
+    or beyond two turns (the beams together as well); several beams at one angle; range_min or
+    range_max not finite, negative, range_max zero or over ``MAX_REACH_M``; range_min above
+    range_max; a finite negative reading; a finite reading over ``MAX_REACH_FACTOR`` times
+    range_max or over ``MAX_REACH_M``. REP 117's encodings stay valid: ``+inf``, ``-inf``,
+    ``NaN``, and finite "no return" values just past range_max (range_max + 1 and the like).
+    """
+    a0, inc = scan.angle_min_rad, scan.angle_increment_rad
+    rmin, rmax = scan.range_min_m, scan.range_max_m
+    n = int(np.size(scan.ranges_m))
+    if not (math.isfinite(a0) and abs(a0) <= MAX_TURN_RAD):
+        return f"angle_min {a0:.3g} rad"
+    if not (math.isfinite(inc) and abs(inc) * max(n - 1, 1) <= MAX_TURN_RAD):
+        return f"angle_increment {inc:.3g} rad over {n} beams"
+    if n > 1 and inc == 0.0:
+        return f"angle_increment 0 over {n} beams"
+    if not (math.isfinite(rmin) and rmin >= 0.0):
+        return f"range_min {rmin:.3g} m"
+    if not (math.isfinite(rmax) and 0.0 < rmax <= MAX_REACH_M):
+        return f"range_max {rmax:.3g} m"
+    if rmin > rmax:
+        return f"range_min {rmin:.3g} m above range_max {rmax:.3g} m"
+    r = np.asarray(scan.ranges_m, dtype=np.float64).ravel()
+    reach_m = min(MAX_REACH_FACTOR * rmax, MAX_REACH_M)
+    with np.errstate(invalid="ignore"):
+        finite = np.isfinite(r)
+        negative = finite & (r < 0.0)
+        far = finite & (r > reach_m)
+    if negative.any():
+        i = int(np.argmax(negative))
+        return f"beam {i} reads {r[i]:.3g} m, negative"
+    if far.any():
+        i = int(np.argmax(far))
+        return f"beam {i} reads {r[i]:.3g} m, beyond any reach (range_max {rmax:.3g} m)"
+    return None
 
 
 def velocities_from_poses(

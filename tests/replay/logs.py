@@ -4,13 +4,15 @@
 wall ahead at ``wall_m[i]`` in scan ``i`` (beams that miss it read ``+inf``, REP 117's "free"),
 a few ``NaN`` beams behind, and the commanded velocity either on a Twist (or TwistStamped) topic
 or only as odometry poses, whose twist is left in a world frame turned by ``world_yaw_rad`` (as
-Stage's ground truth is), so only the poses give the forward speed.
+Stage's ground truth is), so only the poses give the forward speed. ``scan_at`` puts another
+scan (``garbled_ranges``: what a damaged storage file deserializes to) in place of scan ``i``,
+or leaves it out.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -46,12 +48,24 @@ def wall_ranges(wall_m: float, beams: int = BEAMS, nan_beams: int = 4) -> np.nda
     return r.astype(np.float32)
 
 
-def scan_msg(stamp_ns: int, ranges: np.ndarray, range_max_m: float = 8.0):
+def garbled_ranges(beams: int = BEAMS, seed: int = 7) -> np.ndarray:
+    """Random bytes read as float32 ranges, as a log with bytes written over its middle gives:
+    huge and tiny values of either sign, NaNs, and a signalling NaN (whose cast to float64 is
+    numpy's "invalid value" warning) at beam 0."""
+    raw = np.random.default_rng(seed).integers(0, 256, 4 * beams, dtype=np.uint8)
+    r = raw.view(np.float32).copy()
+    r.view(np.uint32)[0] = 0x7F800001  # signalling NaN
+    return r
+
+
+def scan_msg(
+    stamp_ns: int, ranges: np.ndarray, range_max_m: float = 8.0, angle_min_rad: float = -math.pi
+):
     n = len(ranges)
     return T["sensor_msgs/msg/LaserScan"](
         _header(stamp_ns, "laser"),
-        -math.pi,
-        math.pi - 2 * math.pi / n,
+        angle_min_rad,
+        angle_min_rad + 2 * math.pi - 2 * math.pi / n,
         2 * math.pi / n,
         0.0,
         0.1,
@@ -70,6 +84,7 @@ def corridor_log(
     command: str = "twist",  # "twist", "twist-stamped" or "odometry"
     world_yaw_rad: float = 1.0,
     scan_topic: str = "/scan",
+    scan_at: Mapping[int, object | None] | None = None,  # scan i: this LaserScan, or none
 ) -> Path:
     """Write the log; returns ``path`` (a bag directory)."""
     with Writer(path, version=9, storage_plugin=STORAGE[storage]) as w:
@@ -90,11 +105,12 @@ def corridor_log(
                 w.write(cmd, t - 1000, TS.serialize_cdr(msg, "geometry_msgs/msg/TwistStamped"))
             else:
                 w.write(cmd, t, odometry(t, i * v_mps * PERIOD_NS / 1e9, world_yaw_rad, v_mps))
-            w.write(
-                scans,
-                t,
-                TS.serialize_cdr(scan_msg(t, wall_ranges(wall)), "sensor_msgs/msg/LaserScan"),
-            )
+            msg = scan_msg(t, wall_ranges(wall))
+            if scan_at is not None and i in scan_at:
+                msg = scan_at[i]
+                if msg is None:
+                    continue
+            w.write(scans, t, TS.serialize_cdr(msg, "sensor_msgs/msg/LaserScan"))
     return path
 
 

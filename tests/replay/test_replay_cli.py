@@ -16,7 +16,15 @@ from egc_robot.pipeline import FILTERS
 from rosbags.rosbag2 import StoragePlugin, Writer
 
 from egc_app.cli import main
-from tests.replay.logs import PERIOD_NS, START_NS, TS, corridor_log, scan_msg, wall_ranges
+from tests.replay.logs import (
+    PERIOD_NS,
+    START_NS,
+    TS,
+    corridor_log,
+    garbled_ranges,
+    scan_msg,
+    wall_ranges,
+)
 from tests.view.rrd import read_recording
 
 MAPPING1 = Path(__file__).resolve().parents[2] / ".." / "shared" / "bags" / "Mapping1.bag"
@@ -243,3 +251,95 @@ def test_every_filter_of_the_family_replays(tmp_path, capsys, name):
         assert s["changed"] == 0 and s["hold_s"] == 0
     elif name != "dwa":  # dwa lets 0.12 m/s through: the robot could still stop before the wall
         assert s["changed"] > 0
+
+
+def _at(i: int) -> int:
+    return START_NS + i * PERIOD_NS
+
+
+def test_corrupt_scans_are_skipped_counted_and_named(tmp_path, capsys):
+    # Scan 5's angle_min is garbage; scan 12's ranges are random bytes (huge values of either
+    # sign, NaNs, a signalling NaN), as a log with bytes written over its middle deserializes.
+    garbled = {
+        5: scan_msg(_at(5), wall_ranges(2.0), angle_min_rad=1e30),
+        12: scan_msg(_at(12), garbled_ranges()),
+    }
+    log = corridor_log(tmp_path / "garbled", "mcap", scan_at=garbled)
+    clean = corridor_log(tmp_path / "clean", "mcap", scan_at={5: None, 12: None})
+    rrd = {name: tmp_path / f"{name}.rrd" for name in ("garbled", "clean")}
+    code, s, err = replay(capsys, str(log), "--record", str(rrd["garbled"]))
+    assert code == 0 and all(k in s for k in PINNED)
+    skipped = [line for line in err.splitlines() if not line.startswith("recording saved")]
+    assert skipped == [
+        "egc-teleop replay: skipped 2 of 30 scans on '/scan' as corrupt, fields no sensor sends "
+        "(first, index 5: angle_min 1e+30 rad)"
+    ], err
+    assert "Warning" not in err
+    code, ref, _ = replay(capsys, str(clean), "--record", str(rrd["clean"]))
+    assert code == 0 and ref["scans_corrupt"] == 0
+    assert s["scans_corrupt"] == 2 and s["scans"] == ref["scans"] == 28
+    for key in set(s) | set(ref):
+        if key not in ("log", "scans_corrupt"):
+            assert s[key] == ref[key], key
+    # scan by scan, the others went through the filter exactly as without the garbled ones
+    got, want = read_recording(rrd["garbled"]), read_recording(rrd["clean"])
+    for entity in ("/velocity/v/filtered", "/velocity/w/filtered", "/velocity/v/recorded"):
+        assert got[entity].column("Scalars:scalars") == want[entity].column("Scalars:scalars")
+
+
+def test_corrupt_scan_in_a_real_process_no_numpy_warning(tmp_path):
+    log = corridor_log(tmp_path / "log", "mcap", scan_at={12: scan_msg(_at(12), garbled_ranges())})
+    proc = subprocess.run(
+        [sys.executable, "-W", "default", "-m", "egc_app.cli", "replay", str(log)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 0 and json.loads(proc.stdout)["scans_corrupt"] == 1
+    assert proc.stderr.count("\n") == 1 and "Warning" not in proc.stderr, proc.stderr
+    assert "skipped 1 of 30 scans on '/scan' as corrupt" in proc.stderr
+    assert "(first, index 12: beam " in proc.stderr
+
+
+def test_every_scan_corrupt_is_a_bad_log(tmp_path, capsys):
+    garbled = {i: scan_msg(_at(i), garbled_ranges(seed=i)) for i in range(30)}
+    log = corridor_log(tmp_path / "log", "sqlite3", scan_at=garbled)
+    line = bad(capsys, str(log))
+    assert "every scan is corrupt" in line and "30 of 30 scans on '/scan'" in line
+    assert "first, index 0: beam " in line
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_folder_without_metadata_replays_its_only_log_file(tmp_path, capsys, storage):
+    log = corridor_log(tmp_path / "log", storage)
+    code, ref, _ = replay(capsys, str(log))
+    assert code == 0
+    (log / "metadata.yaml").unlink()
+    (storage_file,) = (f for f in log.iterdir())
+    code, s, err = replay(capsys, str(log))
+    assert code == 0 and s["log"] == str(storage_file)
+    assert err.splitlines() == [
+        f"egc-teleop replay: {log} has no metadata.yaml: replaying its only log file, "
+        f"{storage_file.name}"
+    ]
+    assert {k: v for k, v in s.items() if k != "log"} == {
+        k: v for k, v in ref.items() if k != "log"
+    }
+
+
+def test_folder_without_metadata_and_several_or_no_log_files(tmp_path, capsys):
+    log = corridor_log(tmp_path / "log", "mcap")
+    (log / "metadata.yaml").unlink()
+    (mcap,) = log.glob("*.mcap")
+    (log / "second.db3").write_bytes(b"")
+    line = bad(capsys, str(log))
+    assert f"{log}: no metadata.yaml and several log files ({mcap.name}, second.db3)" in line
+    assert "give one file, or restore metadata.yaml" in line
+    assert "Expected metadata file" not in line
+    notes = tmp_path / "notes"
+    notes.mkdir()
+    (notes / "readme.txt").write_text("not a bag\n")
+    line = bad(capsys, str(notes))
+    assert line.endswith(
+        f"{notes}: not a ROS 2 bag (no metadata.yaml) and no .mcap, .db3 or .bag file in it"
+    )

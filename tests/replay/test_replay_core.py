@@ -16,6 +16,7 @@ from egc_robot.replay_core import (
     ScanVerdict,
     VelocitySample,
     scan_durations_s,
+    scan_fault,
     scan_points,
     summarize,
     velocities_from_poses,
@@ -209,3 +210,55 @@ def test_each_scan_stands_alone_no_acceleration_ramp(d, w):
         (ref.v_cmd_mps, ref.w_cmd_radps), abs=1e-12
     )
     assert v.limiter == ref.limiter.value
+
+
+def test_scan_fault_accepts_what_sensors_send():
+    # REP 117's encodings, "no return" as range_max + 1 or a little more, readings below
+    # range_min (the blind zone), negative increments, a single beam, an empty scan
+    rep117 = [math.inf, -math.inf, math.nan, 6.0, 5.0 + 1.0, 0.0, 0.05, 4999.0]
+    assert scan_fault(scan(rep117)) is None
+    assert scan_fault(scan([1.0] * 720, angle_min=math.pi, inc=-2 * math.pi / 720)) is None
+    assert scan_fault(scan([1.0], inc=0.0)) is None and scan_fault(scan([])) is None
+    assert scan_fault(scan([0.2, 0.3 + 1.0], rmin=0.0, rmax=0.3)) is None  # a short-range one
+    assert scan_fault(scan([2.0, 3.0], rmin=2.0, rmax=2.0)) is None  # degenerate, not absurd
+
+
+@pytest.mark.parametrize(
+    ("fields", "why"),
+    [
+        ({"angle_min": math.nan}, "angle_min nan"),
+        ({"angle_min": 1e30}, "angle_min 1e+30"),
+        ({"inc": math.inf}, "angle_increment inf"),
+        ({"inc": 3.0e9}, "angle_increment 3e+09"),
+        ({"inc": 2.0}, "angle_increment 2 rad over 8 beams"),  # 14 rad: beyond two turns
+        ({"inc": 0.0}, "angle_increment 0 over 8 beams"),
+        ({"rmin": math.nan}, "range_min nan"),
+        ({"rmin": -0.5}, "range_min -0.5"),
+        ({"rmax": math.inf}, "range_max inf"),
+        ({"rmax": 0.0}, "range_max 0"),
+        ({"rmax": 2e38}, "range_max 2e+38"),
+        ({"rmin": 6.0}, "range_min 6 m above range_max 5 m"),
+    ],
+)
+def test_scan_fault_names_absurd_fields(fields, why):
+    fault = scan_fault(scan([1.0] * 8, **fields))
+    assert fault is not None and fault.startswith(why), fault
+
+
+def test_scan_fault_finite_negative_or_unreachable_readings():
+    # range_max 5 m: 5000 m is the limit (1000 x range_max)
+    assert scan_fault(scan([1.0, -0.01, 2.0])) == "beam 1 reads -0.01 m, negative"
+    assert scan_fault(scan([1.0, 2.0, 5001.0])).startswith("beam 2 reads 5e+03 m, beyond")
+    assert scan_fault(scan([1.97e38, -6.6e37])).startswith("beam 1 reads -6.6e+37 m")
+    # a long-range sensor: 1e6 m is the limit whatever range_max says
+    assert scan_fault(scan([2e5], rmax=900.0)) is None
+    assert scan_fault(scan([2e6], rmax=900.0)).startswith("beam 0 reads 2e+06 m, beyond")
+
+
+def test_scan_fault_raises_no_numpy_warning_on_signalling_nans():
+    raw = np.array([0x7F800001, 0xFF800001, 0x3F800000], dtype=np.uint32).view(np.float32)
+    with np.errstate(all="raise"):  # a warning would be an exception here
+        with np.errstate(invalid="ignore"):
+            ranges = raw.astype(np.float64)
+        assert scan_fault(scan(ranges)) is None  # NaNs (of any kind) are "no information"
+        assert scan_fault(scan(np.append(ranges, -3.0))) == "beam 3 reads -3 m, negative"
