@@ -52,6 +52,7 @@ from egc_common.messages import BaseCommand
 from egc_common.profiles import PROFILES, get_profile
 from egc_common.transport import (
     DEFAULT_ENDPOINT,
+    LEASE_MS,
     add_zenoh_arguments,
     open_session,
     options_from_args,
@@ -362,6 +363,29 @@ def _open_recorder(args: argparse.Namespace) -> Recorder | None:
     return recorder
 
 
+def resume_window_caveat(config: ControllerConfig, lease_ms: int | None) -> str | None:
+    """Why ``resume_window_s`` cannot take effect in full, or None when it can.
+
+    A gap longer than ``release_timeout_s``, or than the Zenoh lease (the operator's liveliness
+    token goes with it), ends the operator's session, and a new one needs a centred stick
+    (DESIGN 8) whatever the resume window says. ``lease_ms`` None: unknown (a config file).
+    """
+    if not config.link_aware:
+        return None
+    limits = [("safety.release_timeout_s", config.release_timeout_s)]
+    if lease_ms is not None:
+        limits.append(("the Zenoh lease (--lease-ms)", lease_ms / 1000.0))
+    name, limit_s = min(limits, key=lambda item: item[1])
+    if config.resume_window_s <= limit_s:
+        return None
+    return (
+        f"link.resume_window_s {config.resume_window_s:g} s is longer than {name} "
+        f"{limit_s:g} s: a link gap longer than {limit_s:g} s ends the operator's session and "
+        "needs a centred stick; to resume after longer gaps raise safety.release_timeout_s and "
+        "--lease-ms here and the operator's --lease-ms as well"
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=args.log_level, format="robot: %(message)s")
     try:
@@ -380,6 +404,12 @@ def run(args: argparse.Namespace) -> int:
         # DESIGN 11: a zero twist in HOLD; a ROS 2 base brakes at its own limits.
         controller_config = dataclasses.replace(controller_config, hold_ramp=False)
     rate_hz = 1.0 / controller_config.nominal_period_s
+    lease_ms = args.lease_ms
+    if lease_ms is None and args.zenoh_config is None:
+        lease_ms = LEASE_MS
+    caveat = resume_window_caveat(controller_config, lease_ms)
+    if caveat is not None:
+        log.warning("%s", caveat)
     if args.summary is not None:
         check_writable(args.summary, "--summary")
     recorder = _open_recorder(args)  # a bad path: one line, before any session or driver opens

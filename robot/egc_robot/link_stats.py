@@ -4,8 +4,8 @@ Fed with every decoded command of the operator in control (accepted or rejected 
 both arrived) and with the accepted ones' ages, it reports over a sliding window (1 s):
 
 - command age percentiles p50/p90 (arrival minus ``stamp_ns``, synchronised operators only);
-- the largest gap between arrivals, including the gap still open now (so it grows during an
-  outage);
+- the largest gap between arrivals that ends in the window, including the gap still open now
+  (so it grows during an outage, and a 2 s outage shows for a second after the link returns);
 - loss from ``seq`` gaps: 1 - received / expected, expected = the span of ``seq`` over the window;
 - the loop delay tau = p90 age + the operator's latest ``view_age_ms`` + ``reaction_time``,
   each unknown part counted as ``command_timeout`` (DESIGN 9).
@@ -50,6 +50,7 @@ class LinkStats:
         self._view_age_ms: float | None = None
         self._last_rx_ns: int | None = None
         self._seq_before: int | None = None  # the last seq that left the window
+        self._rx_before: int | None = None  # when that command arrived
         # Totals over the whole run (kept across sessions): commands that arrived, and seq
         # numbers skipped on the way (a late one that fills a gap takes one back).
         self.received_total = 0
@@ -64,6 +65,7 @@ class LinkStats:
         self._view_age_ms = None
         self._last_rx_ns = None
         self._seq_before = None
+        self._rx_before = None
         self._max_seq = None  # a new session numbers from 1 again
 
     def on_arrival(self, seq: int, rx_ns: int) -> None:
@@ -107,7 +109,7 @@ class LinkStats:
         gap_ms = None
         if self._last_rx_ns is not None:
             gap_ns = now_ns - self._last_rx_ns
-            previous = None
+            previous = self._rx_before
             for rx, _ in self._arrivals:
                 if previous is not None and rx - previous > gap_ns:
                     gap_ns = rx - previous
@@ -135,7 +137,7 @@ class LinkStats:
     def _expire(self, now_ns: int) -> None:
         horizon = now_ns - self._window_ns
         while self._arrivals and self._arrivals[0][0] < horizon:
-            _, seq = self._arrivals.popleft()
+            self._rx_before, seq = self._arrivals.popleft()
             self._seq_before = seq if self._seq_before is None else max(self._seq_before, seq)
         while self._ages and self._ages[0][0] < horizon:
             _, age = self._ages.popleft()

@@ -4,17 +4,20 @@ robot's and operator's real parameters (an unknown key fails loudly, so these st
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
 import pytest
 from egc_common import config as config_mod
 from egc_common.errors import UsageError
-from egc_common.transport import ZenohOptions, build_config
+from egc_common.profiles import get_profile
+from egc_common.transport import LEASE_MS, ZenohOptions, build_config
 from egc_operator.cli import JOYSTICK_KEYS, OPERATOR_KEYS
 from egc_operator.joystick_evdev import ButtonMap
 from egc_robot.controller import ControllerConfig
+from egc_robot.pipeline import PipelineConfig
 
-from egc_app.robot_cmd import ROBOT_TABLES, build_controller_config
+from egc_app.robot_cmd import ROBOT_TABLES, build_controller_config, resume_window_caveat
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 
@@ -109,3 +112,20 @@ def test_absurd_numbers_are_one_clear_error(override):
     args = argparse.Namespace(profile="pioneer3dx", filter="egc", rate_hz=None)
     with pytest.raises(UsageError):
         build_controller_config(args, config_mod.load(None, [override]))
+
+
+def test_a_resume_window_beyond_the_session_limits_is_named_at_start():
+    # An outside check: resume_window_s = 3 did nothing beyond 2 s, silently (the lease and
+    # release_timeout end the operator's session first).
+    defaults = ControllerConfig(PipelineConfig(get_profile("pioneer3dx")))
+    assert resume_window_caveat(defaults, LEASE_MS) is None  # 2 s = 2 s = 2 s, on purpose
+    longer = dataclasses.replace(defaults, resume_window_s=3.0)
+    text = resume_window_caveat(longer, LEASE_MS)
+    assert text is not None and "safety.release_timeout_s 2 s" in text and "--lease-ms" in text
+    released_later = dataclasses.replace(longer, release_timeout_s=4.0)
+    assert "the Zenoh lease (--lease-ms) 2.5 s" in (
+        resume_window_caveat(released_later, 2500) or ""
+    )
+    assert resume_window_caveat(released_later, 4000) is None
+    assert resume_window_caveat(released_later, None) is None  # lease unknown: a config file
+    assert resume_window_caveat(dataclasses.replace(longer, link_aware=False), 2000) is None

@@ -71,3 +71,16 @@ def test_run_totals_count_missing_seq_and_survive_a_new_session():
     stats.reset()
     feed(stats, [1, 3])  # a new session numbers from 1 again
     assert (stats.received_total, stats.missing_total) == (9, 4)
+
+
+def test_a_gap_longer_than_the_window_shows_once_it_ends():
+    # An outside check: after a 1.8 s outage the first telemetry said "gap max 1 ms", since the
+    # arrival before the gap had already left the 1 s window.
+    stats = LinkStats()
+    t = feed(stats, range(1, 11))
+    t_back = t + 1800 * MS
+    stats.on_arrival(11, t_back)
+    assert stats.figures(t_back).cmd_gap_max_ms == pytest.approx(1800)
+    assert stats.figures(t_back + 900 * MS).cmd_gap_max_ms == pytest.approx(1800)
+    t = feed(stats, range(12, 80), t0=t_back + 20 * MS)
+    assert stats.figures(t).cmd_gap_max_ms == pytest.approx(20)  # gone a second later
