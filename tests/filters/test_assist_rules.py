@@ -524,6 +524,36 @@ def test_rule_override():
     assert last.confidence == 1.0 and not last.modified
 
 
+def test_rule_override_yields_when_the_sweep_holds_it_still():
+    """The override sent, the base held still (the sweep): after ``override_yield_s`` the rules
+    drive again, and stay in charge while the stick stays in its cell; a stick moved to another
+    cell may win again. (An outside check: a steady stick held a Jackal at a wall for good.)"""
+    wall = line(0.5, -1.0, 0.5, 1.0)
+    mem = AssistMemory.initial()
+    rules = {}
+    r = None
+    for t in range(0, 4001, DT_MS):
+        # The base moves as the rules ask, and not at all when the override asks (the sweep).
+        sent = (0.0, 0.0) if r is None or r.rule == "override" else (r.v_mps, r.w_radps)
+        r = assist_step(mem, 1.0, 0.0, wall, None, t * MS, PARAMS, P, sent=sent)
+        mem = r.memory
+        rules[t] = r
+    first = min(t for t, r in rules.items() if r.rule == "override")
+    last = max(t for t, r in rules.items() if r.rule == "override")
+    yield_ms = PARAMS.override_yield_s * 1000
+    assert yield_ms - 2 * DT_MS <= last - first <= yield_ms + DT_MS
+    assert all(r.rule != "override" for t, r in rules.items() if t > last)
+    assert mem.override_spent
+    # The stick moved to another cell: the operator asks again, and wins again.
+    again = []
+    for t in range(4000 + DT_MS, 6001, DT_MS):
+        sent = (r.v_mps, r.w_radps) if r.rule != "override" else (0.0, 0.0)
+        r = assist_step(mem, 1.0, 0.6, wall, None, t * MS, PARAMS, P, sent=sent)
+        mem = r.memory
+        again.append(r.rule)
+    assert "override" in again
+
+
 def test_a_moving_stick_never_overrides():
     wall = line(0.5, -1.0, 0.5, 1.0)
     mem = AssistMemory.initial()

@@ -133,7 +133,11 @@ How each part maps to the paper
   the confidence histogram (same build and decay rates), the time the stick has been held in one
   cell *while the rules change the command* and the stick is not in line with the via point.
   Once that reaches ``override_confidence`` the stick's own eq. 4 command goes out (rule
-  ``override``). The pipeline's footprint sweep still keeps the robot off obstacles.
+  ``override``). The pipeline's footprint sweep still keeps the robot off obstacles. An override
+  the sweep has held still for ``override_yield_s`` is spent: the rules (and ``unblock``) drive
+  again until the stick moves to another cell or is centred. (Not in the paper, whose override
+  never met a robot it could not move: without it, a stick held steady at a wall stalls there
+  for good and the via points are never reached.)
 
 Rules (names reported in ``AssistResult.rule``), in the order they are tried
 -----------------------------------------------------------------------------
@@ -213,6 +217,9 @@ class AssistParams:
     confidence_build_s: float = 0.5
     confidence_decay_s: float = 0.15
     override_confidence: float = 0.9  # (1) steady-against-the-rules level for the override
+    # The override stopped by the sweep this long (s): it yields to the rules until the stick
+    # moves to another cell or is centred (a steady stick into a wall otherwise stalls for ever).
+    override_yield_s: float = 1.0
     align_tolerance_rad: float = math.radians(45.0)
     # Steering: w = gain * heading (1/s); the rules' angles (rad) and speed factors (1).
     heading_gain_per_s: float = 1.5
@@ -295,6 +302,7 @@ class AssistParams:
             "wall_max_s",
             "detour_step_rad",
             "unblock_try_s",
+            "override_yield_s",
             "way_half_width_m",
             "max_dt_s",
         )
@@ -386,7 +394,8 @@ class AssistMemory:
     (v, w) this step returned; ``blocked_s``: how long motion was asked for and none sent;
     ``escape``: the unblocking try under way (0 ahead, 1 turn, 2 back; -1 none), ``escape_s``
     how long it has run, ``escape_turn`` the turn the rules wanted when it began; ``freed_by``
-    / ``freed_ns``: the try that last freed the robot, and when.
+    / ``freed_ns``: the try that last freed the robot, and when; ``override_held_s``: how long
+    the sweep has held the override still; ``override_spent``: it yielded, for this stick cell.
     """
 
     counts: Grid = _ZERO_GRID
@@ -409,6 +418,8 @@ class AssistMemory:
     escape_turn: float = 0.0
     freed_by: int = -1
     freed_ns: int | None = None
+    override_held_s: float = 0.0
+    override_spent: bool = False
 
     @staticmethod
     def initial() -> AssistMemory:
@@ -741,6 +752,7 @@ def assist_step(
     cell = None if centred else stick_cell(phi, params.confidence_bins)
     confidence = update_confidence(memory.confidence, cell, dt, params)
     conf = 0.0 if cell is None else confidence[cell]
+    spent = memory.override_spent and cell is not None and cell == memory.stick_cell
     v_ref, w_ref = profile.v_max_mps * xs, profile.w_max_radps * ys
 
     def result(
@@ -754,6 +766,7 @@ def assist_step(
         gave_up: bool = False,
         detour: float = 0.0,
         unblock: tuple[float, int, float, float, int, int | None] = (0.0, -1, 0.0, 0.0, -1, None),
+        override_held_s: float = 0.0,
     ) -> AssistResult:
         turning = rule == "avoid-front" and heading is not None and v == 0.0
         turn = math.copysign(1.0, heading) if turning and heading is not None else 0.0
@@ -783,6 +796,8 @@ def assist_step(
             detour,
             (v, w),
             *unblock,
+            override_held_s,
+            spent,
         )
         modified = abs(v - v_ref) > _SAME or abs(w - w_ref) > _SAME
         return AssistResult(
@@ -895,8 +910,26 @@ def assist_step(
         contest = max(memory.contest - dt / params.confidence_decay_s, 0.0)
     else:
         contest = 0.0
+    if spent:
+        contest = 0.0
     if contest >= params.override_confidence and conf >= params.override_confidence:
-        return result(v_ref, w_ref, "override", phi, contest, (None, math.inf), bearing)
+        held_s = 0.0
+        if sent is not None and _motion(sent, profile) < params.unblock_below * _motion(
+            memory.asked, profile
+        ):
+            held_s = memory.override_held_s + dt
+        if held_s < params.override_yield_s:
+            return result(
+                v_ref,
+                w_ref,
+                "override",
+                phi,
+                contest,
+                (None, math.inf),
+                bearing,
+                override_held_s=held_s,
+            )
+        spent, contest = True, 0.0
     refused = sent is not None and _motion(sent, profile) < params.unblock_below * _motion(
         memory.asked, profile
     )
