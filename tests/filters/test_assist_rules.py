@@ -524,7 +524,7 @@ def test_rule_override():
     assert last.confidence == 1.0 and not last.modified
 
 
-def test_rule_override_yields_when_the_sweep_holds_it_still():
+def test_override_yields_when_the_sweep_holds_it_still():
     """The override sent, the base held still (the sweep): after ``override_yield_s`` the rules
     drive again, and stay in charge while the stick stays in its cell; a stick moved to another
     cell may win again. (An outside check: a steady stick held a Jackal at a wall for good.)"""
