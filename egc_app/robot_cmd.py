@@ -289,7 +289,9 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
         raise UsageError(str(exc)) from None
 
 
-def _ros2_settings(args: argparse.Namespace, cfg: dict[str, Any]) -> Ros2Settings:
+def _ros2_settings(
+    args: argparse.Namespace, cfg: dict[str, Any], need_rclpy: bool = True
+) -> Ros2Settings:
     """``--driver ros2``: settings from ``[ros2]`` and the flags, checked before anything opens;
     one line naming the extra if rclpy is missing."""
     from egc_robot.ros2_driver import require_rclpy
@@ -307,7 +309,8 @@ def _ros2_settings(args: argparse.Namespace, cfg: dict[str, Any]) -> Ros2Setting
         settings = ros2_settings(config_mod.section(cfg, "ros2", SECTIONS["ros2"]), flags)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    require_rclpy()
+    if need_rclpy:
+        require_rclpy()
     return settings
 
 
@@ -399,8 +402,10 @@ def run(args: argparse.Namespace) -> int:
     except config_mod.ConfigError as exc:
         raise UsageError(str(exc)) from None
     controller_config = build_controller_config(args, cfg)
+    # Bad ROS 2 flags are one line whatever the driver (a typo now, not on the day it runs on
+    # --driver ros2); without rclpy only --driver ros2 stops.
+    _ros2_settings(args, cfg, need_rclpy=args.driver == "ros2")
     if args.driver == "ros2":
-        _ros2_settings(args, cfg)  # bad settings or no rclpy: one line, before anything opens
         # DESIGN 11: a zero twist in HOLD; a ROS 2 base brakes at its own limits.
         controller_config = dataclasses.replace(controller_config, hold_ramp=False)
     rate_hz = 1.0 / controller_config.nominal_period_s

@@ -48,3 +48,34 @@ def test_an_unknown_option_that_looks_like_a_word_is_still_an_error(capsys):
         parser_for("episode").parse_args(["--start", "-x"])
     assert exc.value.code == 2
     assert "expected one argument" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("command", "option", "value", "dest"),
+    [
+        ("episode", "--goal", "-3,abc", "goal"),
+        ("episode", "--goal", "-nan,4", "goal"),
+        ("episode", "--goal", "-INF,4", "goal"),
+        ("episode", "--start", "-x,1,0", "start"),
+        ("robot", "--laser-pose", "-1,2,nan", "laser_pose"),
+    ],
+)
+def test_a_mistyped_coordinate_reaches_its_own_check(command, option, value, dest):
+    # An outside check: these said "expected one argument", not what is wrong with them.
+    assert getattr(parser_for(command).parse_args([option, value]), dest) == value
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["episode", "--map", "hallway", "--goal", "-3,abc"], "--goal X,Y must be 2"),
+        (["episode", "--map", "hallway", "--goal", "-nan,4"], "finite numbers, got '-nan,4'"),
+        (["robot", "--laser-pose", "-1,2,nan"], "laser pose must be X,Y,YAW"),
+    ],
+)
+def test_and_its_message_names_the_problem(capsys, argv, message):
+    from egc_app.cli import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]

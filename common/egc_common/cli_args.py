@@ -2,7 +2,9 @@
 
 Coordinates are typed the way people type them: ``--start -12.5,8.5,0`` and ``--goal -2,3``
 must work, so a leading minus followed by a digit is a number (also in a comma-separated
-list), not an option. argparse's own pattern accepts a single number only.
+list), not an option; so are ``-nan``, ``-inf`` and any comma list after one minus, so that a
+mistyped coordinate gets the option's own message, not "expected one argument". argparse's
+own pattern accepts a single number only.
 """
 
 from __future__ import annotations
@@ -15,7 +17,9 @@ from pathlib import Path
 
 from egc_common.errors import UsageError
 
-NEGATIVE_NUMBERS = re.compile(r"^-\d[\d.eE+\-]*(,[\-+]?[\d.eE+\-]+)*$|^-\.\d")
+# A minus then a digit, a point and a digit, or nan/inf, or a single minus and a comma later:
+# a value (so "-3,abc" reaches the option's own check and its message), never an option name.
+NEGATIVE_NUMBERS = re.compile(r"^-(\d|\.\d|nan|inf)|^-[^-][^=]*,", re.IGNORECASE)
 
 
 def numbers_are_values(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
