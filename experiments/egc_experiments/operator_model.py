@@ -43,6 +43,7 @@ from typing import IO, Any
 import numpy as np
 from egc_common import keys
 from egc_common.cli_args import numbers_are_values
+from egc_common.clock_id import monotonic_clock_id
 from egc_common.errors import UsageError
 from egc_common.joystick_file import JoystickSample
 from egc_common.messages import Telemetry
@@ -222,8 +223,17 @@ def main(argv: list[str] | None = None) -> int:
             else None
         )
         driver = ModelDriver(OperatorSide(model, args.mode, start), intent)
+        # One host (network namespaces share the kernel's clock): the robot's clock is ours, so
+        # clock sync needs no estimate, and command ages are the link's alone (as for a real
+        # operator on the robot's machine; Cristian's estimate was off by up to 22 ms here).
         node = OperatorNode(
-            session, args.robot, args.operator_id, driver, args.rate_hz, view=driver
+            session,
+            args.robot,
+            args.operator_id,
+            driver,
+            args.rate_hz,
+            view=driver,
+            clock_id=monotonic_clock_id(),
         )
         log.info("operator %s (%s) driving robot %s", args.operator_id, args.operator, args.robot)
         try:

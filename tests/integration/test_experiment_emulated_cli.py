@@ -83,3 +83,23 @@ def test_sigterm_mid_run_stops_every_process_and_removes_the_namespaces(tmp_path
     time.sleep(0.5)
     assert not _ours(str(tmp_path)), _ours(str(tmp_path))
     assert not _namespaces(proc.pid)
+
+
+def test_emulated_command_ages_are_the_links_own(tmp_path):
+    """Outside check: the emulated operator estimated the robot's clock (Cristian) where the
+    real operator knows it is its own (one kernel): ages were off the relay's by up to 22 ms."""
+    (tmp_path / "grid.toml").write_text(
+        'world = "hallway"\noperator = "forward"\nfilter = "egc"\nmax_time_s = 8\n'
+        '[[sweep]]\ntransport = "udp"\ndelay_ms = [80]\njitter_frac = [0.3]\n'
+    )
+    proc = subprocess.run(
+        [sys.executable, "-m", "egc_app.cli", "experiment", "--grid", "grid.toml",
+         "--out", "out", "--mode", "emulated"],
+        cwd=tmp_path, capture_output=True, text=True, timeout=200,
+        env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)),
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    (row,) = [json.loads(line) for line in (tmp_path / "out/runs.jsonl").read_text().splitlines()]
+    applied_ms = row["link"]["up"]["p50_ms"]  # what the relay held the operator's datagrams
+    assert 70 < applied_ms < 90
+    assert abs(row["cmd_age_p50_ms"] - applied_ms) < 4.0, (row["cmd_age_p50_ms"], applied_ms)
