@@ -384,7 +384,9 @@ def replay(
         )
     if not verdicts:
         raise UsageError(f"{path}: topic {topics.scan!r} has no scans")
-    kind = "odometry poses" if topics.command_type == ODOMETRY else "twist"
+    kind = {ODOMETRY: "odometry poses", TWIST_STAMPED: "twist-stamped"}.get(
+        topics.command_type, "twist"
+    )
     extra = {
         "log": str(path),
         "scan_topic": topics.scan,

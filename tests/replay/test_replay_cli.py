@@ -95,6 +95,7 @@ def test_ros2_log_wall_ahead(tmp_path, capsys, storage, command):
     assert s["changed"] > 0 and s["hold_s"] > 0 and s["max_cut_mps"] == pytest.approx(0.12)
     assert s["closest_m"] == pytest.approx(0.3, abs=1e-6)  # the wall, last scan
     assert s["command_topic"] == ("/odom" if command == "odometry" else "/cmd_vel")
+    assert s["command_source"] == {"odometry": "odometry poses"}.get(command, command)
     code, s, _ = replay(capsys, str(log), "--filter", "none")
     assert code == 0 and s["changed"] == 0 and s["hold_s"] == 0 and s["filter"] == "none"
 
