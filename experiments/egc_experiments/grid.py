@@ -240,7 +240,9 @@ def _seeds(where: str, value: object) -> list[int]:
 
 def _sweep_points(
     where: str, axes: dict[str, Any], worlds: dict[str, WorldEntry]
-) -> Iterator[RunPoint]:
+) -> Iterator[tuple[str, RunPoint]]:
+    """The sweep's run points, each with the ``world`` name it came from (a [worlds.NAME]
+    entry or a map)."""
     for key in ("world", "operator"):
         if key not in axes:
             raise GridError(f"{where}: no {key} (give it in the sweep or at the top level)")
@@ -266,7 +268,7 @@ def _sweep_points(
         jitter = v["delay_ms"] * v["jitter_frac"] if "jitter_frac" in v else v["jitter_ms"]
         outages = ((v["outage_start_s"], v["outage_s"]),) if v["outage_s"] > 0 else ()
         try:
-            yield RunPoint(
+            point = RunPoint(
                 world=entry.map,
                 operator=v["operator"],
                 filter=v["filter"],
@@ -289,6 +291,7 @@ def _sweep_points(
             )
         except ValueError as exc:
             raise GridError(f"{where}: {exc}") from None
+        yield v["world"], point
 
 
 def check_link(point: RunPoint) -> None:
@@ -322,6 +325,7 @@ def parse_grid(
     defaults = {k: v for k, v in data.items() if k in AXES}
     points: dict[str, RunPoint] = {}
     names: list[str] = []
+    world_of: dict[str, str] = {}  # point key -> the world name (maybe an entry) it came from
     for i, sweep in enumerate(sweeps, start=1):
         name = sweep.get("name", f"sweep {i}")
         if not isinstance(name, str):
@@ -336,10 +340,11 @@ def parse_grid(
             del axes["jitter_ms"]
         if "jitter_ms" in sweep and "jitter_frac" in defaults and "jitter_frac" not in sweep:
             del axes["jitter_frac"]
-        for point in _sweep_points(where, axes, worlds):
+        for world_name, point in _sweep_points(where, axes, worlds):
             key = point.key()
             if key in points:
                 continue
+            world_of[key] = world_name
             try:
                 check_link(point)
             except GridError as exc:
@@ -354,13 +359,20 @@ def parse_grid(
                 point.filter,
                 point.profile,
                 point.start,
+                point.goal,
             )
             if point.operator.startswith("route"):
-                ident += (point.goal, point.mode)
+                ident += (point.mode,)
             if ident in checked:
                 continue
             checked.add(ident)
-            check_point(point)
+            try:
+                check_point(point)
+            except GridError as exc:
+                name = world_of[point.key()]
+                if name not in worlds:  # a map named in the sweep: the message names it
+                    raise
+                raise GridError(f"{source}: [worlds.{name}]: {exc}") from None
     return Grid(description, tuple(names), tuple(points.values()))
 
 

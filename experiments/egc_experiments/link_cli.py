@@ -4,10 +4,12 @@
                     [--scenario FILE] [--stats FILE.json] [--duration S] [--quiet]
 
 Prints a ready line on stderr once listening, and per-direction counts when it stops (SIGINT,
-SIGTERM or ``--duration``; exit 0): forwarded, dropped, delay percentiles and send errors
-(sends the system refused, e.g. ECONNREFUSED from a target with nothing on its UDP port, or no
-route); ``--stats`` writes the same as JSON (``send_errors`` in each direction, and at the top
-level by direction). Bad input gives one line on stderr and exit 2.
+SIGTERM or ``--duration``; exit 0): forwarded, dropped, delay percentiles, in flight (held by
+the relay when it stopped or the connection closed, never delivered) and send errors (sends the
+system refused, e.g. ECONNREFUSED from a target with nothing on its UDP port, or no route);
+``--stats`` writes the same as JSON (``in_flight`` and ``send_errors`` in each direction, and
+``send_errors`` at the top level by direction). Bad input, ``--stats`` included, gives one line
+on stderr and exit 2 before anything runs.
 
 Our ``udp/`` transport is two links on one port number (``egc_common.transport``): best-effort
 datagrams on UDP and Zenoh's reliable control traffic on TCP. So a ``udp/`` relay also relays
@@ -31,6 +33,7 @@ import sys
 import time
 from pathlib import Path
 
+from egc_common.cli_args import check_writable
 from egc_common.errors import UsageError
 
 from egc_experiments.link_model import Schedule, SpecError, load_scenario, parse_spec
@@ -124,8 +127,8 @@ def build_relay(args: argparse.Namespace) -> Relay:
         raise UsageError(f"--connect {connect}: port 0 is not a target")
     if args.duration is not None and not args.duration > 0:
         raise UsageError(f"--duration must be > 0 seconds, got {args.duration}")
-    if args.stats and not Path(args.stats).resolve().parent.is_dir():
-        raise UsageError(f"--stats {args.stats}: the folder does not exist")
+    if args.stats is not None:  # a directory or an unwritable path: now, not after the run
+        check_writable(args.stats, "--stats")
     up, down = _schedules(args)
     log = (lambda line: None) if args.quiet else None
     try:

@@ -48,6 +48,10 @@ PARETO_ALPHA: Final = 3.0
 _PARETO_MEAN: Final = PARETO_ALPHA / (PARETO_ALPHA - 1.0)
 _PARETO_STD: Final = math.sqrt(PARETO_ALPHA / ((PARETO_ALPHA - 1.0) ** 2 * (PARETO_ALPHA - 2.0)))
 UDP_QUEUE_LIMIT: Final = 1000
+# Bounds no link study reaches: beyond them a value is a typo (delay=1e15) and the relay would
+# hold every packet for ever (or overflow its timers) and forward nothing, silently.
+MAX_DELAY_MS: Final = 600_000.0  # delay and jitter: 10 minutes
+MIN_RATE_KBITPS: Final = 1.0  # a rate limit below 1 kbit/s (rate=0 is no limit)
 TCP_LOSS_MESSAGE: Final = (
     "loss is not possible on a TCP link: a TCP connection retransmits what is lost; "
     "use udp/ endpoints to emulate loss, or outage= for a link that stops"
@@ -61,6 +65,22 @@ class SpecError(ValueError):
 def _check_number(name: str, value: float) -> None:
     if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
         raise SpecError(f"{name} must be a finite number >= 0, got {value!r}")
+
+
+def _check_size(key: str, value: float, text: str, label: str = "") -> None:
+    """SpecError unless ``value`` (of SPEC key ``key``, written ``text``; ``label``: its name
+    where it is written, e.g. a trace column) is within the bounds a link study can use: delay
+    and jitter at most ``MAX_DELAY_MS``, a rate of 0 (no limit) or at least ``MIN_RATE_KBITPS``."""
+    if key in ("delay", "jitter") and value > MAX_DELAY_MS:
+        raise SpecError(
+            f"{label or key}={text.strip()} ms is more than {MAX_DELAY_MS:g} ms (10 minutes), "
+            "beyond any link to study"
+        )
+    if key == "rate" and 0 < value < MIN_RATE_KBITPS:
+        raise SpecError(
+            f"rate={text.strip()} kbit/s is below {MIN_RATE_KBITPS:g} kbit/s, the slowest rate "
+            "(leave rate out, or rate=0, for no limit)"
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,6 +105,12 @@ class LinkSpec:
     def __post_init__(self) -> None:
         for name in ("delay_ms", "jitter_ms", "loss_pct", "burst", "rate_kbitps"):
             _check_number(name, getattr(self, name))
+        for key, value in (
+            ("delay", self.delay_ms),
+            ("jitter", self.jitter_ms),
+            ("rate", self.rate_kbitps),
+        ):
+            _check_size(key, value, f"{value:g}")
         if self.dist not in DISTS:
             raise SpecError(f"dist must be one of {', '.join(DISTS)}, got {self.dist!r}")
         if self.loss_pct > 100:
@@ -211,6 +237,7 @@ def parse_spec(text: str) -> LinkSpec:
             raise SpecError(f"{key}= given twice in SPEC {text!r}")
         if key in ("delay", "jitter"):
             values[key] = _parse_number(key, value, ("ms",))
+            _check_size(key, values[key], value.strip().removesuffix("ms").strip())
         elif key == "loss":
             loss = _parse_number(key, value, ("%",))
             if loss > 100:
@@ -218,6 +245,7 @@ def parse_spec(text: str) -> LinkSpec:
             values[key] = loss
         elif key in ("burst", "rate"):
             values[key] = _parse_number(key, value)
+            _check_size(key, values[key], value.strip())
         elif key == "dist":
             dist = value.strip()
             if dist not in DISTS:
@@ -363,11 +391,13 @@ def parse_trace(text: str, source: str = "trace") -> Trace:
         try:
             t_s = _parse_number("t_s", cell["t_s"])
             delay = _parse_number("delay_ms", cell["delay_ms"])
+            _check_size("delay", delay, cell["delay_ms"], "delay_ms")
             loss = _parse_number("loss", cell["loss"])
             if loss > 100:
                 raise SpecError(f"loss={cell['loss']} is a percentage in [0, 100]")
             if "jitter_ms" in cell:
                 jitters.append(_parse_number("jitter_ms", cell["jitter_ms"]))
+                _check_size("jitter", jitters[-1], cell["jitter_ms"], "jitter_ms")
         except SpecError as exc:
             raise SpecError(f"{source}:{n}: {exc}") from None
         if rows and t_s <= rows[-1].t_s:
@@ -653,6 +683,11 @@ class DirectionStats:
     this direction the system reported as failed (``ECONNREFUSED`` after an ICMP port
     unreachable from the far end, no route to host, a full buffer); a datagram whose send failed
     at once is in neither ``forwarded`` nor ``dropped`` (the link model's losses).
+    ``in_flight``: packets the link model let through that were still held (delayed, or queued
+    behind a rate limit) when the relay stopped or their connection closed, so never delivered.
+    So every packet a direction read is forwarded, dropped, in flight or a send refused at once
+    (a TCP direction counts chunks as read; a refusal reported later by ICMP is a send error of
+    a packet already forwarded).
     """
 
     forwarded: int
@@ -665,6 +700,7 @@ class DirectionStats:
     late_p99_ms: float | None = None
     late_max_ms: float | None = None
     send_errors: int = 0
+    in_flight: int = 0
 
     @classmethod
     def from_samples(
@@ -674,6 +710,7 @@ class DirectionStats:
         delays_ms: Iterable[float],
         lateness_ms: Iterable[float] = (),
         send_errors: int = 0,
+        in_flight: int = 0,
     ) -> DirectionStats:
         """Summarise the observed delays (and scheduling lateness) of one direction."""
         delays = sorted(delays_ms)
@@ -693,6 +730,7 @@ class DirectionStats:
             late_p99_ms=pct(late, 99),
             late_max_ms=late[-1] if late else None,
             send_errors=send_errors,
+            in_flight=in_flight,
         )
 
     @property
@@ -715,6 +753,7 @@ class DirectionStats:
             "late_p99_ms": self.late_p99_ms,
             "late_max_ms": self.late_max_ms,
             "send_errors": self.send_errors,
+            "in_flight": self.in_flight,
         }
 
     def line(self, name: str) -> str:
@@ -730,4 +769,5 @@ class DirectionStats:
         )
         if self.late_p99_ms is not None:
             text += f"; late p99 {self.late_p99_ms:.3f} max {ms(self.late_max_ms)} ms"
+        text += f"; in flight at stop {self.in_flight}"
         return text + f"; send errors {self.send_errors}"

@@ -154,12 +154,15 @@ class Recorder:
     ``send_errors``: sends of this direction that failed (``DirectionStats``); on a connected
     UDP socket the kernel reports an ICMP error for an earlier datagram on the next send or
     receive, so the receive side counts those for the direction that sent through that socket.
+    ``in_flight``: packets still held by a lane when it closed (relay stop, connection closed),
+    never delivered.
     """
 
     def __init__(self, seed: int) -> None:
         self.forwarded = 0
         self.dropped = 0
         self.send_errors = 0
+        self.in_flight = 0
         self.delays_ms = array.array("d")
         self.late_ms = array.array("d")
         self.max_delay_ms = 0.0
@@ -184,7 +187,12 @@ class Recorder:
     def stats(self) -> DirectionStats:
         """The summary; the maxima are exact even when the reservoir is full."""
         s = DirectionStats.from_samples(
-            self.forwarded, self.dropped, self.delays_ms, self.late_ms, self.send_errors
+            self.forwarded,
+            self.dropped,
+            self.delays_ms,
+            self.late_ms,
+            self.send_errors,
+            self.in_flight,
         )
         if not self.forwarded:
             return s
@@ -199,6 +207,7 @@ class Recorder:
             s.late_p99_ms,
             self.max_late_ms,
             self.send_errors,
+            self.in_flight,
         )
 
 
@@ -283,7 +292,7 @@ class Lane:
         while heap and heap[0][0] <= now:
             due, _, read_at, data = heapq.heappop(heap)
             if data is None:
-                self._heap.clear()
+                self._discard()
                 if self._on_eof is not None:
                     self._on_eof()
                 return
@@ -306,10 +315,16 @@ class Lane:
             return False
         return True
 
-    def close(self) -> None:
-        """Forget what is queued and stop the timer."""
-        self.closed = True
+    def _discard(self) -> None:
+        """Empty the heap, counting the packets in it as in flight (never delivered)."""
+        self._rec.in_flight += sum(1 for entry in self._heap if entry[3] is not None)
         self._heap.clear()
+        self.queued_bytes = 0
+
+    def close(self) -> None:
+        """Forget what is queued (counted in flight: never delivered) and stop the timer."""
+        self.closed = True
+        self._discard()
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None

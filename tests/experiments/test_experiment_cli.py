@@ -141,6 +141,14 @@ def test_a_rerun_skips_what_is_done_and_redoes_a_cut_line(tmp_path, capsys):
             TINY.replace("delay_ms = [0, 200]", 'delay_ms = "fast"'),
             "delay_ms values must be numbers",
         ),
+        # Outside check: a goal off the map ran (exit 0) to 'timeout', goal_distance_m 698.
+        (
+            TINY.replace('"random:2"', '"x"')
+            + '[worlds.x]\nmap = "office02"\nstart = [-7, -1, 1.5708]\ngoal = [500, 500]\n',
+            "grid.toml: [worlds.x]: goal 500,500 is outside map 'office02' "
+            "(x -15 to 15, y -15 to 15 m)",
+        ),
+        (TINY.replace("delay_ms = [0, 200]", "delay_ms = [0, 1e15]"), "more than 600000 ms"),
     ],
 )
 def test_bad_grids_exit_2_with_one_line_and_write_nothing(tmp_path, capsys, grid_text, message):

@@ -158,6 +158,19 @@ def test_unknown_names_are_found_before_running(axes, message):
         grid(f"[[sweep]]\n{axes}\n", check=True)
 
 
+def test_a_goal_outside_its_map_is_one_line_naming_the_world_entry():
+    """As ``egc-teleop episode`` says it, with the [worlds.NAME] entry it came from; a goal on
+    the map (or on its edge) passes, and a bad start pose is named the same way."""
+    text = "[worlds.far]\nmap='hallway'\ngoal={goal}\n[[sweep]]\nworld='far'\noperator='goal'\n"
+    message = r"g.toml: \[worlds.far\]: goal 1000,-3 is outside map 'hallway' \(x -0.2 to 18.2, y"
+    with pytest.raises(GridError, match=message) as info:
+        grid(text.format(goal="[1000, -3]"), check=True)
+    assert "\n" not in str(info.value)
+    assert grid(text.format(goal="[18.2, 2]"), check=True).points[0].goal == (18.2, 2.0)
+    with pytest.raises(GridError, match=r"\[worlds.far\]: world 'hallway': start pose"):
+        grid(text.format(goal="[5, 2]").replace("goal=", "start=[500, 0, 0]\ngoal="), check=True)
+
+
 def test_files_that_are_not_grids(tmp_path):
     with pytest.raises(GridError, match="does not exist"):
         load_grid(tmp_path / "missing.toml")

@@ -210,6 +210,36 @@ def test_udp_send_errors_are_counted_per_direction_and_printed(tmp_path: Path) -
     assert stats["send_errors"] == {"up": errors, "down": 0}  # the earlier key, kept
 
 
+def test_what_is_still_delayed_at_stop_is_counted_in_flight(tmp_path: Path) -> None:
+    """Outside check: delay=5000, 50 datagrams, SIGTERM at 4.4 s printed 'up: forwarded 0,
+    dropped 0' (and the same JSON). What the relay still held is now counted, per direction."""
+    stats_file = tmp_path / "stats.json"
+    sink = UdpSink(echo=True)
+    try:
+        with link(
+            "--listen", "udp/127.0.0.1:0", "--connect", f"udp/127.0.0.1:{sink.port}",
+            "--up", "delay=3000", "--down", "delay=100", "--stats", str(stats_file),
+            "--udp-only", "--quiet",
+        ) as relay, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as client:  # fmt: skip
+            for _ in range(20):
+                client.sendto(b"ping", ("127.0.0.1", relay.port))
+                time.sleep(0.01)
+            time.sleep(0.5)
+            err = relay.stop()
+    finally:
+        sink.close()
+    assert sink.got == [], err
+    assert re.search(r"^link: up: forwarded 0, dropped 0 .*; in flight at stop 20; ", err, re.M)
+    assert re.search(r"^link: down: forwarded 0, .*; in flight at stop 0; ", err, re.M), err
+    stats = json.loads(stats_file.read_text())
+    assert (stats["up"]["forwarded"], stats["up"]["dropped"], stats["up"]["in_flight"]) == (
+        0,
+        0,
+        20,
+    )
+    assert stats["down"]["in_flight"] == 0 and stats["send_errors"] == {"up": 0, "down": 0}
+
+
 def test_udp_outage_drops_and_tcp_outage_delays() -> None:
     sink = UdpSink(echo=False)
     with link(
@@ -365,6 +395,26 @@ def test_bad_inputs_exit_2_with_one_line(tmp_path: Path) -> None:
             "not valid TOML": [*ok, "--scenario", str(bad_toml)],
             "leave out --up and --down": [*ok, "--scenario", str(bad_toml), "--up", "delay=1"],
             "the following arguments are required: --connect": ["--listen", "tcp/127.0.0.1:0"],
+            # Outside check: a directory as --stats ran the whole session and failed at exit.
+            f"--stats {tmp_path}: is a directory": [*ok, "--stats", str(tmp_path)],
+            "--stats .*/no/s.json: directory .* does not exist": [
+                *ok,
+                "--stats",
+                str(tmp_path / "no" / "s.json"),
+            ],
+            # Outside check: absurd sizes were taken, then nothing was forwarded.
+            r"--up 'delay=1e308': delay=1e308 ms is more than 600000 ms \(10 minutes\)": [
+                *ok,
+                "--up",
+                "delay=1e308",
+            ],
+            "--down 'delay=1e15': delay=1e15 ms is more than 600000 ms": [
+                *ok,
+                "--down",
+                "delay=1e15",
+            ],
+            "jitter=1e308 ms is more than 600000 ms": [*ok, "--up", "jitter=1e308"],
+            "rate=1e-300 kbit/s is below 1 kbit/s": [*ok, "--up", "rate=1e-300"],
         }
         for message, args in cases.items():
             assert re.search(message, one_line_exit_2(*args)), (message, args)

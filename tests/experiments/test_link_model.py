@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 from egc_experiments.link_model import (
+    MAX_DELAY_MS,
+    MIN_RATE_KBITPS,
     UDP_QUEUE_LIMIT,
     DirectionStats,
     LinkModel,
@@ -211,6 +213,8 @@ def test_trace_replays_with_zero_order_hold() -> None:
         ("t_s,delay_ms,loss\n0,x,0\n", "trace:2: delay_ms='x' is not a number"),
         ("t_s,delay_ms,loss\n0,1,101\n", "percentage"),
         ("t_s,delay_ms,loss\n0,1\n", "expected 3 columns"),
+        ("t_s,delay_ms,loss\n0,1,0\n5,1e15,0\n", "trace:3: delay_ms=1e15 ms is more than 600000"),
+        ("t_s,delay_ms,loss,jitter_ms\n0,1,0,1e308\n", "trace:2: jitter_ms=1e308 ms is more"),
     ],
 )
 def test_trace_errors(text: str, message: str | None) -> None:
@@ -237,6 +241,13 @@ def test_trace_errors(text: str, message: str | None) -> None:
         ("outage=5+0", "duration must be > 0"),
         ("outage=1+5,outage=3+1", "outages overlap"),
         ("reorder=maybe", "must be 1 or 0"),
+        # Outside check: absurd sizes were taken, and then nothing was ever forwarded.
+        ("delay=1e308", r"delay=1e308 ms is more than 600000 ms \(10 minutes\)"),
+        ("delay=1e15", "delay=1e15 ms is more than 600000 ms"),
+        ("delay=600000.5ms", "delay=600000.5 ms is more than 600000 ms"),
+        ("jitter=1e308", "jitter=1e308 ms is more than 600000 ms"),
+        ("rate=1e-300", r"rate=1e-300 kbit/s is below 1 kbit/s.*rate=0, for no limit"),
+        ("rate=0.999", "rate=0.999 kbit/s is below 1 kbit/s"),
     ],
 )
 def test_spec_errors_are_clear(spec: str, message: str) -> None:
@@ -262,6 +273,21 @@ def test_spec_parses_every_key_and_round_trips() -> None:
     assert parse_spec(spec.to_text()) == spec
     assert parse_spec("") == LinkSpec() and parse_spec("  ").perfect
     assert parse_spec("loss=5,burst=1") == LinkSpec(loss_pct=5, burst=1)
+
+
+def test_spec_sizes_are_bounded_where_no_link_study_goes() -> None:
+    """Delay and jitter up to 10 minutes and a rate from 1 kbit/s (or 0, no limit) are taken,
+    beyond that one line: in SPECs, in a LinkSpec built directly, in scenarios and traces."""
+    assert (MAX_DELAY_MS, MIN_RATE_KBITPS) == (600_000.0, 1.0)
+    spec = parse_spec("delay=600000,jitter=600000ms,rate=1")
+    assert (spec.delay_ms, spec.jitter_ms, spec.rate_kbitps) == (600_000, 600_000, 1)
+    assert parse_spec("rate=0").rate_kbitps == 0
+    for kwargs in ({"delay_ms": 1e15}, {"jitter_ms": 6e5 + 1}, {"rate_kbitps": 1e-300}):
+        with pytest.raises(SpecError, match=r"600000 ms|below 1 kbit/s"):
+            LinkSpec(**kwargs)  # type: ignore[arg-type]
+    # A 10-minute delay still gives a finite arrival the relay can schedule.
+    slowest = parse_spec("delay=600000,rate=1")
+    assert LinkModel(slowest, seed=0, ordered=True).transit(0.0, 125) == pytest.approx(601.0)
 
 
 def test_tcp_link_refuses_loss_with_a_clear_message() -> None:
@@ -335,6 +361,9 @@ def test_scenario_with_traces(tmp_path: Path) -> None:
         ('trace = "x.csv"\n[[phase]]\nstart_s = 0\n', "not both"),
         ("delay = 5\n", "unknown key"),
         ("[[phase]]\nstart_s = 0\nup = 5\n", "must be a SPEC string"),
+        ('[[phase]]\nstart_s = 0\nboth = "jitter=1e308"\n', "phase 1 up: jitter=1e308 ms is"),
+        ('[[phase]]\nstart_s = 0\ndown = "rate=1e-300"\n', "phase 1 down: rate=1e-300 kbit/s"),
+        ('trace = "x.csv"\nup_base = "delay=1e15"\n', "up_base: delay=1e15 ms is more than"),
     ],
 )
 def test_scenario_errors(tmp_path: Path, text: str | None, message: str) -> None:
@@ -382,3 +411,30 @@ def test_a_refused_send_is_a_send_error_not_a_forwarded_packet() -> None:
         .line("down")
         .endswith("; send errors 3")
     )
+
+
+def test_what_a_lane_still_holds_when_it_closes_is_counted_in_flight() -> None:
+    """Outside check: delay=5000, 50 datagrams, SIGTERM at 4.4 s printed 'forwarded 0,
+    dropped 0'. What the lane held (delayed, or behind a rate limit) is now in_flight, in the
+    line and the JSON, so forwarded + dropped + in_flight + send_errors is what was read."""
+    import asyncio
+
+    from egc_experiments.relay import Lane, Recorder
+
+    loop = asyncio.new_event_loop()
+    try:
+        recorder = Recorder(seed=0)
+        sent: list[bytes] = []
+        model = LinkModel(parse_spec("delay=5000,loss=20"), seed=3, ordered=False)
+        lane = Lane(loop, model, 0.0, sent.append, recorder)
+        for i in range(50):
+            lane.push(b"x", i * 0.02)
+        lane.close()
+    finally:
+        loop.close()
+    stats = recorder.stats()
+    assert sent == [] and stats.forwarded == 0 and stats.dropped == model.dropped_total > 0
+    assert stats.in_flight == model.forwarded == 50 - stats.dropped
+    assert stats.to_dict()["in_flight"] == stats.in_flight
+    assert f"; in flight at stop {stats.in_flight}; send errors 0" in stats.line("up")
+    assert DirectionStats.from_samples(1, 0, [1.0]).to_dict()["in_flight"] == 0
