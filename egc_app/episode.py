@@ -209,12 +209,9 @@ def run_settings(
     goal = settings.goal or world.goal
     if goal is None:
         raise UsageError(f"map {settings.map!r} suggests no goal: give --goal X,Y")
-    x0, y0 = world.origin
-    if not (x0 <= goal[0] <= x0 + world.width_m and y0 <= goal[1] <= y0 + world.height_m):
-        raise UsageError(
-            f"goal {goal[0]:g},{goal[1]:g} is outside map {settings.map!r} (x {x0:g} to "
-            f"{x0 + world.width_m:g}, y {y0:g} to {y0 + world.height_m:g} m)"
-        )
+    outside = world.outside_message(goal, "goal", settings.map)
+    if outside is not None:
+        raise UsageError(outside)
     tolerance = settings.goal_tolerance_m or world.goal_tolerance_m or DEFAULT_GOAL_TOLERANCE_M
     mode = "direct" if settings.filter == "none" else "shared"
     # The simulated lidar declares "no return" as free: within its range it truly is.

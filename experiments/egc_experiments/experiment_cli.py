@@ -61,7 +61,7 @@ from egc_common.profiles import PROFILES, get_profile
 from egc_robot.pipeline import FILTERS
 from egc_sim.operators import make_operator
 from egc_sim.simulator import Simulator
-from egc_sim.worlds import World, WorldError, load_world
+from egc_sim.worlds import WorldError, load_world
 
 from egc_experiments.grid import Grid, GridError, load_grid
 from egc_experiments.report import PLOT_FILES, write_plots, write_report
@@ -90,21 +90,6 @@ def run_key(run_mode: str, point: RunPoint) -> str:
     return f"{run_mode}:{point.key()}"
 
 
-def goal_outside_map(world: World, goal: tuple[float, float], name: str) -> str:
-    """The message of ``egc-teleop episode`` for a goal outside the map's bounds, or "".
-
-    The same test and words as ``egc_app.episode.run_settings``, which has it inline (nothing
-    to import): a goal outside the grid can never be reached, so each run would time out."""
-    x0, y0 = world.origin
-    x1, y1 = x0 + world.width_m, y0 + world.height_m
-    if x0 <= goal[0] <= x1 and y0 <= goal[1] <= y1:
-        return ""
-    return (
-        f"goal {goal[0]:g},{goal[1]:g} is outside map {name!r} "
-        f"(x {x0:g} to {x1:g}, y {y0:g} to {y1:g} m)"
-    )
-
-
 def check_point(point: RunPoint) -> None:
     """Everything a run needs exists: filter, profile, world (start fits, goal inside the
     map), operator."""
@@ -120,8 +105,8 @@ def check_point(point: RunPoint) -> None:
     goal = point.goal or world.goal
     if start is None or goal is None:
         raise GridError(f"world {point.world!r} has no start or goal of its own: give them")
-    outside = goal_outside_map(world, goal, point.world)
-    if outside:
+    outside = world.outside_message(goal, "goal", point.world)
+    if outside is not None:
         raise GridError(outside)
     profile = get_profile(point.profile)
     try:

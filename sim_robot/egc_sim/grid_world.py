@@ -113,6 +113,20 @@ class World:
         """World pose (x_m, y_m) of the lower-left corner of the lower-left cell (map_server)."""
         return (self.origin_x_m, self.origin_y_m)
 
+    def outside_message(self, xy: tuple[float, float], what: str, name: str) -> str | None:
+        """One line saying ``what`` at ``xy`` lies outside this map (named ``name``), or None.
+
+        A goal there can never be reached: every run would time out (``episode`` and
+        ``experiment`` refuse it up front with these words)."""
+        x0, y0 = self.origin
+        x1, y1 = x0 + self.width_m, y0 + self.height_m
+        if x0 <= xy[0] <= x1 and y0 <= xy[1] <= y1:
+            return None
+        return (
+            f"{what} {xy[0]:g},{xy[1]:g} is outside map {name!r} "
+            f"(x {x0:g} to {x1:g}, y {y0:g} to {y1:g} m)"
+        )
+
     @property
     def free(self) -> BoolGrid:
         """Cells the robot may occupy (map_server's 0)."""
