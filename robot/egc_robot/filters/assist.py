@@ -910,14 +910,14 @@ def assist_step(
         contest = max(memory.contest - dt / params.confidence_decay_s, 0.0)
     else:
         contest = 0.0
+    # Motion asked for last cycle and (almost) none sent: the sweep refused it.
+    refused = sent is not None and _motion(sent, profile) < params.unblock_below * _motion(
+        memory.asked, profile
+    )
     if spent:
         contest = 0.0
     if contest >= params.override_confidence and conf >= params.override_confidence:
-        held_s = 0.0
-        if sent is not None and _motion(sent, profile) < params.unblock_below * _motion(
-            memory.asked, profile
-        ):
-            held_s = memory.override_held_s + dt
+        held_s = memory.override_held_s + dt if refused else 0.0
         if held_s < params.override_yield_s:
             return result(
                 v_ref,
@@ -930,9 +930,6 @@ def assist_step(
                 override_held_s=held_s,
             )
         spent, contest = True, 0.0
-    refused = sent is not None and _motion(sent, profile) < params.unblock_below * _motion(
-        memory.asked, profile
-    )
     blocked_s, escape, escape_s = 0.0, -1, 0.0
     freed_by, freed_ns = memory.freed_by, memory.freed_ns
     if memory.escape >= 0:  # an escape under way: its try runs out, or the sweep refuses it
