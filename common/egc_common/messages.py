@@ -174,15 +174,43 @@ def _f32_array(
     return arr.reshape(-1, width) if width > 1 else arr
 
 
-def _unpack(payload: object, max_bytes: int) -> Mapping[Any, Any]:
+class _NotFlatError(Exception):
+    """A map inside a message that has none (``_unpack(flat=True)``)."""
+
+
+def _flat_map_hook() -> Callable[[dict[Any, Any]], dict[Any, Any]]:
+    """An ``object_hook`` that lets one map through, the message's own (the outermost map is
+    the last one msgpack finishes), and stops the unpacker at any map inside it."""
+    seen = [False]
+
+    def hook(obj: dict[Any, Any]) -> dict[Any, Any]:
+        if seen[0]:
+            raise _NotFlatError
+        seen[0] = True
+        return obj
+
+    return hook
+
+
+def _unpack(payload: object, max_bytes: int, flat: bool = False) -> Mapping[Any, Any]:
+    """``flat``: the message is one map of scalars and bytes (a scan): any array or inner map
+    is refused as soon as its header is read, so a payload of millions of tiny containers
+    (seconds of unpacking, in the receive path) costs no more than its first few bytes."""
     if isinstance(payload, memoryview):
         payload = payload.tobytes()
     if not isinstance(payload, (bytes, bytearray)):
         raise _InvalidError(RejectReason.WRONG_TYPE, "payload must be bytes")
     if len(payload) > max_bytes:
         raise _InvalidError(RejectReason.TOO_LARGE, f"{len(payload)} bytes > limit {max_bytes}")
+    limits: dict[str, Any] = {}
+    if flat:
+        limits = {"max_array_len": 0, "max_map_len": 64, "object_hook": _flat_map_hook()}
     try:
-        obj = msgpack.unpackb(bytes(payload), raw=False, strict_map_key=False, timestamp=0)
+        obj = msgpack.unpackb(
+            bytes(payload), raw=False, strict_map_key=False, timestamp=0, **limits
+        )
+    except _NotFlatError:
+        raise _InvalidError(RejectReason.WRONG_TYPE, "a map inside the message") from None
     except Exception as exc:  # msgpack raises many types (ExtraData, ValueError, ...)
         raise _InvalidError(
             RejectReason.NOT_MSGPACK, f"not msgpack: {type(exc).__name__}"
@@ -204,10 +232,10 @@ T = TypeVar("T")
 
 
 def _decode(
-    payload: object, max_bytes: int, build: Callable[[Mapping[Any, Any]], T]
+    payload: object, max_bytes: int, build: Callable[[Mapping[Any, Any]], T], flat: bool = False
 ) -> T | Rejection:
     try:
-        return build(_unpack(payload, max_bytes))
+        return build(_unpack(payload, max_bytes, flat))
     except _InvalidError as exc:
         return exc.rejection
     except RecursionError:
@@ -651,7 +679,7 @@ def _build_scan(m: Mapping[Any, Any]) -> ScanMessage:
 
 
 def decode_scan(payload: object) -> ScanMessage | Rejection:
-    return _decode(payload, MAX_SCAN_BYTES, _build_scan)
+    return _decode(payload, MAX_SCAN_BYTES, _build_scan, flat=True)
 
 
 @dataclass(frozen=True, slots=True)

@@ -269,6 +269,9 @@ def too_close_readings(
     return ranges_m, extra
 
 
+_MAX_TOO_CLOSE_PLACES = 64  # per -inf beam (see too_close_points)
+
+
 def too_close_points(
     angles_rad: FloatArray,
     range_min_m: float,
@@ -295,6 +298,9 @@ def too_close_points(
     t0 = footprint_exit_m(a, mount_x_m, mount_y_m, half_l, half_w) + gap_m
     span = np.clip(range_min_m - t0, 0.0, None)
     n = int(np.ceil(span.max() / step_m)) + 1 if span.size else 0
+    # Every step_m up to a lidar's usual range_min (~1 m); a range_min of kilometres (a broken
+    # message) would ask for millions of places per beam, and gigabytes: spread them instead.
+    n = min(n, _MAX_TOO_CLOSE_PLACES)
     if n == 0:
         return np.empty((0, 2), dtype=np.float64)
     frac = np.linspace(0.0, 1.0, n) if n > 1 else np.zeros(1)

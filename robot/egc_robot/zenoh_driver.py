@@ -19,6 +19,7 @@ from egc_common.messages import (
     BaseCommand,
     Odometry,
     Rejection,
+    RejectReason,
     decode_odometry,
     decode_scan,
 )
@@ -54,6 +55,12 @@ class ZenohDriver:
         ]
 
     def _on_scan(self, sample: zenoh.Sample) -> None:
+        try:
+            self._take_scan(sample)
+        except Exception as exc:  # nothing from the network raises out of the receive path
+            self._count(Rejection(RejectReason.OUT_OF_RANGE, f"unusable scan: {exc}"), "scan")
+
+    def _take_scan(self, sample: zenoh.Sample) -> None:
         now_ns = time.monotonic_ns()
         decoded = decode_scan(payload_bytes(sample))
         if isinstance(decoded, Rejection):

@@ -111,3 +111,18 @@ def test_scan_points_are_prepared_once_and_read_only():
     np.testing.assert_allclose(first.xy, [[1.0, 0.0], [-2.0, 0.0]], atol=1e-12)
     with pytest.raises(ValueError):
         first.xy[0, 0] = 5.0
+
+
+def test_minus_inf_beams_of_an_absurd_range_min_stay_a_few_places_each():
+    # An outside check: 20 -inf beams with range_min 9999 m (a broken message) sampled every
+    # 2 cm asked for 10 million places and 1.4 GB. At most 64 places a beam now, the nearest
+    # (where the beam leaves the footprint) always among them.
+    from egc_common.scan import too_close_points
+
+    angles = np.linspace(-0.2, 0.2, 20)
+    half = (PIONEER3DX.length_m / 2, PIONEER3DX.width_m / 2)
+    pts = too_close_points(angles, 9999.0, 0.0, 0.0, half)
+    assert 0 < len(pts) <= 20 * 64
+    assert np.all(np.isfinite(pts))
+    near = too_close_points(angles, 0.5, 0.0, 0.0, half)  # an ordinary range_min
+    assert pts[:, 0].min() == pytest.approx(near[:, 0].min(), abs=1e-3)  # the front edge

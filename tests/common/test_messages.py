@@ -289,6 +289,28 @@ def test_other_messages_round_trip():
     np.testing.assert_array_equal(back.ranges_m, ranges)  # no-return readings survive the wire
 
 
+@pytest.mark.parametrize(
+    "extra",
+    [
+        [1, 2, 3],
+        {"a": 1},
+        [[]] * 1000,
+    ],
+)
+def test_a_scan_is_one_flat_map(extra):
+    """A scan holds scalars and bytes only: a container in it is refused at its header. (An
+    outside check: 4 MB of empty arrays took 1.2 s to unpack in the receive path, and froze
+    the robot that long; see _unpack's flat mode.)"""
+    fields = {"v": 1, "stamp_ns": 3, "angle_min_rad": -1.0, "angle_increment_rad": 0.01}
+    fields |= {"range_min_m": 0.1, "range_max_m": 10.0, "ranges_m": b"\0\0\0\0" * 4}
+    assert isinstance(decode_scan(msgpack.packb(fields | {"x": 1.0})), ScanMessage)
+    rejected = decode_scan(msgpack.packb(fields | {"x": extra}))
+    assert isinstance(rejected, Rejection)
+    assert rejected.reason in (RejectReason.NOT_MSGPACK, RejectReason.WRONG_TYPE)
+    bomb = b"\xdd" + (4 * 1024 * 1024 - 10).to_bytes(4, "big") + b"\x90" * (4 * 1024 * 1024 - 10)
+    assert decode_scan(bomb).reason is RejectReason.NOT_MSGPACK  # at the header, not NOT_A_MAP
+
+
 def test_map_round_trips_bit_packed_and_rejects_mismatches():
     grid = np.random.default_rng(1).random((37, 53)) > 0.7
     m = MapMessage(
