@@ -94,8 +94,13 @@ class Scan:
             )
             if self.extra_xy_m is not None and len(self.extra_xy_m):
                 xy = np.concatenate((xy, np.asarray(self.extra_xy_m, np.float64).reshape(-1, 2)))
-            ahead_m, behind_m = seen_along_axis_cached(
-                self.angles_rad.tobytes(), self.range_max_m, self.mount_x_m, self.mount_y_m
+            ahead_m, behind_m = seen_along_axis_of_scan(
+                self.angles_rad,
+                self.ranges_m,
+                self.range_min_m,
+                self.range_max_m,
+                self.mount_x_m,
+                self.mount_y_m,
             )
             cached = obstacle_points(xy, seen_ahead_m=ahead_m, seen_behind_m=behind_m)
             for array in (cached.xy, cached.x, cached.y, cached.r2):
@@ -403,6 +408,32 @@ def seen_along_axis_cached(
     sensor's scans all share theirs, a live one's and a log's alike."""
     a = np.frombuffer(angles, dtype=np.float64)
     return seen_along_axis_m(a, range_max_m, mount_x_m, mount_y_m)
+
+
+def seen_along_axis_of_scan(
+    angles_rad: FloatArray,
+    ranges_m: npt.ArrayLike,
+    range_min_m: float,
+    range_max_m: float,
+    mount_x_m: float = 0.0,
+    mount_y_m: float = 0.0,
+) -> tuple[float, float]:
+    """``seen_along_axis_m`` of the beams that told something in this scan.
+
+    A beam that read NaN or below range_min (REP 117: an error, no information) did not see
+    its direction: a run of them wider than ``BLIND_GAP_SPACINGS`` beam spacings is a blind
+    sector like the one behind a 270-degree laser (an obstacle whose beams all fail, a black
+    or glass wall, must not read as free space ahead). ``+inf``, ``-inf`` and readings past
+    range_max did tell (no return, too close). A scan whose beams all told shares its
+    laser's cached geometry.
+    """
+    angles = np.asarray(angles_rad, dtype=np.float64)
+    r = np.asarray(ranges_m, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        failed = np.isnan(r) | (r < range_min_m) & np.isfinite(r)
+    if failed.any():
+        angles = angles[~failed]
+    return seen_along_axis_cached(angles.tobytes(), range_max_m, mount_x_m, mount_y_m)
 
 
 def obstacle_points(

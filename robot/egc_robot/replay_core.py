@@ -40,7 +40,7 @@ from egc_common.profiles import RobotProfile
 from egc_common.scan import (
     ObstaclePoints,
     obstacle_points,
-    seen_along_axis_cached,
+    seen_along_axis_of_scan,
     too_close_points,
 )
 
@@ -212,7 +212,9 @@ def scan_points(scan: LogScan, footprint_half_m: tuple[float, float] | None = No
         xy = np.concatenate((xy, near))
     free = rr_m.size == 0 and r.size > 0 and bool(np.all(np.isposinf(r)))
     closest = float(rr_m.min()) if rr_m.size else None
-    ahead_m, behind_m = seen_along_axis_cached(angles.tobytes(), float(scan.range_max_m), 0.0, 0.0)
+    ahead_m, behind_m = seen_along_axis_of_scan(
+        angles, r, float(scan.range_min_m), float(scan.range_max_m)
+    )
     return ScanPoints(xy, free, closest, float(scan.range_max_m), ahead_m, behind_m)
 
 

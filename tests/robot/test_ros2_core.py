@@ -564,3 +564,33 @@ def test_the_unseen_directions_are_those_of_the_laser_where_it_sits():
         np.full(720, 5.0), -math.pi, full[1] - full[0], 0.05, 10.0, laser, 0, half
     )
     assert isinstance(everywhere, Scan) and unseen_directions(everywhere) == []
+
+
+@pytest.mark.parametrize("failed", [math.nan, 0.0, -1.0])
+@pytest.mark.parametrize("filter_name", ["egc", "ek-egc", "assist", "dwa"])
+def test_a_wall_whose_beams_all_fail_is_not_free_space(failed, filter_name):
+    """An outside fuzz: a wall across a corridor 0.45 m ahead, its 147 beams reading NaN (or 0,
+    or -1: below range_min, errors per REP 117), and the robot drove at it at full speed, the
+    failed beams simply dropped. A run of beams that told nothing is a direction the laser did
+    not see, as the blind cone behind a 270-degree laser: no travel that way."""
+    profile = get_profile("pioneer3dx")
+    half = profile.half_size_m
+    cfg = PipelineConfig(profile, filter=filter_name, no_return_is_free=True)
+    beam = -math.pi + (2 * math.pi / 360) * np.arange(360)
+    with np.errstate(divide="ignore"):
+        side = np.where(np.sin(beam) != 0, 1.5 / np.abs(np.sin(beam)), np.inf)
+        wall = np.where(np.cos(beam) > 0, 0.45 / np.cos(beam), np.inf)
+    ranges = np.minimum(side, 10.0 + 1.0)  # beyond range_max: no return (free)
+    hidden = wall < side
+    ranges[hidden] = failed
+    scan = scan_from_laser(ranges, beam[0], beam[1] - beam[0], 0.05, 10.0, LaserPose(), 0, half)
+    assert isinstance(scan, Scan)
+    out = step_command(cfg, 1.0, 0.0, "shared", scan.obstacles(), (0.0, 0.0), 0.05)
+    assert out.v_cmd_mps <= 1e-12, out
+    # One failed beam straight ahead tells nothing about a wall: the robot drives on.
+    one = np.minimum(side, 11.0)
+    one[180] = failed
+    scan = scan_from_laser(one, beam[0], beam[1] - beam[0], 0.05, 10.0, LaserPose(), 0, half)
+    assert isinstance(scan, Scan)
+    out = step_command(cfg, 1.0, 0.0, "shared", scan.obstacles(), (0.0, 0.0), 0.05)
+    assert out.v_cmd_mps > 0.0
