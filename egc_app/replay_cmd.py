@@ -290,10 +290,16 @@ def _commands(reader: Any, topics: Topics) -> tuple[CommandTrack, int]:
     return CommandTrack.of(samples), count
 
 
-def _scans(reader: Any, topic: str) -> Iterator[LogScan]:
+def _scans(reader: Any, topic: str) -> Iterator[LogScan | str]:
+    """The topic's scans; a record whose bytes do not deserialize is the reason, as a str (one
+    damaged record is skipped like a corrupt scan, not the end of the replay)."""
     connections = [c for c in reader.connections if c.topic == topic]
     for conn, log_ns, raw in reader.messages(connections=connections):
-        m = reader.deserialize(raw, conn.msgtype)
+        try:
+            m = reader.deserialize(raw, conn.msgtype)
+        except _LOG_ERRORS as exc:
+            yield "cannot deserialize: " + (" ".join(str(exc).split()) or type(exc).__name__)
+            continue
         # A damaged log's ranges may hold signalling NaNs: casting them is no warning here
         # (scan_fault judges the values).
         with np.errstate(invalid="ignore"):
@@ -352,8 +358,8 @@ def replay(
         try:
             footprint = replayer.config.profile.half_size_m
             for index, scan in enumerate(_scans(reader, topics.scan)):
-                fault = scan_fault(scan)
-                if fault is not None:
+                fault = scan if isinstance(scan, str) else scan_fault(scan)
+                if fault is not None or isinstance(scan, str):
                     corrupt += 1
                     first_corrupt = first_corrupt or (index, fault)
                     bar.update()
@@ -378,8 +384,8 @@ def replay(
                 f"first, index {index}: {why})"
             )
         print(
-            f"egc-teleop replay: skipped {what} as corrupt, fields no sensor sends "
-            f"(first, index {index}: {why})",
+            f"egc-teleop replay: skipped {what} as corrupt (undecodable, or fields no "
+            f"sensor sends; first, index {index}: {why})",
             file=sys.stderr,
         )
     if not verdicts:

@@ -84,7 +84,8 @@ def corridor_log(
     command: str = "twist",  # "twist", "twist-stamped" or "odometry"
     world_yaw_rad: float = 1.0,
     scan_topic: str = "/scan",
-    scan_at: Mapping[int, object | None] | None = None,  # scan i: this LaserScan, or none
+    scan_at: Mapping[int, object | None]
+    | None = None,  # scan i: this LaserScan (or raw bytes), or none
 ) -> Path:
     """Write the log; returns ``path`` (a bag directory)."""
     with Writer(path, version=9, storage_plugin=STORAGE[storage]) as w:
@@ -110,7 +111,12 @@ def corridor_log(
                 msg = scan_at[i]
                 if msg is None:
                     continue
-            w.write(scans, t, TS.serialize_cdr(msg, "sensor_msgs/msg/LaserScan"))
+            raw = (
+                msg
+                if isinstance(msg, bytes)
+                else TS.serialize_cdr(msg, "sensor_msgs/msg/LaserScan")
+            )
+            w.write(scans, t, raw)  # bytes: a record as damaged as they are
     return path
 
 

@@ -272,8 +272,8 @@ def test_corrupt_scans_are_skipped_counted_and_named(tmp_path, capsys):
     assert code == 0 and all(k in s for k in PINNED)
     skipped = [line for line in err.splitlines() if not line.startswith("recording saved")]
     assert skipped == [
-        "egc-teleop replay: skipped 2 of 30 scans on '/scan' as corrupt, fields no sensor sends "
-        "(first, index 5: angle_min 1e+30 rad)"
+        "egc-teleop replay: skipped 2 of 30 scans on '/scan' as corrupt (undecodable, or fields "
+        "no sensor sends; first, index 5: angle_min 1e+30 rad)"
     ], err
     assert "Warning" not in err
     code, ref, _ = replay(capsys, str(clean), "--record", str(rrd["clean"]))
@@ -299,7 +299,7 @@ def test_corrupt_scan_in_a_real_process_no_numpy_warning(tmp_path):
     assert proc.returncode == 0 and json.loads(proc.stdout)["scans_corrupt"] == 1
     assert proc.stderr.count("\n") == 1 and "Warning" not in proc.stderr, proc.stderr
     assert "skipped 1 of 30 scans on '/scan' as corrupt" in proc.stderr
-    assert "(first, index 12: beam " in proc.stderr
+    assert "first, index 12: beam " in proc.stderr
 
 
 def test_every_scan_corrupt_is_a_bad_log(tmp_path, capsys):
@@ -344,3 +344,24 @@ def test_folder_without_metadata_and_several_or_no_log_files(tmp_path, capsys):
     assert line.endswith(
         f"{notes}: not a ROS 2 bag (no metadata.yaml) and no .mcap, .db3 or .bag file in it"
     )
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_undecodable_scan_records_are_skipped_not_the_end(tmp_path, capsys, storage):
+    """An outside check: one LaserScan record cut short (or with a garbage sequence length)
+    ended the replay with exit 2, throwing away every good scan around it."""
+    whole = TS.serialize_cdr(scan_msg(_at(7), wall_ranges(2.0)), "sensor_msgs/msg/LaserScan")
+    garbage = bytearray(whole)
+    garbage[48:56] = b"\xff" * 8  # sequence lengths of billions
+    damaged = {7: bytes(whole[:40]), 9: bytes(garbage)}
+    log = corridor_log(tmp_path / "damaged", storage, scan_at=damaged)
+    clean = corridor_log(tmp_path / "clean", storage, scan_at={7: None, 9: None})
+    code, s, err = replay(capsys, str(log))
+    assert code == 0, err
+    assert "skipped 2 of 30 scans on '/scan' as corrupt" in err
+    assert "index 7: cannot deserialize" in err
+    code, ref, _ = replay(capsys, str(clean))
+    assert s["scans_corrupt"] == 2 and s["scans"] == ref["scans"] == 28
+    for key in set(s) | set(ref):
+        if key not in ("log", "scans_corrupt"):
+            assert s[key] == ref[key], key
