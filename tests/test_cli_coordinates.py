@@ -57,6 +57,7 @@ def test_an_unknown_option_that_looks_like_a_word_is_still_an_error(capsys):
         ("episode", "--goal", "-nan,4", "goal"),
         ("episode", "--goal", "-INF,4", "goal"),
         ("episode", "--start", "-x,1,0", "start"),
+        ("episode", "--goal", "-,1", "goal"),
         ("robot", "--laser-pose", "-1,2,nan", "laser_pose"),
     ],
 )

@@ -19,7 +19,7 @@ from egc_common.errors import UsageError
 
 # A minus then a digit, a point and a digit, or nan/inf, or a single minus and a comma later:
 # a value (so "-3,abc" reaches the option's own check and its message), never an option name.
-NEGATIVE_NUMBERS = re.compile(r"^-(\d|\.\d|nan|inf)|^-[^-][^=]*,", re.IGNORECASE)
+NEGATIVE_NUMBERS = re.compile(r"^-(\d|\.\d|nan|inf|,)|^-[^-][^=]*,", re.IGNORECASE)
 
 
 def numbers_are_values(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
