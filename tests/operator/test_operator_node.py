@@ -12,7 +12,6 @@ import time
 from typing import Any
 
 import numpy.typing as npt
-import pytest
 import zenoh
 from egc_common import keys
 from egc_common.joystick_file import JoystickSample
@@ -24,7 +23,7 @@ from egc_common.messages import (
     decode_command,
     encode_clock_reply,
 )
-from egc_common.transport import ZenohOptions, open_session, payload_bytes
+from egc_common.transport import payload_bytes
 from egc_operator.operator_node import OperatorNode, view_age_ms
 from egc_operator.prediction import CommandHistory
 
@@ -116,13 +115,6 @@ def wait_for(condition: Any, timeout_s: float = 10.0) -> None:
         if time.monotonic() > deadline:
             raise AssertionError("timed out")
         time.sleep(0.01)
-
-
-@pytest.fixture
-def session() -> Any:
-    s = open_session(ZenohOptions())
-    yield s
-    s.close()
 
 
 def test_commands_carry_view_age_and_the_view_gets_the_history(session: zenoh.Session) -> None:

@@ -10,9 +10,7 @@ from __future__ import annotations
 import itertools
 import threading
 import time
-from collections.abc import Iterator
 
-import pytest
 import zenoh
 from egc_common import keys
 from egc_common.joystick_file import JoystickSample
@@ -24,7 +22,7 @@ from egc_common.messages import (
     decode_command,
     decode_goal,
 )
-from egc_common.transport import ZenohOptions, open_session, payload_bytes
+from egc_common.transport import payload_bytes
 from egc_operator.operator_node import OperatorNode, goal_publisher
 from egc_operator.via_route import Route
 
@@ -32,13 +30,6 @@ from tests.operator.test_operator_node import RecordingView, wait_for
 
 ROBOT = "goaltest"
 ROUTE = Route("odom", ((1.0, 0.0), (2.0, -1.0), (3.0, 1.0)))
-
-
-@pytest.fixture
-def session() -> Iterator[zenoh.Session]:
-    s = open_session(ZenohOptions())
-    yield s
-    s.close()
 
 
 class Buttons:

@@ -14,11 +14,9 @@ import time
 from typing import Any
 
 import numpy as np
-import pytest
 import zenoh
 from egc_common import keys
 from egc_common.messages import MapMessage, OperatorCommand, StateMessage, encode_clock_reply
-from egc_common.transport import ZenohOptions, open_session
 from egc_operator.operator_node import OperatorNode
 from egc_operator.status_line import format_status, situation
 
@@ -37,13 +35,6 @@ class MapView(RecordingView):
     def set_world(self, occupancy: Any, resolution_m: float, origin: Any, goal: Any = None) -> None:
         with self.lock:
             self.maps.append((np.asarray(occupancy).shape, resolution_m, origin, goal))
-
-
-@pytest.fixture
-def session() -> Any:
-    s = open_session(ZenohOptions())
-    yield s
-    s.close()
 
 
 def _clock_queryable(session: zenoh.Session) -> Any:
