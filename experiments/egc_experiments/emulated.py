@@ -44,7 +44,8 @@ command arrives, so its cycles are not evenly spaced):
 - ``hold_s`` / ``hold_events``: time, and stretches, in which the robot was in HOLD or IDLE
   after it first drove while the operator model wanted to move (its intent, recorded by the
   operator process with monotonic times);
-- ``interventions``: time limited by ``egc`` or ``sweep``, in 50 ms cycles;
+- ``interventions``: time limited by a filter or the sweep (``INTERVENING_NAMES``), in 50 ms
+  cycles;
 - ``path_m``, ``min_clearance_m`` (the footprint's clearance at the reported poses, capped at
   1 m, 0 after a contact), ``mean_speed_mps``: from the recorded poses between t = 0 and the end;
 - ``cmd_age_p50_ms`` / ``cmd_age_p99_ms`` and ``stale_rejected``: the robot's own summary (its

@@ -19,7 +19,9 @@ in place of the joystick, and nothing else changed:
 - the stick is decided by ``egc_experiments.simulated.OperatorSide``, the very operator logic
   of the simulated mode (the model's stick through its reaction time; centred, deadman held,
   while the view shows the robot IDLE, in ESTOP or waiting for a centred stick), so both modes
-  run the same operator.
+  run the same operator;
+- the goal goes to the robot as the operator's via point (``map`` frame), as in the simulated
+  mode: ``assist`` and ``dwa`` steer to it (without it the two modes disagreed on them).
 
 The model's clock starts (t = 0) at the first stick the node asks for. ``--intent`` records,
 as JSON lines, ``{"t0": NS}`` first and then ``{"t": NS, "move": BOOL}`` whenever the model's
@@ -51,6 +53,7 @@ from egc_common.profiles import get_profile
 from egc_common.transport import ZenohOptions, open_session
 from egc_operator.operator_node import OperatorNode
 from egc_operator.prediction import CommandHistory
+from egc_operator.via_route import Route
 from egc_sim.bridge import parse_pose
 from egc_sim.observation import Observation
 from egc_sim.operators import make_operator
@@ -122,6 +125,9 @@ class ModelDriver:
 
     def set_world(self, *args: Any, **kwargs: Any) -> None:
         pass
+
+    def on_route(self, *args: Any, **kwargs: Any) -> None:
+        pass  # the model knows its goal; the via points it sends need no drawing
 
     def close(self) -> None:
         pass
@@ -234,6 +240,9 @@ def main(argv: list[str] | None = None) -> int:
             args.rate_hz,
             view=driver,
             clock_id=monotonic_clock_id(),
+            # The goal as the operator's via point in the map frame, as the simulated mode sends
+            # it: the filters that steer to a via point (assist, dwa) need it in both modes.
+            route=Route("map", (goal,)) if goal is not None else None,
         )
         log.info("operator %s (%s) driving robot %s", args.operator_id, args.operator, args.robot)
         try:
