@@ -782,3 +782,50 @@ def test_unblock_blocked_again_soon_after_an_escape_tries_the_next_one():
     )
     assert freed.memory.escape == -1 and freed.memory.freed_by == 1
     assert freed.memory.freed_ns == 150 * MS
+
+
+def test_no_rule_drives_faster_than_the_stick_asks():
+    """Assist bends or slows the operator's command, it never speeds it up: whatever the rule,
+    |v| <= m v_max, m the stick's magnitude with a via point and its forward deflection |x_o|
+    without one (module docstring). The base is sent nothing (the sweep refusing everything),
+    so ``unblock`` escapes as well; a stick held for 2 s per draw lets it begin."""
+    rng = np.random.default_rng(11)
+    rules = set()
+    for profile in (PIONEER3DX, JACKAL):
+        params = AssistParams.from_profile(profile)
+        mem = AssistMemory.initial()
+        t_ms = 0
+        for k in range(60):
+            pts = rng.uniform(-2.0, 2.0, size=(rng.integers(1, 30), 2))
+            goal = None if k % 2 == 0 else tuple(rng.uniform(-4.0, 4.0, size=2))
+            x_o, y_o = rng.uniform(-0.3, 0.6), rng.uniform(-0.6, 0.6)
+            asks = math.hypot(x_o, y_o) if goal is not None else abs(x_o)
+            for _ in range(40):
+                r = assist_step(mem, x_o, y_o, pts, goal, t_ms * MS, params, profile, (0.0, 0.0))
+                mem, t_ms = r.memory, t_ms + DT_MS
+                rules.add(r.rule)
+                assert abs(r.v_mps) <= asks * profile.v_max_mps + 1e-12, (r.rule, x_o, y_o, goal)
+    assert "unblock" in rules
+
+
+def test_unblock_moves_at_the_speed_the_stick_asks_for_when_that_is_less():
+    """A stick asking for 10 % of v_max (no via point): the escape ahead and back go at that
+    speed, not at unblock_speed (25 %), and still move; a stick asking for no speed at all (a
+    pure turn) escapes by turning."""
+    box = line(0.5, -1.0, 0.5, 1.0)  # FRONT CLOSE: the rules turn in place
+    for x_o in (0.1, 0.6):
+        speed = min(PARAMS.unblock_speed, x_o) * P.v_max_mps
+        r = run(x_o, 0.0, box)
+        assert r.rule == "avoid-front" and r.v_mps == 0.0 and r.w_radps != 0.0
+        mem = replace(r.memory, blocked_s=PARAMS.unblock_after_s)
+        ahead = assist_step(mem, x_o, 0.0, box, None, 150 * MS, PARAMS, P, (0.0, 0.0))
+        assert ahead.rule == "unblock" and ahead.memory.escape == 0
+        assert ahead.v_mps == pytest.approx(speed) and ahead.w_radps == 0.0
+        mem = replace(r.memory, asked=(0.0, r.w_radps), escape=1, escape_turn=r.w_radps)
+        back = assist_step(mem, x_o, 0.0, box, None, 150 * MS, PARAMS, P, (0.0, 0.0))
+        assert back.rule == "unblock" and back.memory.escape == 2
+        assert back.v_mps == pytest.approx(-speed)
+    turning = run(0.0, 0.8, box)
+    mem = replace(turning.memory, asked=(0.0, turning.w_radps), blocked_s=1.0)
+    escape = assist_step(mem, 0.0, 0.8, box, None, 150 * MS, PARAMS, P, (0.0, 0.0))
+    assert escape.rule == "unblock" and escape.v_mps == 0.0 and escape.w_radps != 0.0

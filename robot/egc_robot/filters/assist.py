@@ -120,8 +120,13 @@ How each part maps to the paper
   Rules that do not know it ask for the same motion for ever: the robot stalled. The pipeline
   hands the assistant the (v, w) the base was last sent; when the rules asked for motion and
   (almost) none was sent for ``unblock_after_s``, rule ``unblock`` escapes: ahead at
-  ``unblock_speed`` of v_max; if the sweep refuses that too, a turn in place away from the turn
-  the rules wanted; then back at that speed. A try that moves the base runs for
+  min(``unblock_speed``, m) of v_max, m the speed the stick asks for (as for the rules above:
+  no rule drives faster than the operator's stick, since the assistant bends or slows the
+  command, never speeds it up); if the sweep refuses that too, a turn in place away from the
+  turn the rules wanted; then back at that speed. A stick asking for no speed (a pure turn
+  without a via point) escapes by turning only. (Before 2026-11-24 the escape went at
+  ``unblock_speed`` whatever the stick asked: a replay recorded at 0.1 m/s on the Jackal sent
+  0.5 m/s in 240 of 2,999 scans.) A try that moves the base runs for
   ``unblock_try_s`` and hands back to the rules; the sweep judges every try. Blocked again
   within ``unblock_repeat_s`` of an escape (the rules steered straight back into the wedge), the
   next escape starts with the try after the one that freed it, so a wedge is not escaped the
@@ -245,7 +250,8 @@ class AssistParams:
     wall_retreat_m: float = 0.455
     # Unblocking (rule ``unblock``): after ``unblock_after_s`` of asking for motion while the
     # base was sent none (the sweep refused it), try in turn ahead at ``unblock_speed`` of
-    # v_max, a turn in place the other way, back at that speed; each try runs for
+    # v_max (or the stick's own speed, if that is less), a turn in place the other way, back
+    # at that speed; each try runs for
     # ``unblock_try_s`` once the base moves, the next one when the sweep refuses it too.
     unblock_after_s: float = 0.25
     unblock_try_s: float = 0.5
@@ -949,12 +955,17 @@ def assist_step(
         # The turn the rules wanted when the escape began: the escape turns the other way.
         wanted = w if abs(w) > _SAME else theta
         escape_turn = memory.escape_turn if memory.escape >= 0 else wanted
+        # Never faster than the stick asks (``drive``: m with a via point, x_o without one); a
+        # stick asking for no speed at all (a pure turn) escapes by turning only.
+        speed = min(params.unblock_speed, drive) * profile.v_max_mps
+        if speed <= _SAME:
+            escape = 1
         if escape == 0:
-            v, w = params.unblock_speed * profile.v_max_mps, 0.0
+            v, w = speed, 0.0
         elif escape == 1:
             v, w = 0.0, -math.copysign(0.5 * profile.w_max_radps, escape_turn or 1.0)
         else:
-            v, w = -params.unblock_speed * profile.v_max_mps, 0.0
+            v, w = -speed, 0.0
         rule = "unblock"
     return result(
         v,
