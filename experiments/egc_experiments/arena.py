@@ -11,7 +11,8 @@ episodes of ``egc-teleop episode`` (``egc_app.episode.run_batch``; the robot's o
 
 - ``hallway``: the built-in hallway (pioneer3dx), via point at its goal;
 - ``mrpb``: the 19 start/goal tests of ``../shared/worlds/mrpb/*/tests.txt`` (pioneer3dx), via
-  points at the corners of a route planned on the map (``--via route``);
+  points at the corners of a route planned on the map (``--via route``); ``--mrpb-dir`` points
+  elsewhere. A suite that finds no world is an error (exit 2), never a run of nothing;
 - ``random``: seeded random obstacle fields ``random:0`` ... ``random:N-1`` (jackal, as in the
   issue's "20 obstacle worlds"), via point at the goal.
 
@@ -135,9 +136,12 @@ def build_cases(
     random_profile: str | None = None,
     first_world: int = 0,
 ) -> list[Case]:
+    """The cases of ``suites``, in order. A suite that finds no world is a UsageError naming
+    where it looked (a run of nothing would report 0 collisions: a pass it never earned)."""
     cases: list[Case] = []
     for suite in suites:
-        profile = SUITE_PROFILE[suite]
+        before = len(cases)
+        profile = SUITE_PROFILE.get(suite, "")
         if suite == "random" and random_profile:
             profile = random_profile
         if suite == "hallway":
@@ -158,7 +162,23 @@ def build_cases(
                 cases.append(_case(suite, f"random:{seed}", s))
         else:
             raise UsageError(f"unknown suite {suite!r}; choose from {', '.join(SUITES)}")
+        if len(cases) == before:
+            raise UsageError(_no_worlds(suite, worlds, mrpb_dir, mrpb_limit))
     return cases
+
+
+def _no_worlds(suite: str, worlds: int, mrpb_dir: Path, mrpb_limit: int | None) -> str:
+    """The one line for a suite that found no world: where it looked, what to change."""
+    if suite == "random":
+        return f"suite random has no worlds: --worlds is {worlds} (give --worlds N, N >= 1)"
+    if mrpb_limit is not None and mrpb_limit <= 0:
+        return f"suite mrpb has no worlds: --mrpb-limit is {mrpb_limit} (give 1 or more)"
+    where = mrpb_dir.resolve()
+    found = "does not exist" if not where.is_dir() else f"has no */{TESTS_FILE}"
+    return (
+        f"suite mrpb found no worlds: {where} {found} "
+        f"(point --mrpb-dir at the MRPB worlds, the folder holding <map>/{TESTS_FILE})"
+    )
 
 
 def episodes(
@@ -822,7 +842,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         if worlds < 0 or args.jobs < 1 or args.first_world < 0:
             raise UsageError("--worlds and --first-world must be >= 0 and --jobs >= 1")
         out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
         report = Path(args.report) if args.report else out / "report.md"
         t0 = time.perf_counter()
         cases = build_cases(
@@ -833,6 +852,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.random_profile,
             args.first_world,
         )
+        out.mkdir(parents=True, exist_ok=True)
         todo = episodes(cases, filters, operators)
         reuse = load_runs(args.reuse)
         partial = out / "partial.jsonl"

@@ -72,3 +72,27 @@ def test_first_world_picks_the_seeds_of_the_random_worlds(capsys):
     assert [c.settings.seed for c in cases] == [1000, 1001]
     assert arena.main(["--out", "/nonexistent-never", "--first-world", "-1"]) == 2
     assert "--first-world must be >= 0" in capsys.readouterr().err
+
+
+def _arena_main(tmp_path, capsys, *extra: str) -> tuple[int, str]:
+    out = tmp_path / "out"
+    code = arena.main(["--out", str(out), "--jobs", "1", "--quiet", *extra])
+    err = capsys.readouterr().err
+    assert not out.exists()  # nothing written for a run of nothing
+    return code, err
+
+
+def test_a_suite_that_finds_no_worlds_is_one_error_line_and_exit_2(tmp_path, capsys):
+    """Outside check: '--suites mrpb' where the default ../shared does not exist ran 0
+    episodes, exit 0, and reported 'no shared-mode episode touched anything'."""
+    missing = tmp_path / "no-such-dir"
+    code, err = _arena_main(tmp_path, capsys, "--suites", "mrpb", "--mrpb-dir", str(missing))
+    assert code == 2 and len(err.splitlines()) == 1
+    assert str(missing) in err and "does not exist" in err and "--mrpb-dir" in err
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    code, err = _arena_main(tmp_path, capsys, "--suites", "hallway,mrpb", "--mrpb-dir", str(empty))
+    assert code == 2 and len(err.splitlines()) == 1
+    assert str(empty) in err and "tests.txt" in err and "--mrpb-dir" in err
+    code, err = _arena_main(tmp_path, capsys, "--suites", "random", "--worlds", "0")
+    assert code == 2 and len(err.splitlines()) == 1 and "--worlds" in err
