@@ -51,11 +51,14 @@ take the command line's values. ``--random-worlds N`` runs ``random:SEED`` for N
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import multiprocessing
 import os
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, replace
@@ -584,10 +587,46 @@ def _run_one_safely(settings: EpisodeSettings) -> dict[str, Any]:
         return {"error": str(exc), **{k: v for k, v in asdict(settings).items() if v is not None}}
 
 
+def _worker_init() -> None:
+    """Worker: a terminal's Ctrl-C (SIGINT to the whole process group) is the batch's to
+    answer; it stops its workers itself (``Pool.terminate``: SIGTERM), with no traceback each."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _stop_on_sigterm(signum: int, _frame: object) -> None:
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second one must not cut the cleanup short
+    raise SystemExit(128 + signum)
+
+
+@contextlib.contextmanager
+def _sigterm_stops_the_batch() -> Iterator[None]:
+    """While the pool runs, SIGTERM raises SystemExit(143) in the main thread, so the pool's
+    ``with`` terminates the workers on the way out. (SIGTERM's default action ended this process
+    alone: the workers, children of the fork server, ran their episodes on for minutes.) A
+    handler someone else installed, or a batch run off the main thread, is left as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.getsignal(signal.SIGTERM)
+    if previous not in (signal.SIG_DFL, None):
+        yield
+        return
+    signal.signal(signal.SIGTERM, _stop_on_sigterm)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def run_batch(
     settings: Sequence[EpisodeSettings], jobs: int, progress: bool = True
 ) -> Iterator[dict[str, Any]]:
-    """Summaries of the episodes, in input order, computed by ``jobs`` worker processes."""
+    """Summaries of the episodes, in input order, computed by ``jobs`` worker processes.
+
+    SIGINT (KeyboardInterrupt) or SIGTERM (SystemExit 143) in the main thread, or closing the
+    generator, terminates the workers before the exception goes on. A caller that does work
+    between summaries should close the generator on the way out (``contextlib.closing``).
+    """
     from tqdm import tqdm
 
     bar = tqdm(total=len(settings), unit="episode", file=sys.stderr, disable=not progress)
@@ -601,7 +640,10 @@ def run_batch(
         # harness's servers) can inherit a lock held at that instant and hang; a batch in CI
         # hung so with two of its three episodes done. The fork server starts clean.
         ctx = multiprocessing.get_context("forkserver" if sys.platform == "linux" else "spawn")
-        with ctx.Pool(min(jobs, len(settings))) as pool:
+        with (
+            _sigterm_stops_the_batch(),
+            ctx.Pool(min(jobs, len(settings)), initializer=_worker_init) as pool,
+        ):
             for summary in pool.imap(_run_one_safely, settings):
                 yield summary
                 bar.update()
@@ -628,11 +670,21 @@ def _run_batch(args: argparse.Namespace, base: EpisodeSettings) -> int:
     out = open(args.out, "w", encoding="utf-8") if args.out else sys.stdout  # noqa: SIM115
     counts = {"reached": 0, "collided": 0, "stalled": 0, "timeout": 0, "error": 0}
     t0 = time.perf_counter()
+    done = 0
     try:
-        for summary in run_batch(suite, args.jobs):
-            counts[summary.get("outcome", "error")] += 1
-            out.write(json.dumps(summary, allow_nan=False) + "\n")
-            out.flush()
+        with contextlib.closing(run_batch(suite, args.jobs)) as summaries:
+            for summary in summaries:
+                counts[summary.get("outcome", "error")] += 1
+                out.write(json.dumps(summary, allow_nan=False) + "\n")
+                out.flush()
+                done += 1
+    except (KeyboardInterrupt, SystemExit):
+        print(
+            f"egc-teleop episode: stopped; {done} of {len(suite)} episodes written, "
+            "the workers ended",
+            file=sys.stderr,
+        )
+        raise
     finally:
         if out is not sys.stdout:
             out.close()
