@@ -14,10 +14,26 @@ writes it to ``--summary``) and saves the Rerun recording (``--record``) on the 
 timeline (``bag_time``, the recorder's receive time; ``stamp``, the scans' header stamps).
 
 A log that cannot be replayed (missing, not a bag, truncated, without the topics it needs, a
-topic of the wrong type, every scan corrupt) is one line on stderr naming the problem and exit
-code 2. A scan no sensor could have sent (``replay_core.scan_fault``: garbage from a damaged
-storage file) is skipped and counted (``scans_corrupt``), with one line on stderr. A folder
-without ``metadata.yaml`` that holds one ``.mcap``, ``.db3`` or ``.bag`` file replays that file.
+topic of the wrong type, every scan corrupt, nothing readable) is one line on stderr naming the
+problem and exit code 2. A scan no sensor could have sent (``replay_core.scan_fault``: garbage
+from a damaged storage file) is skipped and counted (``scans_corrupt``), with one line on
+stderr; so is a command record that does not deserialize or holds no real velocity
+(``command_messages_corrupt``). A folder without ``metadata.yaml`` that holds one ``.mcap``,
+``.db3`` or ``.bag`` file replays that file.
+
+Damaged storage. Whatever the storage layer raises while a pass reads the log (rosbags, apsw,
+the MCAP parser: a damaged file makes them raise almost anything) ends that pass where it is,
+never the process; a reader may also stop early without raising (an MCAP chunk whose lengths
+were overwritten). Either way what was read is replayed, and when the log declares more
+messages than were read (its metadata, MCAP statistics or ROS 1 index) one line on stderr says
+how many were read of how many, and from when the file is damaged; ``scans_unread``,
+``command_messages_unread`` and ``read_error`` in the summary say the same. A pass that read
+nothing because the reader failed is a bad log (exit 2).
+
+Stale commands. A Twist is in effect for ``--cmd-timeout-s`` (default 0.5 s, as a base stops
+when ``cmd_vel`` falls silent) after it was received; a scan after that is replayed without a
+command (``scans_without_command``; ``scans_command_stale`` counts those after a command went
+stale), with one line on stderr. Pose-derived velocities keep their own 1 s limit.
 """
 
 from __future__ import annotations
@@ -39,6 +55,7 @@ from egc_common.errors import UsageError
 from egc_common.profiles import PROFILES, get_profile
 from egc_robot.pipeline import FILTERS
 from egc_robot.replay_core import (
+    COMMAND_MAX_AGE_S,
     ODOMETRY_MAX_AGE_S,
     CommandTrack,
     LogScan,
@@ -46,10 +63,12 @@ from egc_robot.replay_core import (
     Replayer,
     ScanVerdict,
     VelocitySample,
+    pose_fault,
     scan_fault,
     scan_points,
     summarize,
     velocities_from_poses,
+    velocity_fault,
     yaw_from_quaternion,
 )
 
@@ -92,8 +111,27 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="Twist, TwistStamped or Odometry topic giving the commanded velocity (default: "
         "/cmd_vel or the log's only Twist topic, else its odometry differentiated)",
     )
+    parser.add_argument(
+        "--cmd-timeout-s",
+        type=_timeout_s,
+        default=COMMAND_MAX_AGE_S,
+        metavar="S",
+        help="a Twist is in effect this long after it was received, as a base stops when "
+        f"cmd_vel falls silent; later scans have no command (default: {COMMAND_MAX_AGE_S}; "
+        "'inf' holds each until the next)",
+    )
     parser.add_argument("--record", metavar="FILE.rrd", help="save a Rerun recording")
     parser.add_argument("--summary", metavar="FILE.json", help="also write the summary here")
+
+
+def _timeout_s(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not value > 0.0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a time in seconds above 0")
+    return value
 
 
 @dataclass(frozen=True, slots=True)
@@ -122,7 +160,14 @@ def run(args: argparse.Namespace) -> int:
         if out is not None and not Path(out).resolve().parent.is_dir():
             raise UsageError(f"{out}: its folder does not exist")
     with _problems_named(path):
-        summary = replay(path, replayer, args.scan_topic, args.cmd_topic, args.record)
+        summary = replay(
+            path,
+            replayer,
+            args.scan_topic,
+            args.cmd_topic,
+            args.record,
+            cmd_timeout_s=args.cmd_timeout_s,
+        )
     text = json.dumps(summary, indent=2)
     if args.summary:
         Path(args.summary).write_text(text + "\n")
@@ -262,6 +307,61 @@ def _reader(path: Path) -> Any:
     return AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY))
 
 
+def _why(exc: BaseException) -> str:
+    """An exception as one line: its type and message."""
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+@dataclass(slots=True)
+class TopicPass:
+    """One pass over one topic of the log: how far the reader got, against what the log
+    declares (0: the log does not say)."""
+
+    topic: str
+    declared: int
+    read: int = 0  # records the reader gave, decodable or not
+    first_ns: int | None = None
+    last_ns: int | None = None
+    error: str | None = None  # what the reader raised, if it did
+
+    @property
+    def unread(self) -> int:
+        return max(0, self.declared - self.read)
+
+
+def _records(reader: Any, state: TopicPass) -> Iterator[tuple[Any, int, bytes]]:
+    """The topic's records as the reader gives them. Whatever the reader raises (a damaged
+    storage file makes rosbags, apsw or the MCAP parser raise almost anything) ends the pass,
+    noted in ``state``; only the reader's own calls are guarded, never the caller's code."""
+    connections = [c for c in reader.connections if c.topic == state.topic]
+    try:
+        it = iter(reader.messages(connections=connections))
+    except Exception as exc:  # the reader's, on a damaged file: see above
+        state.error = _why(exc)
+        return
+    while True:
+        try:
+            conn, log_ns, raw = next(it)
+        except StopIteration:
+            return
+        except Exception as exc:  # the reader's, on a damaged file: see above
+            state.error = _why(exc)
+            return
+        state.read += 1
+        state.first_ns = log_ns if state.first_ns is None else state.first_ns
+        state.last_ns = log_ns
+        yield conn, log_ns, raw
+
+
+def _deserialize(reader: Any, conn: Any, raw: bytes) -> tuple[Any, str | None]:
+    """The message, or None and why it does not deserialize (a damaged record)."""
+    try:
+        return reader.deserialize(raw, conn.msgtype), None
+    except Exception as exc:  # rosbags' decoder over damaged bytes
+        return None, "cannot deserialize: " + _why(exc)
+
+
 def _stamp_ns(msg: Any) -> int:
     header = getattr(msg, "header", None)
     if header is None:
@@ -269,50 +369,147 @@ def _stamp_ns(msg: Any) -> int:
     return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
 
 
-def _commands(reader: Any, topics: Topics) -> tuple[CommandTrack, int]:
-    """The command track and the number of messages it came from."""
-    connections = [c for c in reader.connections if c.topic == topics.command]
+@dataclass(slots=True)
+class CommandsRead:
+    """The command pass: the track, and the records it came from."""
+
+    track: CommandTrack
+    state: TopicPass
+    corrupt: int
+    first_corrupt: tuple[int, str] | None  # index on the topic, why
+
+
+def _commands(reader: Any, topics: Topics, state: TopicPass, max_age_s: float) -> CommandsRead:
+    """The command track (a Twist holds for ``max_age_s``, a pose-derived velocity for
+    ``ODOMETRY_MAX_AGE_S``); records that do not deserialize or hold no real velocity or pose
+    are skipped and counted."""
     samples: list[VelocitySample] = []
     poses: list[Pose2D] = []
-    count = 0
-    for conn, log_ns, raw in reader.messages(connections=connections):
-        msg = reader.deserialize(raw, conn.msgtype)
-        count += 1
-        if topics.command_type == ODOMETRY:
-            p, q = msg.pose.pose.position, msg.pose.pose.orientation
-            yaw = yaw_from_quaternion(q.x, q.y, q.z, q.w)
-            poses.append(Pose2D(log_ns, _stamp_ns(msg), p.x, p.y, yaw))
-        else:
-            twist = msg.twist if topics.command_type == TWIST_STAMPED else msg
-            samples.append(VelocitySample(log_ns, twist.linear.x, twist.angular.z))
+    corrupt = 0
+    first: tuple[int, str] | None = None
+    for index, (conn, log_ns, raw) in enumerate(_records(reader, state)):
+        msg, fault = _deserialize(reader, conn, raw)
+        if msg is not None:
+            try:
+                if topics.command_type == ODOMETRY:
+                    p, q = msg.pose.pose.position, msg.pose.pose.orientation
+                    yaw = yaw_from_quaternion(q.x, q.y, q.z, q.w)
+                    pose = Pose2D(log_ns, _stamp_ns(msg), float(p.x), float(p.y), yaw)
+                    fault = pose_fault(pose)
+                    if fault is None:
+                        poses.append(pose)
+                else:
+                    twist = msg.twist if topics.command_type == TWIST_STAMPED else msg
+                    v, w = float(twist.linear.x), float(twist.angular.z)
+                    fault = velocity_fault(v, w)
+                    if fault is None:
+                        samples.append(VelocitySample(log_ns, v, w))
+            except (ValueError, OverflowError, ArithmeticError) as exc:  # garbage floats
+                fault = _why(exc)
+        if fault is not None:
+            corrupt += 1
+            first = first or (index, fault)
     if topics.command_type == ODOMETRY:
-        return CommandTrack.of(velocities_from_poses(poses), ODOMETRY_MAX_AGE_S), count
-    return CommandTrack.of(samples), count
+        track = CommandTrack.of(velocities_from_poses(poses), ODOMETRY_MAX_AGE_S)
+    else:
+        track = CommandTrack.of(samples, max_age_s)
+    return CommandsRead(track, state, corrupt, first)
 
 
-def _scans(reader: Any, topic: str) -> Iterator[LogScan | str]:
+def _scans(reader: Any, state: TopicPass) -> Iterator[LogScan | str]:
     """The topic's scans; a record whose bytes do not deserialize is the reason, as a str (one
     damaged record is skipped like a corrupt scan, not the end of the replay)."""
-    connections = [c for c in reader.connections if c.topic == topic]
-    for conn, log_ns, raw in reader.messages(connections=connections):
-        try:
-            m = reader.deserialize(raw, conn.msgtype)
-        except _LOG_ERRORS as exc:
-            yield "cannot deserialize: " + (" ".join(str(exc).split()) or type(exc).__name__)
+    for conn, log_ns, raw in _records(reader, state):
+        m, why = _deserialize(reader, conn, raw)
+        if m is None:
+            yield why or "cannot deserialize"
             continue
-        # A damaged log's ranges may hold signalling NaNs: casting them is no warning here
-        # (scan_fault judges the values).
-        with np.errstate(invalid="ignore"):
-            ranges = np.asarray(m.ranges, dtype=np.float64)
-        yield LogScan(
-            log_ns,
-            _stamp_ns(m),
-            float(m.angle_min),
-            float(m.angle_increment),
-            float(m.range_min),
-            float(m.range_max),
-            ranges,
+        try:
+            # A damaged log's ranges may hold signalling NaNs: casting them is no warning
+            # here (scan_fault judges the values).
+            with np.errstate(invalid="ignore"):
+                ranges = np.asarray(m.ranges, dtype=np.float64)
+            scan = LogScan(
+                log_ns,
+                _stamp_ns(m),
+                float(m.angle_min),
+                float(m.angle_increment),
+                float(m.range_min),
+                float(m.range_max),
+                ranges,
+            )
+        except (ValueError, TypeError, OverflowError) as exc:
+            yield "cannot read its fields: " + _why(exc)
+            continue
+        yield scan
+
+
+def _open(path: Path) -> tuple[Any, dict[str, str], dict[str, int]]:
+    """The open reader, ``topic -> message type`` and ``topic -> messages declared``; whatever
+    opening a damaged file raises is one UsageError line."""
+    reader: Any = None
+    try:
+        reader = _reader(path)
+        reader.open()
+        types: dict[str, str] = {}
+        declared: dict[str, int] = {}
+        for c in reader.connections:
+            types.setdefault(c.topic, c.msgtype)
+            declared[c.topic] = declared.get(c.topic, 0) + max(0, int(c.msgcount or 0))
+    except Exception as exc:  # the reader's, on a damaged file
+        if reader is not None:
+            _close(reader)
+        detail = " ".join(str(exc).split()) or type(exc).__name__
+        raise UsageError(f"{path}: cannot read this log ({detail})") from None
+    return reader, types, declared
+
+
+def _close(reader: Any) -> None:
+    with contextlib.suppress(Exception):  # a damaged file may fail to close too: nothing lost
+        reader.close()
+
+
+def _t_s(ns: int, t0_ns: int) -> str:
+    return f"{(ns - t0_ns) / 1e9:.1f}"
+
+
+def unread_line(
+    scans: TopicPass, commands: TopicPass, t0_ns: int, end_ns: int | None
+) -> str | None:
+    """One stderr line when a pass stopped before the end of the log: how much it read of what
+    the log declares, from when the file is damaged, and what the reader raised; None when
+    every pass read all it should."""
+    short = [p for p in (scans, commands) if p.unread or p.error]
+    if not short:
+        return None
+    parts = []
+    for p in (scans, commands):
+        if not p.unread:
+            continue
+        what = "scans" if p is scans else "messages"
+        if parts:
+            parts.append(f"{p.read} of the {p.declared} {what} on {p.topic!r}")
+        else:
+            parts.append(
+                f"read {p.read} of the {p.declared} {what} the log declares on {p.topic!r}"
+            )
+    ends = [p.last_ns for p in short if p.last_ns is not None]
+    after = min(ends) if ends else t0_ns
+    total = ""
+    if end_ns is not None and end_ns > after:
+        total = f" of {_t_s(end_ns, t0_ns)} s"
+    errors = "; ".join(dict.fromkeys(p.error for p in short if p.error))
+    reason = f" (the reader: {errors})" if errors else ""
+    if parts:
+        return (
+            f"egc-teleop replay: {' and '.join(parts)}: the file is damaged after "
+            f"t = {_t_s(after, t0_ns)} s{total}; the rest was not replayed{reason}"
         )
+    topics = " and ".join(repr(p.topic) for p in short)
+    return (
+        f"egc-teleop replay: reading {topics} stopped at t = {_t_s(after, t0_ns)} s{total}: "
+        f"anything after it was not replayed{reason}"
+    )
 
 
 def replay(
@@ -322,59 +519,100 @@ def replay(
     cmd_topic: str | None = None,
     record: str | None = None,
     progress: bool | None = None,
+    cmd_timeout_s: float = COMMAND_MAX_AGE_S,
 ) -> dict[str, Any]:
     """Replay the log at ``path``; returns the summary as a JSON-ready dict.
 
     ``progress`` None shows the bar on an interactive stderr only (after a second).
+    ``cmd_timeout_s``: how long a Twist stays in effect after it was received.
     """
+    reader, types, declared = _open(path)
+    try:
+        return _replay(
+            reader,
+            types,
+            declared,
+            path,
+            replayer,
+            scan_topic,
+            cmd_topic,
+            record,
+            progress,
+            cmd_timeout_s,
+        )
+    finally:
+        _close(reader)
+
+
+def _replay(
+    reader: Any,
+    types: dict[str, str],
+    declared: dict[str, int],
+    path: Path,
+    replayer: Replayer,
+    scan_topic: str | None,
+    cmd_topic: str | None,
+    record: str | None,
+    progress: bool | None,
+    cmd_timeout_s: float,
+) -> dict[str, Any]:
     from tqdm import tqdm
 
-    with _reader(path) as reader:
-        types: dict[str, str] = {}
-        for c in reader.connections:
-            types.setdefault(c.topic, c.msgtype)
-        topics = choose_topics(types, scan_topic, cmd_topic, path)
-        total = sum(c.msgcount for c in reader.connections if c.topic == topics.scan)
-        track, command_messages = _commands(reader, topics)
-        if command_messages == 0:
-            raise UsageError(f"{path}: topic {topics.command!r} has no messages")
-        recorder = None
-        if record is not None:
-            from egc_app.replay_record import ReplayRecording
+    topics = choose_topics(types, scan_topic, cmd_topic, path)
+    command_pass = TopicPass(topics.command, declared.get(topics.command, 0))
+    commands = _commands(reader, topics, command_pass, cmd_timeout_s)
+    if command_pass.read == 0:
+        if command_pass.error is not None:
+            raise UsageError(f"{path}: cannot read this log ({command_pass.error})")
+        raise UsageError(f"{path}: topic {topics.command!r} has no messages")
+    track = commands.track
+    scan_pass = TopicPass(topics.scan, declared.get(topics.scan, 0))
+    recorder = None
+    if record is not None:
+        from egc_app.replay_record import ReplayRecording
 
-            recorder = ReplayRecording(record, path.name, replayer, topics.scan, topics.command)
-        verdicts: list[ScanVerdict] = []
-        corrupt = 0
-        first_corrupt: tuple[int, str] | None = None  # index on the topic, why
-        memory: object | None = None
-        bar = tqdm(
-            total=total or None,
-            unit="scan",
-            file=sys.stderr,
-            disable=(not sys.stderr.isatty()) if progress is None else not progress,
-            delay=1.0,
-            desc=f"replay {path.name}",
-        )
-        try:
-            footprint = replayer.config.profile.half_size_m
-            for index, scan in enumerate(_scans(reader, topics.scan)):
-                fault = scan if isinstance(scan, str) else scan_fault(scan)
-                if fault is not None or isinstance(scan, str):
-                    corrupt += 1
-                    first_corrupt = first_corrupt or (index, fault)
-                    bar.update()
-                    continue
-                points = scan_points(scan, footprint)
-                command = track.at(scan.log_ns)
-                verdict, result, obstacles, memory = replayer.step(scan, points, command, memory)
-                verdicts.append(verdict)
-                if recorder is not None:
-                    recorder.on_scan(verdict, result, obstacles)
+        recorder = ReplayRecording(record, path.name, replayer, topics.scan, topics.command)
+    verdicts: list[ScanVerdict] = []
+    corrupt = 0
+    stale = 0
+    first_stale_ns: int | None = None
+    first_corrupt: tuple[int, str] | None = None  # index on the topic, why
+    memory: object | None = None
+    bar = tqdm(
+        total=scan_pass.declared or None,
+        unit="scan",
+        file=sys.stderr,
+        disable=(not sys.stderr.isatty()) if progress is None else not progress,
+        delay=1.0,
+        desc=f"replay {path.name}",
+    )
+    try:
+        footprint = replayer.config.profile.half_size_m
+        for index, scan in enumerate(_scans(reader, scan_pass)):
+            fault = scan if isinstance(scan, str) else scan_fault(scan)
+            if fault is not None or isinstance(scan, str):
+                corrupt += 1
+                first_corrupt = first_corrupt or (index, fault)
                 bar.update()
-        finally:
-            bar.close()
+                continue
+            points = scan_points(scan, footprint)
+            command = track.at(scan.log_ns)
+            if command is None and track.stale_at(scan.log_ns):
+                stale += 1
+                first_stale_ns = scan.log_ns if first_stale_ns is None else first_stale_ns
+            verdict, result, obstacles, memory = replayer.step(scan, points, command, memory)
+            verdicts.append(verdict)
             if recorder is not None:
-                recorder.close()
+                recorder.on_scan(verdict, result, obstacles)
+            bar.update()
+    finally:
+        bar.close()
+        if recorder is not None:
+            recorder.close()
+    if scan_pass.read == 0 and scan_pass.error is not None:
+        raise UsageError(f"{path}: cannot read this log ({scan_pass.error})")
+    starts = [p.first_ns for p in (scan_pass, command_pass) if p.first_ns is not None]
+    t0_ns = min(starts)
     if first_corrupt is not None:
         index, why = first_corrupt
         what = f"{corrupt} of {corrupt + len(verdicts)} scans on {topics.scan!r}"
@@ -390,20 +628,56 @@ def replay(
         )
     if not verdicts:
         raise UsageError(f"{path}: topic {topics.scan!r} has no scans")
+    if commands.first_corrupt is not None:
+        index, why = commands.first_corrupt
+        print(
+            f"egc-teleop replay: skipped {commands.corrupt} of {command_pass.read} messages on "
+            f"{topics.command!r} as corrupt (undecodable, or no velocity or pose a robot "
+            f"has; first, index {index}: {why})",
+            file=sys.stderr,
+        )
+    line = unread_line(scan_pass, command_pass, t0_ns, _end_ns(reader))
+    if line is not None:
+        print(line, file=sys.stderr)
     kind = {ODOMETRY: "odometry poses", TWIST_STAMPED: "twist-stamped"}.get(
         topics.command_type, "twist"
     )
+    max_age_s = ODOMETRY_MAX_AGE_S if topics.command_type == ODOMETRY else cmd_timeout_s
+    if stale and topics.command_type != ODOMETRY and first_stale_ns is not None:
+        print(
+            f"egc-teleop replay: {stale} of {len(verdicts)} scans came over {max_age_s:g} s "
+            f"after the latest message on {topics.command!r} (the first at t = "
+            f"{_t_s(first_stale_ns, t0_ns)} s): replayed without a command, as a base stops "
+            "when cmd_vel falls silent (--cmd-timeout-s sets how long)",
+            file=sys.stderr,
+        )
     extra = {
         "log": str(path),
         "scan_topic": topics.scan,
         "command_topic": topics.command,
         "command_source": kind,
-        "command_messages": command_messages,
+        "command_messages": command_pass.read - commands.corrupt,
+        "command_max_age_s": max_age_s if math.isfinite(max_age_s) else None,
         "scans_without_command": sum(1 for v in verdicts if not v.has_command),
+        "scans_command_stale": stale,
         "scans_corrupt": corrupt,
+        "command_messages_corrupt": commands.corrupt,
+        "scans_unread": scan_pass.unread,
+        "command_messages_unread": command_pass.unread,
+        "read_error": scan_pass.error or command_pass.error,
     }
     summary = summarize(verdicts, replayer.config.filter, replayer.config.profile.name, extra)
     out = summary.as_dict()
     if out["closest_m"] is not None and not math.isfinite(out["closest_m"]):
         out["closest_m"] = None
     return out
+
+
+def _end_ns(reader: Any) -> int | None:
+    """The log's declared end (its last message's receive time), or None when it does not
+    say or the value is garbage."""
+    try:
+        end = int(reader.end_time)
+    except Exception:  # a damaged summary or index
+        return None
+    return end if end > 0 else None

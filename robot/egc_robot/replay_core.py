@@ -10,7 +10,10 @@ Times. A log has two clocks: the recorder's receive time (``log_ns``, one clock 
 topic) and each message's header stamp (``stamp_ns``, the sensor's or the driver's clock).
 Scans are paired with the command in effect at their receive time, because a Twist has no
 header; odometry is differentiated, and hold time measured, by header stamps, because real logs
-give several messages one receive time (``../shared/bags/README.md``).
+give several messages one receive time (``../shared/bags/README.md``). A command is in effect
+for at most ``COMMAND_MAX_AGE_S`` after it was received (a base stops when ``cmd_vel`` falls
+silent: DESIGN 11's simulated base after 0.5 s, as real bases do), a pose-derived velocity for
+``ODOMETRY_MAX_AGE_S``; a scan after that has no command.
 
 Scans follow REP 117: ``+inf`` nothing within range_max (free), ``NaN`` no information
 (unknown), ``-inf`` an object closer than range_min (an obstacle at range_min); finite readings
@@ -53,11 +56,13 @@ CHANGED_MPS = 0.01  # DESIGN 11: a command is "changed" when filtered v or w dif
 MOVING = 0.01  # |v| (m/s) or |w| (rad/s) above this is a moving command
 MAX_GAP_S = 1.0  # a gap between scans (or poses) longer than this is not driving time
 ODOMETRY_MAX_AGE_S = 1.0  # a pose-derived velocity older than this is not known any more
+COMMAND_MAX_AGE_S = 0.5  # a base stops when cmd_vel is silent this long (DESIGN 11's sim base)
 _NS = 1_000_000_000
 # Sanity bounds for ``scan_fault``: far beyond any real laser, well short of garbage floats.
 MAX_REACH_M = 1e6  # no sensor's range_max, nor a reading, is longer
 MAX_REACH_FACTOR = 1000.0  # no reading is longer than this many times range_max
 MAX_TURN_RAD = 4.0 * math.pi  # no scan starts, or sweeps, beyond two full turns
+MAX_SPEED = 1e3  # no command, in m/s or rad/s, is faster: a damaged record's garbage float
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -259,6 +264,24 @@ def scan_fault(scan: LogScan) -> str | None:
     return None
 
 
+def velocity_fault(linear_mps: float, angular_radps: float) -> str | None:
+    """Why a recorded command cannot have been sent to a base, or None when it could: a
+    component not finite or over ``MAX_SPEED`` (m/s or rad/s), what a damaged record gives."""
+    for name, value in (("linear.x", linear_mps), ("angular.z", angular_radps)):
+        if not (math.isfinite(value) and abs(value) <= MAX_SPEED):
+            return f"{name} {value:.3g}"
+    return None
+
+
+def pose_fault(pose: Pose2D) -> str | None:
+    """Why an odometry pose cannot have come from a robot, or None when it could: a position
+    or yaw not finite, or a position beyond ``MAX_REACH_M`` from the origin."""
+    for name, value in (("x", pose.x_m), ("y", pose.y_m), ("yaw", pose.yaw_rad)):
+        if not math.isfinite(value) or (name != "yaw" and abs(value) > MAX_REACH_M):
+            return f"pose {name} {value:.3g}"
+    return None
+
+
 def velocities_from_poses(
     poses: Sequence[Pose2D], max_gap_s: float = MAX_GAP_S
 ) -> list[VelocitySample]:
@@ -293,8 +316,8 @@ def velocities_from_poses(
 
 @dataclass(frozen=True, slots=True)
 class CommandTrack:
-    """The commanded velocity over log time: each sample holds until the next one (a base
-    keeps its last command), or for at most ``max_age_ns`` when set."""
+    """The commanded velocity over log time: each sample holds until the next one, or for at
+    most ``max_age_ns`` when set (a base stops when its commands stop: ``COMMAND_MAX_AGE_S``)."""
 
     log_ns: tuple[int, ...]
     samples: tuple[VelocitySample, ...]
@@ -303,18 +326,29 @@ class CommandTrack:
     @staticmethod
     def of(samples: Sequence[VelocitySample], max_age_s: float | None = None) -> CommandTrack:
         ordered = tuple(sorted(samples, key=lambda s: s.log_ns))
-        age = None if max_age_s is None else int(max_age_s * _NS)
+        age = None if max_age_s is None or math.isinf(max_age_s) else int(max_age_s * _NS)
         return CommandTrack(tuple(s.log_ns for s in ordered), ordered, age)
 
-    def at(self, log_ns: int) -> VelocitySample | None:
-        """The sample in effect at ``log_ns`` (the latest at or before it), or None."""
+    def latest(self, log_ns: int) -> VelocitySample | None:
+        """The latest sample at or before ``log_ns``, however old, or None."""
         i = bisect.bisect_right(self.log_ns, log_ns) - 1
-        if i < 0:
-            return None
-        sample = self.samples[i]
-        if self.max_age_ns is not None and log_ns - sample.log_ns > self.max_age_ns:
+        return self.samples[i] if i >= 0 else None
+
+    def at(self, log_ns: int) -> VelocitySample | None:
+        """The sample in effect at ``log_ns`` (the latest at or before it, if it is not older
+        than ``max_age_ns``), or None."""
+        sample = self.latest(log_ns)
+        if sample is None or self.stale(sample, log_ns):
             return None
         return sample
+
+    def stale_at(self, log_ns: int) -> bool:
+        """A sample came before ``log_ns`` but is too old to be in effect at it."""
+        sample = self.latest(log_ns)
+        return sample is not None and self.stale(sample, log_ns)
+
+    def stale(self, sample: VelocitySample, log_ns: int) -> bool:
+        return self.max_age_ns is not None and log_ns - sample.log_ns > self.max_age_ns
 
 
 @dataclass(frozen=True, slots=True)

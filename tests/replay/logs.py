@@ -6,7 +6,8 @@ a few ``NaN`` beams behind, and the commanded velocity either on a Twist (or Twi
 or only as odometry poses, whose twist is left in a world frame turned by ``world_yaw_rad`` (as
 Stage's ground truth is), so only the poses give the forward speed. ``scan_at`` puts another
 scan (``garbled_ranges``: what a damaged storage file deserializes to) in place of scan ``i``,
-or leaves it out.
+or leaves it out; ``command_at`` does the same for the command written with scan ``i`` (raw
+bytes: a damaged record).
 """
 
 from __future__ import annotations
@@ -86,6 +87,7 @@ def corridor_log(
     scan_topic: str = "/scan",
     scan_at: Mapping[int, object | None]
     | None = None,  # scan i: this LaserScan (or raw bytes), or none
+    command_at: Mapping[int, bytes | None] | None = None,  # command i: these bytes, or none
 ) -> Path:
     """Write the log; returns ``path`` (a bag directory)."""
     with Writer(path, version=9, storage_plugin=STORAGE[storage]) as w:
@@ -99,7 +101,11 @@ def corridor_log(
         for i, wall in enumerate(wall_m):
             t = START_NS + i * PERIOD_NS
             twist = T["geometry_msgs/msg/Twist"](_vec(v_mps), _vec())
-            if command == "twist":
+            if command_at is not None and i in command_at:
+                raw_cmd = command_at[i]
+                if raw_cmd is not None:
+                    w.write(cmd, t - 1000, raw_cmd)
+            elif command == "twist":
                 w.write(cmd, t - 1000, TS.serialize_cdr(twist, "geometry_msgs/msg/Twist"))
             elif command == "twist-stamped":
                 msg = T["geometry_msgs/msg/TwistStamped"](_header(t, "base_link"), twist)
