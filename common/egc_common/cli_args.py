@@ -5,6 +5,15 @@ must work, so a leading minus followed by a digit is a number (also in a comma-s
 list), not an option; so are ``-nan``, ``-inf`` and any comma list after one minus, so that a
 mistyped coordinate gets the option's own message, not "expected one argument". argparse's
 own pattern accepts a single number only.
+
+Numbers in coordinates, on the command line and in input files, are plain ASCII decimals
+(``plain_float``): Python's ``float()`` also takes ``1_000``, full-width digits and other
+Unicode digits, which nobody types on purpose. Every value ``plain_float`` reads after a minus
+is one ``NEGATIVE_NUMBERS`` lets through as a value, so ``-2,3`` keeps working.
+
+Input files (joystick CSVs, route files) are read with ``read_input_file``: at most a bound of
+bytes, so a device, a pipe or a huge file given by mistake costs bounded memory and gets one
+line, and a UTF-8 byte-order mark (what some editors write first) is accepted.
 """
 
 from __future__ import annotations
@@ -20,6 +29,61 @@ from egc_common.errors import UsageError
 # A minus then a digit, a point and a digit, or nan/inf, or a single minus and a comma later:
 # a value (so "-3,abc" reaches the option's own check and its message), never an option name.
 NEGATIVE_NUMBERS = re.compile(r"^-(\d|\.\d|nan|inf|,)|^-[^-][^=]*,", re.IGNORECASE)
+
+
+# A plain decimal: sign, digits with at most one point, optional exponent (ASCII only); and the
+# words nan and inf(inity), so that the caller's finiteness check can say what is wrong.
+PLAIN_NUMBER = re.compile(
+    r"[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|infinity)", re.ASCII | re.IGNORECASE
+)
+_SPACE = " \t\r\n\f\v"
+
+
+def plain_float(text: str) -> float:
+    """``text`` (ASCII blanks around it allowed) as a float when it is a plain ASCII decimal
+    such as ``-2``, ``.5``, ``3.``, ``1e-3`` (or nan/inf, which callers reject with their own
+    finiteness message); ValueError otherwise, also for what ``float()`` alone would take:
+    ``1_000``, full-width or other non-ASCII digits."""
+    stripped = text.strip(_SPACE)
+    if not PLAIN_NUMBER.fullmatch(stripped):
+        raise ValueError(f"not a plain decimal number: {text!r}")
+    return float(stripped)
+
+
+MiB = 1024 * 1024
+
+
+def read_input_file(path: str | Path, what: str, limit_bytes: int) -> str:
+    """The text of the input file ``path`` (UTF-8, a leading byte-order mark dropped).
+
+    At most ``limit_bytes`` + 1 bytes are ever read, so /dev/zero, a pipe or a sparse 3 GB file
+    costs bounded memory. ValueError with one line naming ``what`` and ``path``: not found, a
+    directory, unreadable, larger than the limit (the limit is in the message), not UTF-8.
+    """
+    p = Path(path)
+    try:
+        with p.open("rb") as f:
+            data = f.read(limit_bytes + 1)
+    except FileNotFoundError:
+        raise ValueError(f"{what} not found: {p}") from None
+    except OSError as exc:
+        reason = exc.strerror or os.strerror(exc.errno or errno.EIO)
+        raise ValueError(f"cannot read {what} {p}: {reason}") from None
+    if len(data) > limit_bytes:
+        raise ValueError(
+            f"{what} {p}: more than {_size(limit_bytes)}, the most a {what} may have "
+            "(is it the right file?)"
+        )
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ValueError(
+            f"cannot read {what} {p}: not UTF-8 text (byte {exc.start} is {data[exc.start]:#04x})"
+        ) from None
+
+
+def _size(n: int) -> str:
+    return f"{n / MiB:g} MiB" if n >= MiB else f"{n} bytes"
 
 
 def numbers_are_values(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:

@@ -10,6 +10,11 @@ absent: no pick, the robot runs its default), ``via_next`` and ``via_clear`` (0/
 all). Blank lines and lines starting with ``#`` are ignored. Between rows the last row holds (zero-order hold); after the
 last row the stick is centred with the deadman released.
 
+Any other column, or a column twice, is an error naming it and the accepted columns: a
+misspelled ``dead_man`` must not leave the deadman at its default, held. Numbers are plain
+ASCII decimals (``egc_common.cli_args.plain_float``); a UTF-8 byte-order mark is accepted; a
+file is read with a bound (``MAX_FILE_BYTES``).
+
     t_s,x,y,deadman,mode,estop
     0.0,0.0,0.0,1,shared,0
     0.5,1.0,0.0,1,shared,0
@@ -25,6 +30,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from egc_common.cli_args import MiB, plain_float, read_input_file
 from egc_common.messages import FILTER_NAMES
 
 REQUIRED = ("t_s", "x", "y")
@@ -37,6 +43,10 @@ OPTIONAL = {
     "via_next": "0",
     "via_clear": "0",
 }
+COLUMNS = (*REQUIRED, *OPTIONAL)
+# More than any recording needs (about an hour at 50 Hz; parsed, the worst case of short rows
+# takes about 160 MB), and a bound on what a device or a wrong file can cost.
+MAX_FILE_BYTES = 4 * MiB
 # The filters an operator may pick for shared mode ("none" is direct mode: the mode column).
 SHARED_FILTERS = tuple(name for name in FILTER_NAMES if name != "none")
 _TRUE = {"1", "true", "yes", "on"}
@@ -77,21 +87,30 @@ def _flag(text: str, where: str) -> bool:
 
 def _float(text: str, where: str, lo: float, hi: float) -> float:
     try:
-        value = float(text)
+        value = plain_float(text)
     except ValueError:
-        raise JoystickFileError(f"{where}: expected a number, got {text!r}") from None
+        raise JoystickFileError(
+            f"{where}: expected a number (plain ASCII decimal), got {text!r}"
+        ) from None
     if not math.isfinite(value) or not lo <= value <= hi:
         raise JoystickFileError(f"{where}: {value} outside [{lo}, {hi}]")
     return value
 
 
 def parse_joystick_csv(text: str, name: str = "<joystick file>") -> tuple[JoystickSample, ...]:
+    text = text.removeprefix("\ufeff")  # a byte-order mark some editors write
     lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     if not lines:
         raise JoystickFileError(f"{name}: empty joystick file")
     reader = csv.DictReader(io.StringIO("\n".join(lines)))
     header = [h.strip() for h in (reader.fieldnames or [])]
     reader.fieldnames = header
+    accepted = f"(accepted: {', '.join(COLUMNS)})"
+    for i, column in enumerate(header):
+        if column not in COLUMNS:
+            raise JoystickFileError(f"{name}: unknown column {column!r} {accepted}")
+        if column in header[:i]:
+            raise JoystickFileError(f"{name}: column {column!r} appears twice {accepted}")
     missing = [c for c in REQUIRED if c not in header]
     if missing:
         raise JoystickFileError(f"{name}: header lacks column(s) {', '.join(missing)}")
@@ -138,14 +157,11 @@ def parse_joystick_csv(text: str, name: str = "<joystick file>") -> tuple[Joysti
 
 
 def load_joystick_file(path: str | Path) -> tuple[JoystickSample, ...]:
-    p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise JoystickFileError(f"joystick file not found: {p}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise JoystickFileError(f"cannot read joystick file {p}: {exc}") from None
-    return parse_joystick_csv(text, str(p))
+        text = read_input_file(path, "joystick file", MAX_FILE_BYTES)
+    except ValueError as exc:
+        raise JoystickFileError(str(exc)) from None
+    return parse_joystick_csv(text, str(path))
 
 
 class JoystickTrack:

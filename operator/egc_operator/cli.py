@@ -3,7 +3,8 @@
 Exactly one source: ``--joystick /dev/input/eventN`` (evdev gamepad), ``--joystick-file FILE``
 (the recorded-joystick CSV of ``egc_common.joystick_file``) or ``--script NAME`` (a CSV shipped
 in ``egc_operator/scripts/``; ``--script list`` lists them). A file or script ends with the
-deadman released and the process exits 0 (``--loop`` repeats it instead).
+deadman released and the process exits 0 (``--loop`` repeats it instead, until stopped; a file
+whose rows are all at one instant holds that row).
 
 Shared mode's filter: ``--filter NAME`` (one of ``egc``, ``ek-egc``, ``assist``, ``dwa``) is
 sent with every command unless the source picks one (the gamepad's filter button, a file's
@@ -63,6 +64,9 @@ from egc_operator.status_line import StatusLine
 from egc_operator.via_route import Route, RouteError, route_from_options
 
 log = logging.getLogger("egc.operator")
+
+MAX_DURATION_S = 1e7  # about 116 days
+MAX_CLOCK_OFFSET_S = 1e6  # the test hook's shift: hours are plenty; nan or inf are no shift
 
 OPERATOR_KEYS = ("rate_hz", "deadzone", "gamepad")
 JOYSTICK_KEYS = tuple(ButtonMap.__dataclass_fields__)
@@ -233,8 +237,14 @@ def run(args: argparse.Namespace) -> int:
     rate_hz = args.rate_hz if args.rate_hz is not None else _number(op_cfg, "rate_hz", 50.0)
     if not 1.0 <= rate_hz <= 1000.0:
         raise UsageError("--rate-hz must be within [1, 1000]")
-    if args.duration is not None and not args.duration > 0:
-        raise UsageError("--duration must be positive")
+    if args.duration is not None and not 0 < args.duration <= MAX_DURATION_S:
+        # nan and inf too: a timer cannot wait that long (a traceback in its thread)
+        raise UsageError(f"--duration must be positive, at most {MAX_DURATION_S:g} s")
+    if not abs(args.clock_offset_s) <= MAX_CLOCK_OFFSET_S:  # nan too
+        raise UsageError(
+            f"--clock-offset-s must be a number of seconds within +-{MAX_CLOCK_OFFSET_S:g}, "
+            f"got {args.clock_offset_s}"
+        )
     if args.filter == "none":
         raise UsageError(
             "--filter none: 'none' is direct mode, chosen with --mode direct or the gamepad's "

@@ -35,7 +35,12 @@ class CommandSource(Protocol):
 
 
 class TrackSource:
-    """Replays a recorded track; with ``loop`` it starts over at the end."""
+    """Replays a recorded track; with ``loop`` it starts over at the end, forever.
+
+    A looped track of duration 0 (one row, or all rows at the same ``t_s``) holds its last
+    sample until the operator stops: there is nothing to start over, and ``--loop`` promises
+    to repeat, not to release the deadman after one sample.
+    """
 
     def __init__(self, track: JoystickTrack, loop: bool = False) -> None:
         self._track = track
@@ -44,8 +49,11 @@ class TrackSource:
 
     def sample(self, t_s: float) -> JoystickSample:
         duration = self._track.duration_s
-        if self._loop and duration > 0:
-            t_s %= duration
+        if self._loop:
+            if duration > 0:
+                t_s %= duration
+            else:
+                t_s = min(t_s, duration)  # hold the one instant there is
         elif t_s > duration:
             self._finished = True
             return RELEASED

@@ -3,7 +3,10 @@
 - **Input**: ``--goal X,Y`` (repeatable, in order; ``-2,3`` is a value, see
   ``egc_common.cli_args``) or ``--route FILE`` (one point per line, ``x,y`` or ``x y``, ``#``
   comments and blank lines ignored, at most ``MAX_GOAL_POINTS``), in ``--goal-frame odom|map``.
-  Errors are ``RouteError`` with one clear line (a file's errors name ``file:line``).
+  Numbers are plain ASCII decimals (``egc_common.cli_args.plain_float``: not ``1_000`` nor
+  full-width digits); a file may start with a UTF-8 byte-order mark and is read with a bound
+  (``MAX_ROUTE_FILE_BYTES``). Errors are ``RouteError`` with one clear line (a file's errors
+  name ``file:line``).
 - **What to send**: the whole route, in order, every time. The robot keeps its progress when
   the same route (same operator, frame and points) comes again, so the operator republishes it
   once a second: a robot that starts later, or control taken later, still gets it. The robot
@@ -26,10 +29,13 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from egc_common.cli_args import PLAIN_NUMBER, MiB, plain_float, read_input_file
 from egc_common.messages import GOAL_FRAMES, MAX_GOAL_COORD_M, MAX_GOAL_POINTS, GoalMessage
 
 XY = tuple[float, float]
 REPUBLISH_NS = 1_000_000_000
+# 64 points need a few hundred bytes; room for comments, and far less than a device can pour.
+MAX_ROUTE_FILE_BYTES = 1 * MiB
 SAME_POINT_M = 1e-6  # the robot echoes the floats it was sent; this only absorbs rounding
 
 
@@ -55,7 +61,7 @@ _SEPARATOR = re.compile(r"\s*,\s*|\s+")
 
 
 def _coordinate(text: str) -> float:
-    value = float(text)  # ValueError for a non-number
+    value = plain_float(text)  # ValueError for anything but a plain ASCII decimal
     if not math.isfinite(value) or abs(value) > MAX_GOAL_COORD_M:
         raise ValueError(f"{text!r} is not a finite coordinate within {MAX_GOAL_COORD_M:g} m")
     return value
@@ -73,7 +79,19 @@ def parse_point(text: str, *, spaces: bool = False) -> XY:
     except ValueError as exc:
         if "finite" in str(exc):
             raise
-        raise ValueError(f"expected two numbers, got {text.strip()!r}") from None
+        odd = [p for p in parts if _python_float(p) and not PLAIN_NUMBER.fullmatch(p)]
+        why = f" ({odd[0]!r}: digits 0-9 only, no '_')" if odd else ""
+        what = "two plain decimal numbers" if odd else "two numbers"
+        raise ValueError(f"expected {what}, got {text.strip()!r}{why}") from None
+
+
+def _python_float(text: str) -> bool:
+    """Whether ``float()`` alone would take ``text`` (``1_000``, full-width digits)."""
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def parse_goals(values: list[str]) -> tuple[XY, ...]:
@@ -90,6 +108,7 @@ def parse_goals(values: list[str]) -> tuple[XY, ...]:
 def parse_route_text(text: str, name: str = "<route>") -> tuple[XY, ...]:
     """A route file's points: one ``x,y`` or ``x y`` per line; ``#`` comments, blank lines."""
     points: list[XY] = []
+    text = text.removeprefix("\ufeff")  # a byte-order mark some editors write
     for line_no, line in enumerate(text.splitlines(), start=1):
         content = line.split("#", 1)[0].strip()
         if not content:
@@ -106,14 +125,11 @@ def parse_route_text(text: str, name: str = "<route>") -> tuple[XY, ...]:
 
 
 def load_route_file(path: str | Path) -> tuple[XY, ...]:
-    p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise RouteError(f"route file not found: {p}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise RouteError(f"cannot read route file {p}: {exc}") from None
-    return parse_route_text(text, str(p))
+        text = read_input_file(path, "route file", MAX_ROUTE_FILE_BYTES)
+    except ValueError as exc:
+        raise RouteError(str(exc)) from None
+    return parse_route_text(text, str(path))
 
 
 def route_from_options(goals: list[str] | None, route_file: str | None, frame: str) -> Route:

@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import functools
 import os
+import shutil
 import statistics
 import sys
 import threading
@@ -101,6 +102,8 @@ THIN_LINE = rr.Radius.ui_points(1.0)
 THICK_LINE = rr.Radius.ui_points(2.0)
 SCAN_RADIUS_M = 0.02
 PREDICTION_PERIOD_NS = 50_000_000  # the ghost is redrawn at most this often (robot clock)
+# A recording that failed with less free space than this beside it: "the disk is full".
+FULL_DISK_BYTES = 1024 * 1024
 DOWNLINK_SAMPLES = 20  # telemetry arrivals in the downlink median
 TEXT_LEVELS = {
     "trace": "TRACE",
@@ -262,7 +265,9 @@ def _open(
         option = {"save": "--save", "serve_web": "--serve-web", "connect": "--connect"}
         raise UsageError(f"{option.get(target.kind, 'view')}: {exc}") from None
     rec.send_recording_name(recording_name or f"{robot_id}: operator view")
-    return OperatorView(rec, robot_id, where=where)
+    view = OperatorView(rec, robot_id, where=where)
+    view.save_path = target.path if target.kind == "save" else None
+    return view
 
 
 class OperatorView:
@@ -303,6 +308,7 @@ class OperatorView:
         self._stale_drawn: tuple[str, str] | None = None  # the stale texts last drawn
         self._viewer_missing: str | None = None  # why the viewer cannot be reached, if not
         self._watch_stop = threading.Event()
+        self.save_path: Path | None = None  # the recording file, when the view is saved to one
         if recording is not None:
             self._log_static(recording)
 
@@ -502,6 +508,9 @@ class OperatorView:
             rec.flush(timeout_sec=1.0) if missing else rec.flush()
             rec.disconnect()
         except Exception as exc:  # Rerun raises RuntimeError when its gRPC sink cannot connect
+            if self.save_path is not None:  # or when its file writer failed (disk full, ...)
+                print(f"egc-teleop: warning: {cut_short(self.save_path, exc)}", file=sys.stderr)
+                return
             print(
                 f"egc-teleop: warning: the view did not reach the viewer ({exc}); "
                 "nothing was saved (--save FILE.rrd keeps a view)",
@@ -765,6 +774,21 @@ class OperatorView:
             text = f"robot rejected {new} more command(s) ({total} in total)"
             rec.log(paths.TEXT_LOG, rr.TextLog(text, level="WARN"))
         self._rejected_seen = max(self._rejected_seen, total)
+
+
+def cut_short(path: Path, exc: BaseException) -> str:
+    """What to say when writing the recording ``path`` failed with ``exc`` (Rerun says only
+    that its file writer stopped; its own error line before this one says why)."""
+    try:
+        kept = f"{path.stat().st_size} bytes kept"
+    except OSError as err:
+        kept = f"its size is unknown ({err.strerror})"
+    try:
+        full = shutil.disk_usage(path.resolve().parent).free < FULL_DISK_BYTES
+    except OSError:
+        full = False
+    why = "the disk is full" if full else "a write error"
+    return f"the recording {path} was cut short ({why}; Rerun: {exc}); {kept} (driving went on)"
 
 
 def _to_robot_frame(
