@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import enum
 import math
+import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Final, TypeVar
@@ -30,6 +31,25 @@ MAX_SCAN_BEAMS: Final = 200_000
 MAX_MAP_CELLS: Final = 64_000_000
 MAX_MAP_BYTES: Final = MAX_MAP_CELLS // 8 + 4096
 MAX_VIEW_AGE_MS: Final = 3_600_000
+# Telemetry figures (DESIGN 7, 9), each in a physically sensible range; a message with one
+# outside it is rejected whole (OUT_OF_RANGE), as one with a NaN is. Generous: the robot's own
+# figures never come near them (its speeds are within the base's +-100, see BaseCommand).
+MAX_SPEED_MPS: Final = 100.0  # v_ref, v_cmd, v_lim_latency (the latter >= 0)
+MAX_TURN_RADPS: Final = 100.0  # w_ref, w_cmd, w_lim_latency (the latter >= 0)
+MAX_POSE_COORD_M: Final = 1e7  # the odometry pose's x and y (as a map's origin)
+MAX_LOCAL_COORD_M: Final = 1e6  # circles in {R} (x, y and radius >= 0), r_rc >= 0
+MAX_ANGLE_RAD: Final = 1e6  # pose theta (odometry may not wrap it), suggested_rad
+# Link figures: delays (tau, the accepted commands' age p50/p90, the largest command gap) are
+# >= 0 and at most a day (the robot's own are bounded by its timeouts, view_age_ms by
+# MAX_VIEW_AGE_MS). cmd_age_ms and scan_age_ms count since the newest command or scan, which may
+# be long ago (a sensor that died): bounded by the range of the robot's nanosecond clock; a
+# command may be stamped ahead by up to max_command_age (the robot accepts it), so cmd_age_ms
+# may be negative by a delay. A scan or command that another thread of the robot takes in just
+# after a cycle read its clock makes scan_age_ms (seen: -0.73 ms from a real robot) or
+# cmd_gap_max_ms slightly negative: down to -MAX_RACE_MS is accepted.
+MAX_DELAY_MS: Final = 86_400_000.0
+MAX_CLOCK_MS: Final = MAX_INT / 1e6
+MAX_RACE_MS: Final = 1000.0
 
 MODES: Final = ("direct", "shared")
 # The filter family of DESIGN 6, pinned names ("none" is direct mode).
@@ -175,7 +195,8 @@ def _f32_array(
 
 
 class _NotFlatError(Exception):
-    """A map inside a message that has none (``_unpack(flat=True)``)."""
+    """A map inside a message that has none (``_unpack(flat=True)``), or a container inside
+    an array (``_Shape``)."""
 
 
 def _flat_map_hook() -> Callable[[dict[Any, Any]], dict[Any, Any]]:
@@ -192,10 +213,53 @@ def _flat_map_hook() -> Callable[[dict[Any, Any]], dict[Any, Any]]:
     return hook
 
 
-def _unpack(payload: object, max_bytes: int, flat: bool = False) -> Mapping[Any, Any]:
+@dataclass(frozen=True, slots=True)
+class _Shape:
+    """What a message received by the operator may hold (telemetry, state, clock reply, map):
+    one map of at most ``keys`` entries whose values are scalars, strings of at most
+    ``max_str`` bytes, bytes of at most ``max_bin``, or arrays of at most ``max_array``
+    scalars. Nothing else nests: no map inside the message, no container inside an array.
+
+    msgpack checks each length at the container's header and the hooks refuse a nested
+    container as soon as the first one is complete, so a payload of millions of tiny containers
+    (an outside check: 4 MB of empty maps took 0.24 s and 258 MB in the operator's receive
+    path, empty arrays 1.2 s, and starved its command loop) is refused after its first few
+    bytes. Unknown keys (DESIGN 7) are still ignored, within this shape.
+    """
+
+    keys: int = 128
+    max_array: int = 64
+    max_str: int = 1024
+    max_bin: int = 4096
+
+    def unpack_options(self) -> dict[str, Any]:
+        def list_hook(items: list[Any]) -> list[Any]:
+            for item in items:
+                if isinstance(item, (list, dict)):
+                    raise _NotFlatError
+            return items
+
+        return {
+            "max_map_len": self.keys,
+            "max_array_len": self.max_array,
+            "max_str_len": self.max_str,
+            "max_bin_len": self.max_bin,
+            "max_ext_len": 16,  # none of these messages has one; a timestamp's is 4-12 bytes
+            "object_hook": _flat_map_hook(),
+            "list_hook": list_hook,
+        }
+
+
+_LIMIT_EXCEEDED = re.compile(r"(\d+) exceeds max_(\w+)_len\((\d+)\)")
+
+
+def _unpack(
+    payload: object, max_bytes: int, flat: bool = False, shape: _Shape | None = None
+) -> Mapping[Any, Any]:
     """``flat``: the message is one map of scalars and bytes (a scan): any array or inner map
     is refused as soon as its header is read, so a payload of millions of tiny containers
-    (seconds of unpacking, in the receive path) costs no more than its first few bytes."""
+    (seconds of unpacking, in the receive path) costs no more than its first few bytes.
+    ``shape``: the same for a message that holds short arrays of scalars (see ``_Shape``)."""
     if isinstance(payload, memoryview):
         payload = payload.tobytes()
     if not isinstance(payload, (bytes, bytearray)):
@@ -205,13 +269,23 @@ def _unpack(payload: object, max_bytes: int, flat: bool = False) -> Mapping[Any,
     limits: dict[str, Any] = {}
     if flat:
         limits = {"max_array_len": 0, "max_map_len": 64, "object_hook": _flat_map_hook()}
+    elif shape is not None:
+        limits = shape.unpack_options()
     try:
         obj = msgpack.unpackb(
             bytes(payload), raw=False, strict_map_key=False, timestamp=0, **limits
         )
     except _NotFlatError:
-        raise _InvalidError(RejectReason.WRONG_TYPE, "a map inside the message") from None
+        what = "a map inside the message" if flat else "a container nested in the message"
+        raise _InvalidError(RejectReason.WRONG_TYPE, what) from None
     except Exception as exc:  # msgpack raises many types (ExtraData, ValueError, ...)
+        exceeded = None if shape is None else _LIMIT_EXCEEDED.search(str(exc))
+        if exceeded is not None:
+            length, kind, limit = exceeded.groups()
+            unit = "bytes" if kind in ("str", "bin", "ext") else "items"
+            raise _InvalidError(
+                RejectReason.TOO_LARGE, f"{kind} of {length} {unit} > limit {limit}"
+            ) from None
         raise _InvalidError(
             RejectReason.NOT_MSGPACK, f"not msgpack: {type(exc).__name__}"
         ) from None
@@ -232,10 +306,14 @@ T = TypeVar("T")
 
 
 def _decode(
-    payload: object, max_bytes: int, build: Callable[[Mapping[Any, Any]], T], flat: bool = False
+    payload: object,
+    max_bytes: int,
+    build: Callable[[Mapping[Any, Any]], T],
+    flat: bool = False,
+    shape: _Shape | None = None,
 ) -> T | Rejection:
     try:
-        return build(_unpack(payload, max_bytes, flat))
+        return build(_unpack(payload, max_bytes, flat, shape))
     except _InvalidError as exc:
         return exc.rejection
     except RecursionError:
@@ -448,13 +526,28 @@ REGIONS: Final = ("safe", "conditional", "unsafe")
 SIDES: Final = ("left", "right")
 
 
-def _opt_tuple(m: Mapping[Any, Any], key: str, n: int) -> tuple[float, ...] | None:
+def _opt_tuple(
+    m: Mapping[Any, Any],
+    key: str,
+    n: int,
+    bounds: tuple[tuple[float, float], ...] | None = None,
+) -> tuple[float, ...] | None:
+    """An optional list of ``n`` numbers; ``bounds``: each one's (lo, hi), in order."""
     value = m.get(key)
     if value is None:
         return None
     if not isinstance(value, list) or len(value) != n:
         raise _InvalidError(RejectReason.WRONG_TYPE, f"{key!r} must be a list of {n} numbers")
-    return tuple(_float({key: v}, key) for v in value)
+    if bounds is None:
+        return tuple(_float({key: v}, key) for v in value)
+    return tuple(
+        _float({f"{key}[{i}]": v}, f"{key}[{i}]", lo, hi)
+        for i, (v, (lo, hi)) in enumerate(zip(value, bounds, strict=True))
+    )
+
+
+def _opt_range(m: Mapping[Any, Any], key: str, lo: float, hi: float) -> float | None:
+    return None if m.get(key) is None else _float(m, key, lo, hi)
 
 
 def _opt_str(
@@ -466,47 +559,63 @@ def _opt_str(
     return None if m.get(key) is None else _str(m, key, choices, max_chars)
 
 
+_CIRCLE: Final = (
+    (-MAX_LOCAL_COORD_M, MAX_LOCAL_COORD_M),
+    (-MAX_LOCAL_COORD_M, MAX_LOCAL_COORD_M),
+    (0.0, MAX_LOCAL_COORD_M),
+)
+_POSE: Final = (
+    (-MAX_POSE_COORD_M, MAX_POSE_COORD_M),
+    (-MAX_POSE_COORD_M, MAX_POSE_COORD_M),
+    (-MAX_ANGLE_RAD, MAX_ANGLE_RAD),
+)
+_GOAL: Final = ((-MAX_GOAL_COORD_M, MAX_GOAL_COORD_M), (-MAX_GOAL_COORD_M, MAX_GOAL_COORD_M))
+# The telemetry's shape: ~40 keys, arrays of 2-3 numbers, the scan's points as bytes.
+_TELEMETRY_SHAPE: Final = _Shape(max_bin=MAX_SCAN_BEAMS * 8)
+
+
 def _build_telemetry(m: Mapping[Any, Any]) -> Telemetry:
     t = object.__new__(Telemetry)
+    v, w = MAX_SPEED_MPS, MAX_TURN_RADPS
     values: dict[str, Any] = {
         "seq": _int(m, "seq"),
         "stamp_ns": _int(m, "stamp_ns"),
         "state": _str(m, "state", STATES),
         "mode": _str(m, "mode", MODES),
-        "v_ref": _float(m, "v_ref"),
-        "w_ref": _float(m, "w_ref"),
-        "v_cmd": _float(m, "v_cmd"),
-        "w_cmd": _float(m, "w_cmd"),
+        "v_ref": _float(m, "v_ref", -v, v),
+        "w_ref": _float(m, "w_ref", -w, w),
+        "v_cmd": _float(m, "v_cmd", -v, v),
+        "w_cmd": _float(m, "w_cmd", -w, w),
         "w_si": _float(m, "w_si", 0.0, 1.0),
         "region": _str(m, "region", REGIONS) if "region" in m else "safe",
         "side": _opt_str(m, "side", SIDES),
         "limiter": _str(m, "limiter") if "limiter" in m else "none",
-        "igc": _opt_tuple(m, "igc", 3),
-        "agc": _opt_tuple(m, "agc", 3),
-        "egc": _opt_tuple(m, "egc", 3),
-        "r_rc": _float(m, "r_rc") if "r_rc" in m else 0.0,
+        "igc": _opt_tuple(m, "igc", 3, _CIRCLE),
+        "agc": _opt_tuple(m, "agc", 3, _CIRCLE),
+        "egc": _opt_tuple(m, "egc", 3, _CIRCLE),
+        "r_rc": _float(m, "r_rc", 0.0, MAX_LOCAL_COORD_M) if "r_rc" in m else 0.0,
         "scan_xy": _f32_array(m, "scan_xy", 2) if "scan_xy" in m else np.zeros((0, 2), np.float32),
-        "pose": _opt_tuple(m, "pose", 3),
-        "cmd_age_ms": _opt_float(m, "cmd_age_ms"),
-        "scan_age_ms": _opt_float(m, "scan_age_ms"),
+        "pose": _opt_tuple(m, "pose", 3, _POSE),
+        "cmd_age_ms": _opt_range(m, "cmd_age_ms", -MAX_DELAY_MS, MAX_CLOCK_MS),
+        "scan_age_ms": _opt_range(m, "scan_age_ms", -MAX_RACE_MS, MAX_CLOCK_MS),
         "operator": _opt_str(m, "operator"),
         "profile": _str(m, "profile") if m.get("profile") else "",
         "rejected": _int(m, "rejected") if "rejected" in m else 0,
         "cycle": _int(m, "cycle") if "cycle" in m else 0,
         "reason": _opt_str(m, "reason", max_chars=256),
         "filter": _str(m, "filter") if m.get("filter") else "",
-        "loop_delay_ms": _opt_float(m, "loop_delay_ms"),
-        "cmd_age_p50_ms": _opt_float(m, "cmd_age_p50_ms"),
-        "cmd_age_p90_ms": _opt_float(m, "cmd_age_p90_ms"),
-        "cmd_gap_max_ms": _opt_float(m, "cmd_gap_max_ms"),
-        "link_loss": None if m.get("link_loss") is None else _float(m, "link_loss", 0.0, 1.0),
-        "view_age_ms": _opt_float(m, "view_age_ms"),
-        "v_lim_latency": _opt_float(m, "v_lim_latency"),
-        "w_lim_latency": _opt_float(m, "w_lim_latency"),
-        "goal": _opt_tuple(m, "goal", 2),
+        "loop_delay_ms": _opt_range(m, "loop_delay_ms", 0.0, MAX_DELAY_MS),
+        "cmd_age_p50_ms": _opt_range(m, "cmd_age_p50_ms", 0.0, MAX_DELAY_MS),
+        "cmd_age_p90_ms": _opt_range(m, "cmd_age_p90_ms", 0.0, MAX_DELAY_MS),
+        "cmd_gap_max_ms": _opt_range(m, "cmd_gap_max_ms", -MAX_RACE_MS, MAX_DELAY_MS),
+        "link_loss": _opt_range(m, "link_loss", 0.0, 1.0),
+        "view_age_ms": _opt_range(m, "view_age_ms", 0.0, MAX_VIEW_AGE_MS),
+        "v_lim_latency": _opt_range(m, "v_lim_latency", 0.0, v),
+        "w_lim_latency": _opt_range(m, "w_lim_latency", 0.0, w),
+        "goal": _opt_tuple(m, "goal", 2, _GOAL),
         "goal_frame": _opt_str(m, "goal_frame", GOAL_FRAMES),
         "goals_left": _int(m, "goals_left", 0, MAX_GOAL_POINTS) if "goals_left" in m else 0,
-        "suggested_rad": _opt_float(m, "suggested_rad"),
+        "suggested_rad": _opt_range(m, "suggested_rad", -MAX_ANGLE_RAD, MAX_ANGLE_RAD),
     }
     for key, value in values.items():
         object.__setattr__(t, key, value)
@@ -514,7 +623,7 @@ def _build_telemetry(m: Mapping[Any, Any]) -> Telemetry:
 
 
 def decode_telemetry(payload: object) -> Telemetry | Rejection:
-    return _decode(payload, MAX_TELEMETRY_BYTES, _build_telemetry)
+    return _decode(payload, MAX_TELEMETRY_BYTES, _build_telemetry, shape=_TELEMETRY_SHAPE)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -611,8 +720,12 @@ def _build_state(m: Mapping[Any, Any]) -> StateMessage:
     )
 
 
+# State and clock replies: a handful of keys, short strings, no arrays in use.
+_SMALL_SHAPE: Final = _Shape(keys=64, max_array=16)
+
+
 def decode_state(payload: object) -> StateMessage | Rejection:
-    return _decode(payload, MAX_SMALL_BYTES, _build_state)
+    return _decode(payload, MAX_SMALL_BYTES, _build_state, shape=_SMALL_SHAPE)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -630,12 +743,14 @@ def encode_clock_reply(robot_now_ns: int, clock_id: str | None = None) -> bytes:
 
 
 def decode_clock_reply(payload: object) -> int | Rejection:
-    return _decode(payload, MAX_SMALL_BYTES, lambda m: _int(m, "stamp_ns"))
+    return _decode(payload, MAX_SMALL_BYTES, lambda m: _int(m, "stamp_ns"), shape=_SMALL_SHAPE)
 
 
 def decode_clock_id(payload: object) -> str | None:
     """The reply's optional ``clock`` key, or None (absent, or not a valid id)."""
-    result = _decode(payload, MAX_SMALL_BYTES, lambda m: _opt_str(m, "clock", max_chars=128))
+    result = _decode(
+        payload, MAX_SMALL_BYTES, lambda m: _opt_str(m, "clock", max_chars=128), shape=_SMALL_SHAPE
+    )
     return None if isinstance(result, Rejection) else result
 
 
@@ -809,5 +924,9 @@ def _build_map(m: Mapping[Any, Any]) -> MapMessage:
     )
 
 
+# The map: a few keys, the goal's 2 numbers, the grid as bytes.
+_MAP_SHAPE: Final = _Shape(keys=64, max_array=16, max_bin=MAX_MAP_BYTES)
+
+
 def decode_map(payload: object) -> MapMessage | Rejection:
-    return _decode(payload, MAX_MAP_BYTES, _build_map)
+    return _decode(payload, MAX_MAP_BYTES, _build_map, shape=_MAP_SHAPE)
