@@ -4,10 +4,18 @@
   monotonic deadline schedule, whether the stick moves or not, with command QoS (priority
   INTERACTIVE_HIGH, express). ``seq`` increases by one per command; ``stamp_ns`` is the robot's
   clock as estimated by ``ClockSync`` (0 until the first clock reply).
-- Queries ``egc/<robot>/clock`` from its own thread (10 Hz until synchronised, then 1 Hz).
+- Queries ``egc/<robot>/clock`` from its own thread (10 Hz until the robot's telemetry confirms
+  the clock in use, then 1 Hz), taking every reply (no consolidation).
 - Holds the liveliness token ``egc/<robot>/alive/operator/<id>``; closing the session (or the
   process dying) withdraws it, which releases control on the robot at once.
-- Subscribes to telemetry and state for the status line and the operator view.
+- Subscribes to telemetry and state for the status line and the operator view. Every message
+  refused there (DESIGN 7: a decoder's reason, or telemetry stamped more than 1 s ahead of the
+  robot's clock) is counted by reason (``Rejections``), logged at most once a second per
+  reason with the count held back, and said on the status line; nothing from the network raises
+  out of a callback.
+- Clock replies are kept per replier (``ClockSync``): when more than one peer answers the
+  clock query, the log names them (at most every 30 s, and at once when the clock in use
+  changes) and the robot's own telemetry decides whose clock the stamps follow.
 - Sends ``view_age_ms`` with every command (DESIGN 7, 9): the age, on the robot's clock, of the
   newest telemetry received (and handed to the view), once the clock is synchronised.
 - Keeps a bounded history of the commands it sent (robot-clock stamps) and hands it to the view
@@ -31,6 +39,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any, Protocol
@@ -43,6 +52,7 @@ from egc_common.messages import (
     MAX_VIEW_AGE_MS,
     OperatorCommand,
     Rejection,
+    RejectReason,
     StateMessage,
     Telemetry,
     decode_clock_id,
@@ -56,7 +66,7 @@ from egc_common.transport import command_publisher, payload_bytes
 from egc_operator.clock_sync import ClockSync
 from egc_operator.command_source import CommandSource
 from egc_operator.prediction import CommandHistory, SentCommand
-from egc_operator.status_line import Episode, Status, StatusLine, status_of
+from egc_operator.status_line import Episode, Rejections, Status, StatusLine, status_of
 from egc_operator.via_route import Route, RoutePlanner, active_index
 
 log = logging.getLogger("egc.operator")
@@ -75,6 +85,29 @@ _MAP_TIMEOUT_S = 6.0
 _MAP_RETRY_S = 1.0  # a query that got no map is repeated after this
 _MAP_ATTEMPTS = 10  # a present robot that serves no map is asked this often, then left alone
 _GOAL_POLL_S = 0.05  # the goal thread looks at the route this often (and at once on a press)
+_LOG_PERIOD_NS = NS_PER_S  # one line per kind of bad input per second, at most
+_FUTURE_TELEMETRY_MS = 1000  # ClockSync's future_tolerance_ns: telemetry further ahead is refused
+_REPLIERS_LOG_NS = 30 * NS_PER_S  # "more than one peer answers the clock query", repeated
+
+
+class EventLog:
+    """At most one line per ``period_ns`` per kind of event (each rejection reason, ...), with
+    the count of the lines held back: a robot (or a peer on its keys) sending thousands of bad
+    messages a second must not flood the log (an outside check: 49,532 lines in 10 s)."""
+
+    def __init__(self, period_ns: int = _LOG_PERIOD_NS) -> None:
+        self._period_ns = period_ns
+        self._last_ns: dict[str, int] = {}
+        self._held: Counter[str] = Counter()
+
+    def allow(self, kind: str, now_ns: int) -> int | None:
+        """None: hold this line back; else log it, with this many held back since the last."""
+        last = self._last_ns.get(kind)
+        if last is not None and now_ns - last < self._period_ns:
+            self._held[kind] += 1
+            return None
+        self._last_ns[kind] = now_ns
+        return self._held.pop(kind, 0)
 
 
 def goal_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
@@ -112,13 +145,28 @@ def view_age_ms(
 ) -> int | None:
     """``OperatorCommand.view_age_ms``: the robot-clock age of the newest telemetry shown.
 
-    None (the key is left out) until the clock is synchronised and telemetry has arrived;
-    clamped to [0, MAX_VIEW_AGE_MS] (a clock-sync error can make a fresh one look negative).
+    None (the key is left out) until the clock is synchronised and telemetry has arrived, and
+    for telemetry stamped more than ``_FUTURE_TELEMETRY_MS`` ahead of the clock (taken before
+    the clock was known: it is on no clock of this robot's, and said 0, the freshest, to the
+    robot); clamped to [0, MAX_VIEW_AGE_MS] (a clock-sync error can make a fresh one look
+    negative).
     """
     if not synchronised or telemetry_stamp_ns is None or robot_now_ns <= 0:
         return None
     age_ms = (robot_now_ns - telemetry_stamp_ns) // 1_000_000
+    if age_ms < -_FUTURE_TELEMETRY_MS:
+        return None
     return max(0, min(MAX_VIEW_AGE_MS, age_ms))
+
+
+def _replier_of(reply: zenoh.Reply) -> str:
+    """Who answered a query: the replier's Zenoh session id and its queryable's entity id
+    (``zid/eid``), "" when the reply does not say."""
+    try:
+        replier = reply.replier_id
+        return "" if replier is None else f"{replier.zid}/{replier.eid}"
+    except Exception:  # a binding without it: one replier as far as we can tell
+        return ""
 
 
 class OperatorNode:
@@ -152,6 +200,12 @@ class OperatorNode:
         self._state: StateMessage | None = None
         self._robot_alive = False
         self._telemetry_rx_ns: int | None = None  # our clock, when the newest telemetry came
+        self._state_rx_ns: int | None = None  # ... and the newest state message
+        # Messages on the robot's keys that were refused, by kind and reason (DESIGN 7).
+        self.rejections = Rejections()
+        self._reject_log = EventLog()
+        self._replier_log = EventLog(_REPLIERS_LOG_NS)
+        self._replier_key: tuple[object, ...] | None = None
         # The robot's current state and reason from telemetry: since when, and its link
         # figures' peaks (the status line's HOLD and resume texts).
         self._episode = Episode()
@@ -186,27 +240,67 @@ class OperatorNode:
 
     # -- callbacks ----------------------------------------------------------------------------
 
+    def _reject(self, kind: str, rejection: Rejection) -> None:
+        """Count a refused message and log it, at most once a second per reason."""
+        now = self._clock()
+        reason = rejection.reason.value
+        with self._lock:  # callbacks of several Zenoh threads, the clock and map threads
+            self.rejections.add(kind, reason, rejection.detail, now)
+            total = self.rejections.total
+            held = self._reject_log.allow(f"{kind} {reason}", now)
+        if held is None:
+            return
+        log.warning(
+            "rejected %s from robot %s (%s): %s%s [rejected so far: %d]",
+            kind,
+            self._robot,
+            reason,
+            rejection.detail,
+            f" (+{held} more {kind} {reason} since the last line)" if held else "",
+            total,
+        )
+
     def _on_telemetry(self, sample: zenoh.Sample) -> None:
+        try:
+            self._telemetry_in(sample)
+        except Exception as exc:  # nothing from the network raises out of the callback
+            log.warning("telemetry callback failed: %s: %s", type(exc).__name__, exc)
+
+    def _telemetry_in(self, sample: zenoh.Sample) -> None:
         t = decode_telemetry(payload_bytes(sample))
         if isinstance(t, Rejection):
-            log.debug("bad telemetry: %s", t)
+            self._reject("telemetry", t)
             return
         with self._lock:
-            self._telemetry = t
-            self._telemetry_rx_ns = self._clock()
-            self._episode.update(t)
-            synced = self._sync.synchronised
-            received = self._sync.robot_now(self._clock()) if synced else None
+            now = self._clock()
+            ahead_ns = self._sync.admit_telemetry(t.stamp_ns, now)
+            if ahead_ns is None:
+                self._telemetry = t
+                self._telemetry_rx_ns = now
+                self._episode.update(t)
+                synced = self._sync.synchronised
+                received = self._sync.robot_now(now) if synced else None
+        if ahead_ns is not None:
+            detail = f"stamped {ahead_ns / NS_PER_S:.3g} s ahead of the robot's clock estimate"
+            self._reject("telemetry", Rejection(RejectReason.STALE, detail))
+            return
         if self._view is not None:
             self._view.on_telemetry(t, received_ns=received)
 
     def _on_state(self, sample: zenoh.Sample) -> None:
+        try:
+            self._state_in(sample)
+        except Exception as exc:  # nothing from the network raises out of the callback
+            log.warning("state callback failed: %s: %s", type(exc).__name__, exc)
+
+    def _state_in(self, sample: zenoh.Sample) -> None:
         s = decode_state(payload_bytes(sample))
         if isinstance(s, Rejection):
-            log.debug("bad state: %s", s)
+            self._reject("state", s)
             return
         with self._lock:
             previous, self._state = self._state, s
+            self._state_rx_ns = self._clock()
         if previous is None or (previous.state, previous.reason) != (s.state, s.reason):
             log.info("robot %s: %s", s.state, s.reason)
         if self._view is not None:
@@ -224,6 +318,7 @@ class OperatorNode:
                 # its round trip and clock (a restarted robot's clock is another one). The
                 # arrival time stays, for "no telemetry for N s".
                 self._state = None
+                self._state_rx_ns = None
                 self._telemetry = None
                 self._episode = Episode()
                 self._sync = ClockSync()
@@ -252,35 +347,84 @@ class OperatorNode:
                     timeout=_CLOCK_TIMEOUT_S,
                     priority=zenoh.Priority.INTERACTIVE_HIGH,
                     express=True,
+                    # every reply, as it comes: consolidated, only one replier's reached us
+                    # (the quickest), so a rogue answering first hid the robot altogether
+                    consolidation=zenoh.ConsolidationMode.NONE,
                 )
                 for reply in replies:
                     received = self._clock()
                     ok = reply.ok
                     payload = None if ok is None else payload_bytes(ok)
                     stamp = None if payload is None else decode_clock_reply(payload)
+                    if isinstance(stamp, Rejection):
+                        self._reject("clock reply", stamp)
                     if isinstance(stamp, int):
                         same = self._clock_id is not None and self._clock_id == decode_clock_id(
                             payload
                         )
+                        replier = _replier_of(reply)
                         with self._lock:
                             # asked before the robot (re)appeared: the old robot's round trip
                             current = epoch == self._robot_epoch
                             sample = (
-                                self._sync.add(sent, stamp, received, same_clock=same)
+                                self._sync.add(sent, stamp, received, same, replier)
                                 if current
                                 else None
                             )
-                        if sample is not None and self._view is not None:
+                            in_use = self._sync.driver == replier
+                        if sample is not None and in_use and self._view is not None:
                             # the view wants the offset from this process's monotonic clock
                             skew = self._clock() - time.monotonic_ns()
                             self._view.on_link(sample.rtt_ns / 1e6, sample.offset_ns + skew)
+                self._say_repliers()
             except Exception as exc:  # a closing session must not kill the thread noisily
                 if stop.is_set():
                     return
                 log.debug("clock query failed: %s", exc)
             with self._lock:
-                synced = self._sync.synchronised
-            stop.wait(1.0 if synced else 0.1)
+                confirmed = self._sync.confirmed
+            # 10 Hz until the robot's telemetry confirms the clock in use (a second replier
+            # that comes later is then seen within 0.1 s), then 1 Hz
+            stop.wait(1.0 if confirmed else 0.1)
+
+    def _say_repliers(self) -> None:
+        """More than one peer answers the clock query: name them in the log (at once when the
+        clock in use changes, else every ``_REPLIERS_LOG_NS`` at most)."""
+        with self._lock:
+            views = self._sync.repliers()
+        if len(views) < 2:
+            self._replier_key = None
+            return
+        key = tuple((v.replier, v.drives) for v in views)
+        now = self._clock()
+        if key != self._replier_key:
+            self._replier_key = key
+            self._replier_log = EventLog(_REPLIERS_LOG_NS)
+        if self._replier_log.allow("repliers", now) is None:
+            return
+        with self._lock:
+            telemetry_seen = self._telemetry_rx_ns is not None
+        parts = []
+        for v in views:
+            if v.drives:
+                role = "its clock drives the command stamps"
+            elif v.telemetry_age_ns is not None:
+                age_s = v.telemetry_age_ns / NS_PER_S
+                role = f"ignored, the robot's telemetry is {age_s:+.3g} s old on its clock"
+            elif telemetry_seen:
+                role = "ignored, its clock does not fit the robot's telemetry"
+            else:
+                role = "ignored until telemetry tells the clocks apart"
+            parts.append(f"{v.replier}: {role}")
+        using = "" if any(v.drives for v in views) else "; commands go out unsynchronised"
+        log.warning(
+            "%d peers answer the clock query of robot %s (a rogue, or two robots with that id?):"
+            " %s%s",
+            len(views),
+            self._robot,
+            "; ".join(parts),
+            using,
+        )
 
     def _map_loop(self, stop: threading.Event) -> None:
         """The robot's static map (``egc/<robot>/map``) for the view's world frame, once per
@@ -319,7 +463,7 @@ class OperatorNode:
                 ok = reply.ok
                 world = None if ok is None else decode_map(payload_bytes(ok))
                 if isinstance(world, Rejection):
-                    log.warning("rejected map from the robot: %s", world)
+                    self._reject("map", world)
                 elif world is not None and self._view is not None and not stop.is_set():
                     self._view.set_world(
                         world.blocked,
@@ -488,11 +632,25 @@ class OperatorNode:
             latest = self._sync.latest
             synced = self._sync.synchronised
             rx = self._telemetry_rx_ns
+            state_rx = self._state_rx_ns
             episode = self._episode
             now = self._clock()
             rtt_ms = None if latest is None else latest.rtt_ns / 1e6
             age_s = None if rx is None else (now - rx) / NS_PER_S
-            status = status_of(command, t, s, rtt_ms, synced, alive, age_s, episode)
+            state_age_s = None if state_rx is None else (now - state_rx) / NS_PER_S
+            status = status_of(
+                command,
+                t,
+                s,
+                rtt_ms,
+                synced,
+                alive,
+                age_s,
+                episode,
+                state_age_s=state_age_s,
+                rejections=self.rejections.recent(now),
+                clock_note=self._sync.note(),
+            )
         pending = self._route_pending_since_ns
         if (
             pending is not None

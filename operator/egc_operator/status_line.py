@@ -9,6 +9,13 @@ largest gap between commands, the loss), then w_SI, rejections, mode with the fi
 Every telemetry figure may be unknown (None: an older robot, or none measured yet); unknown
 figures are left out.
 
+The line never passes off old or refused data as current: no telemetry accepted since the
+robot appeared (or none fresh) says NO TELEMETRY, naming the robot's messages that were
+rejected, with their reason, when there are any; a state message older than
+``STATE_STALE_S`` is not shown; messages refused lately are counted on the line even while
+valid telemetry comes (``Rejections``); the clock is "not synced", with why, while the clock
+replies disagree (``ClockSync.note``).
+
 On a terminal the line is redrawn in place a few times a second, cut to the terminal's width
 so that it never wraps. When stdout is not a TTY (a log file, a pipe, CI) the same text is
 printed as plain lines, only when the robot's state or reason, the latency cap or the control
@@ -18,6 +25,7 @@ situation changes and otherwise at most every ``plain_period_s``, so logs stay r
 from __future__ import annotations
 
 import shutil
+from collections import Counter
 from dataclasses import dataclass
 from typing import TextIO
 
@@ -27,6 +35,12 @@ from egc_common.messages import FILTER_NAMES, OperatorCommand, StateMessage, Tel
 RESUME_WINDOW_S = 2.0
 # Telemetry comes every control cycle (20 Hz and more); older than this, the robot is silent.
 TELEMETRY_STALE_S = 0.5
+# The robot sends its state on change and at 1 Hz (DESIGN 7); older than this, it is not shown.
+STATE_STALE_S = 2.5
+# Refused messages are said on the line for this long after the last one.
+REJECTIONS_SHOWN_S = 2.0
+# A telemetry stamp this far behind the newest one is a robot clock that jumped, not a late one.
+EPISODE_CLOCK_JUMP_NS = 10_000_000_000
 MAX_COMMAND_AGE_MS = {"direct": 300, "shared": 1000}
 COMMAND_TIMEOUT_MS = 250.0  # DESIGN 8: a gap shorter than this cannot have tripped the watchdog
 # "ramping up" after a short-gap resume: said this long at most (the robot keeps the reason
@@ -40,6 +54,67 @@ RAMP_DONE_MPS = 0.02
 FILTER_LIMITERS = frozenset(name for name in FILTER_NAMES if name != "none")
 # ... and those that mean an obstacle changed it: a filter or the footprint sweep.
 OBSTACLE_LIMITERS = FILTER_LIMITERS | {"sweep"}
+
+
+@dataclass(frozen=True, slots=True)
+class RecentRejections:
+    """The robot's messages this operator refused lately (``Rejections.recent``)."""
+
+    count: int  # refused in the last REJECTIONS_SHOWN_S (1-2 s of counts, see ``Rejections``)
+    telemetry: int  # ... of them telemetry
+    what: str  # the most frequent kind and reason lately, with the newest detail of it
+    total: int  # refused since the start
+
+
+class Rejections:
+    """Counts the robot's messages that this operator refused, by kind and reason (DESIGN 7:
+    "rejects with a counted, logged reason"). Not thread-safe; times are passed in.
+
+    ``recent`` counts in whole periods of ``REJECTIONS_SHOWN_S / 2``: the current one and the
+    one before it."""
+
+    def __init__(self, period_ns: int = int(REJECTIONS_SHOWN_S / 2 * 1e9)) -> None:
+        self._period_ns = period_ns
+        self.by_reason: Counter[tuple[str, str]] = Counter()  # (kind, reason) -> count
+        self.total = 0
+        self._detail: dict[tuple[str, str], str] = {}
+        self._bucket_ns: int | None = None  # start of the current period
+        self._current: Counter[tuple[str, str]] = Counter()
+        self._previous: Counter[tuple[str, str]] = Counter()
+
+    def _roll(self, now_ns: int) -> None:
+        if self._bucket_ns is None:
+            self._bucket_ns = now_ns
+            return
+        elapsed = now_ns - self._bucket_ns
+        if elapsed < self._period_ns:
+            return
+        self._previous = self._current if elapsed < 2 * self._period_ns else Counter()
+        self._current = Counter()
+        self._bucket_ns = now_ns - elapsed % self._period_ns
+
+    def add(self, kind: str, reason: str, detail: str, now_ns: int) -> None:
+        self._roll(now_ns)
+        key = (kind, reason)
+        self.by_reason[key] += 1
+        self.total += 1
+        self._current[key] += 1
+        self._detail[key] = detail
+
+    def recent(self, now_ns: int) -> RecentRejections | None:
+        """What was refused lately, or None when nothing was."""
+        self._roll(now_ns)
+        counts = self._current + self._previous
+        if not counts:
+            return None
+        (kind, reason), _ = counts.most_common(1)[0]
+        detail = self._detail.get((kind, reason), "")
+        if len(detail) > 60:
+            detail = detail[:59] + "~"
+        telemetry = sum(n for (k, _), n in counts.items() if k == "telemetry")
+        return RecentRejections(
+            sum(counts.values()), telemetry, f"{kind} {reason}: {detail}", self.total
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -83,6 +158,12 @@ class Status:
     episode_s: float | None = None
     # Since they began, the robot's speed has reached its reference (a resume's ramp is over).
     episode_ramped: bool = False
+    # The robot is present and no telemetry was accepted since it appeared.
+    no_telemetry_yet: bool = False
+    # The robot's messages this operator refused lately (None: none).
+    refused: RecentRejections | None = None
+    # What the clock sync says besides the round trip (several repliers, disagreement).
+    clock_note: str | None = None
 
 
 def _seconds(ms: float) -> str:
@@ -167,18 +248,24 @@ def situation(s: Status) -> str:
     age = s.telemetry_age_s
     if not s.robot_present and age is None:
         return "robot: not seen yet (waiting for its liveliness token)"
-    if not s.robot_present or (age is not None and age > TELEMETRY_STALE_S):
+    stale = age is not None and age > TELEMETRY_STALE_S
+    if not s.robot_present or stale or s.no_telemetry_yet:
         # A withdrawn liveliness token says so at once: the robot's last figures are not its
         # present ones, however young they are.
-        gone = (
-            "robot or link silent"
-            if s.robot_present
-            else "robot gone: its session ended or the link dropped"
-        )
-        for_age = "" if age is None else f" for {age:.1f} s"
+        refused = s.refused if s.refused is not None and s.refused.telemetry else None
+        if not s.robot_present:
+            why = "robot gone: its session ended or the link dropped"
+        elif refused is not None:
+            why = "the robot's telemetry is rejected, see REFUSED"
+        elif s.no_telemetry_yet and not stale:
+            why = "none received since the robot appeared"
+        else:
+            why = "robot or link silent"
+        what = "NO VALID TELEMETRY" if refused is not None else "NO TELEMETRY"
+        for_age = f" for {age:.1f} s" if age is not None and (stale or not s.robot_present) else ""
+        view = "the view is old" if age is not None else "nothing to show"
         return (
-            f"NO TELEMETRY{for_age} ({gone}) - the view is old; the robot stops when "
-            "your commands stop reaching it"
+            f"{what}{for_age} ({why}) - {view}; the robot stops when your commands stop reaching it"
         )
     if state is None:
         return "robot: no telemetry"
@@ -205,7 +292,10 @@ def link_figures(s: Status) -> str:
     clock reply is as old as the silence) and once the robot's liveliness changed."""
     parts = ["link --" if s.rtt_ms is None else f"rtt {s.rtt_ms:5.1f} ms"]
     if not s.synchronised:
-        parts[0] += " (clock not synced)"
+        why = "" if s.clock_note is None else f": {s.clock_note}"
+        parts[0] += f" (clock not synced{why})"
+    elif s.clock_note is not None:
+        parts[0] += f" (clock: {s.clock_note})"
     if s.cmd_age_p50_ms is not None:
         p90 = "--" if s.cmd_age_p90_ms is None else f"{s.cmd_age_p90_ms:.0f}"
         parts.append(f"cmd age p50/p90 {s.cmd_age_p50_ms:.0f}/{p90} ms")
@@ -228,8 +318,14 @@ def format_status(s: Status) -> str:
         via = f" | via {s.goal[0]:.1f},{s.goal[1]:.1f}{more}"
     elif s.via_untaken:
         via = " | via points NOT taken by the robot (does the router pass egc/<robot>/goal?)"
+    refused = ""
+    if s.refused is not None:
+        refused = (
+            f" | REFUSED {s.refused.count} robot msgs in {REJECTIONS_SHOWN_S:.0f} s"
+            f" ({s.refused.what}; {s.refused.total} in all)"
+        )
     return (
-        f"{situation(s)} | {link_figures(s)} | {w_si} | {rejected} | {mode}{via} | "
+        f"{situation(s)} | {link_figures(s)} | {w_si} | {rejected}{refused} | {mode}{via} | "
         f"{deadman}{control}"
     )
 
@@ -266,6 +362,9 @@ class StatusLine:
             status.synchronised,
             status.filter,  # the operator picked another one (sustained, unlike the limiter)
             status.goal,  # the robot moved on to another via point
+            status.no_telemetry_yet,
+            status.refused is not None,  # the robot's messages began or stopped being refused
+            status.clock_note,
         )
         if key != self._last_key or now_s - self._last_plain_s >= self._plain_period_s:
             self._stream.write(text + "\n")
@@ -296,8 +395,8 @@ class Episode:
         self.reached_ref = False  # the speed reached its reference since the key changed
 
     def update(self, t: Telemetry) -> None:
-        if t.stamp_ns < self.newest_ns:
-            return  # an older cycle that came late
+        if self.newest_ns - EPISODE_CLOCK_JUMP_NS <= t.stamp_ns < self.newest_ns:
+            return  # an older cycle that came late (far older: the robot's clock jumped)
         key = (t.state, t.reason)
         if key != self.key:
             self.key, self.since_ns, self.gap_ms = key, t.stamp_ns, None
@@ -328,19 +427,29 @@ def status_of(
     robot_alive: bool = True,
     telemetry_age_s: float | None = None,
     episode: Episode | None = None,
+    state_age_s: float | None = None,
+    rejections: RecentRejections | None = None,
+    clock_note: str | None = None,
 ) -> Status:
     """The status line's inputs from the newest messages (robot gone: none of its state, figures
-    or round trip; telemetry older than TELEMETRY_STALE_S: none of its figures, and nothing
-    said about control). Telemetry newer than the state message (sent on change and at 1 Hz)
-    says the state and reason."""
+    or round trip; telemetry older than TELEMETRY_STALE_S, or none since the robot appeared:
+    none of its figures, no state, and nothing said about control; a state message older than
+    STATE_STALE_S: not shown). Telemetry newer than the state message (sent on change and at
+    1 Hz) says the state and reason."""
     stale = telemetry_age_s is not None and telemetry_age_s > TELEMETRY_STALE_S
+    no_telemetry_yet = robot_alive and telemetry is None
     t = None if stale or not robot_alive else telemetry
-    s = state if robot_alive and not stale else None
+    state_stale = state_age_s is not None and state_age_s > STATE_STALE_S
+    s = state if robot_alive and not stale and not no_telemetry_yet and not state_stale else None
     robot_state = None if s is None else s.state
     reason = None if s is None else s.reason
     controller = None if s is None else s.operator
     rejected = None if s is None else s.rejected
-    if t is not None and t.reason is not None and (s is None or t.stamp_ns > s.stamp_ns):
+    if (
+        t is not None
+        and (t.reason is not None or s is None)
+        and (s is None or t.stamp_ns > s.stamp_ns)
+    ):
         robot_state, reason, controller = t.state, t.reason, t.operator
     if t is not None and (s is None or t.stamp_ns > s.stamp_ns):
         # The count only grows: the newest message's (the telemetry's, when it is newer than the
@@ -379,6 +488,9 @@ def status_of(
         episode_gap_ms=gap_ms,
         episode_s=episode_s,
         episode_ramped=episode is not None and episode.ramped(robot_state, reason),
+        no_telemetry_yet=no_telemetry_yet,
+        refused=rejections,
+        clock_note=clock_note,
     )
 
 
