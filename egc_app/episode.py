@@ -65,7 +65,7 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from egc_common.cli_args import check_writable
+from egc_common.cli_args import check_writable, plain_float
 from egc_common.errors import UsageError
 from egc_common.messages import Telemetry
 from egc_common.profiles import PROFILES, get_profile
@@ -323,7 +323,7 @@ def episode_via_points(
 def _floats(text: str, n: int, what: str) -> tuple[float, ...]:
     parts = str(text).split(",")
     try:
-        values = tuple(float(p) for p in parts)
+        values = tuple(plain_float(p) for p in parts)
     except ValueError:
         values = ()
     if len(values) != n or not all(math.isfinite(v) for v in values):

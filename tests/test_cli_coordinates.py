@@ -9,8 +9,11 @@ errors.
 from __future__ import annotations
 
 import importlib
+import subprocess
+import sys
 
 import pytest
+from egc_common.transport import free_port
 
 from egc_app.cli import SUBCOMMANDS, CliArgumentParser
 
@@ -80,3 +83,55 @@ def test_and_its_message_names_the_problem(capsys, argv, message):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
+
+
+# Numbers in coordinates are plain ASCII decimals (egc_common.cli_args.plain_float): float()
+# alone also takes 1_000 and full-width digits, which nobody types on purpose. An outside check
+# found the operator's --goal/--route strict but these options still on float().
+NOT_PLAIN = ["1_000", "\uff11", "1\uff10"]  # underscore; full-width 1; 1 then full-width 0
+
+
+def run_cli(*argv: str) -> tuple[int, list[str]]:
+    """A real ``egc-teleop`` process (a value taken for a number would start a robot or a
+    simulator that runs on: the timeout makes that a failure, not a hang)."""
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-m", "egc_app.cli", *argv],
+            capture_output=True,
+            text=True,
+            timeout=15,
+        )
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"{argv} ran on instead of refusing its arguments")
+    return proc.returncode, proc.stderr.strip().splitlines()
+
+
+@pytest.mark.parametrize("bad", NOT_PLAIN)
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["episode", "--map", "hallway", "--start", "{},0,0"], "--start X,Y,YAW must be 3"),
+        (["episode", "--map", "hallway", "--goal", "-2,{}"], "--goal X,Y must be 2"),
+        (["sim", "--start", "-1,{},0"], "--start must be X,Y,YAW"),
+        (["robot", "--laser-pose", "-0.1,0,{}"], "laser pose must be X,Y,YAW"),
+        (["robot", "--start", "-1,{},0", "--listen", "PORT"], "--start must be X,Y,YAW"),
+    ],
+)
+def test_coordinates_are_plain_decimals(argv, message, bad):
+    # The robot reads --start once its session is open: a free port, not the default 7447.
+    port = f"tcp/127.0.0.1:{free_port('tcp')}"
+    code, err = run_cli(*(port if a == "PORT" else a.format(bad) for a in argv))
+    assert code == 2
+    assert len(err) == 1 and message in err[0] and bad in err[0], err
+
+
+def test_negative_and_plain_coordinates_still_parse():
+    from egc_robot.ros2_core import parse_laser_pose
+    from egc_sim.bridge import parse_pose
+
+    from egc_app.episode import parse_goal, parse_start
+
+    assert parse_start("-12.5,8.5,-1.57") == (-12.5, 8.5, -1.57)
+    assert parse_goal(" -2.5,-3e-1") == (-2.5, -0.3)
+    assert parse_pose("-1,-.5,+3.") == (-1.0, -0.5, 3.0)
+    assert parse_laser_pose("-0.1,-0.05,-3.14159") == (-0.1, -0.05, -3.14159)

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from egc_common.cli_args import plain_float
 from egc_common.messages import Odometry
 from egc_common.ros2_topics import (
     DEFAULT_CMD_TOPIC,
@@ -120,7 +121,7 @@ def parse_laser_pose(text: str) -> tuple[float, float, float]:
     """``X,Y,YAW`` (metres, metres, radians), e.g. ``-0.1,0,3.14159``; ValueError if not."""
     parts = text.split(",")
     try:
-        values = tuple(float(p) for p in parts)
+        values = tuple(plain_float(p) for p in parts)
     except ValueError:
         values = ()
     if len(values) != 3 or not all(math.isfinite(v) for v in values):

@@ -21,6 +21,7 @@ import time
 from typing import Any
 
 from egc_common import keys
+from egc_common.cli_args import plain_float
 from egc_common.errors import UsageError
 from egc_common.messages import (
     Odometry,
@@ -58,7 +59,7 @@ def parse_pose(text: str | None) -> tuple[float, float, float] | None:
         return None
     parts = text.split(",")
     try:
-        x, y, yaw = (float(p) for p in parts)
+        x, y, yaw = (plain_float(p) for p in parts)
     except ValueError:
         raise UsageError(f"--start must be X,Y,YAW in metres and radians, got {text!r}") from None
     if not all(math.isfinite(v) for v in (x, y, yaw)):
