@@ -41,7 +41,13 @@ from typing import Any
 
 from egc_common.cli_args import check_writable
 from egc_common.errors import UsageError
+from egc_common.profiles import get_profile
 from egc_common.transport import free_port
+from egc_experiments.link_cli import _schedules as link_schedules
+from egc_experiments.link_model import SpecError
+from egc_experiments.relay import EndpointError, Relay, parse_endpoint
+from egc_operator.command_source import load_script, script_names
+from egc_sim.bridge import open_simulator
 
 STOP_TIMEOUT_S = 10.0
 _PR_SET_PDEATHSIG = 1
@@ -174,7 +180,10 @@ def _wait_ready(proc: subprocess.Popen[bytes], host: str, port: int) -> None:
     raise UsageError(f"{proc.args[3]} did not start listening on port {port}")
 
 
-def run(args: argparse.Namespace) -> int:
+def check_arguments(args: argparse.Namespace) -> None:
+    """Every argument the children would refuse, checked here before any of them starts, with
+    the message the child would give: one line and exit 2 from the demo itself, not a child's
+    error, a robot's stop summary and "robot exited 2" after it (DESIGN 2)."""
     if args.duration is not None and not args.duration > 0:
         raise UsageError("--duration must be positive")
     if args.save is not None and args.no_view:
@@ -184,6 +193,32 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(f"--save needs a .rrd file name, got {args.save!r}")
         # Before the robot starts: the operator would refuse it only once the robot is up.
         check_writable(args.save, "--save")
+    if args.json is not None:  # now, not as a traceback once the whole demo has run
+        check_writable(args.json, "--json")
+    try:
+        profile = get_profile(args.profile)
+        load_script(args.script)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    open_simulator(args.world, profile, None, 0)  # the robot's (and sim's) own check and message
+    if args.up is not None or args.down is not None or args.scenario is not None:
+        # egc-teleop link's own checks: the SPECs or the scenario, and what a TCP link refuses.
+        up, down = link_schedules(
+            argparse.Namespace(up=args.up or "", down=args.down or "", scenario=args.scenario)
+        )
+        somewhere = parse_endpoint(f"{args.transport}/127.0.0.1:1")
+        try:
+            Relay(somewhere, somewhere, up, down, seed=args.link_seed)
+        except (SpecError, EndpointError) as exc:
+            hint = " (in the demo: --transport udp)" if args.transport == "tcp" else ""
+            raise UsageError(f"{exc}{hint}") from None
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.script == "list":  # as `egc-teleop operator --script list`
+        print("\n".join(script_names()))
+        return 0
+    check_arguments(args)
     linked = args.up is not None or args.down is not None or args.scenario is not None
     proto = args.transport
     endpoint = f"{proto}/127.0.0.1:{free_port(proto)}"
@@ -256,7 +291,11 @@ def run(args: argparse.Namespace) -> int:
     except (OSError, ValueError) as exc:
         print(f"demo: no robot summary ({exc})", file=sys.stderr)
         return 1
-    if args.json is not None:
-        Path(args.json).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     print(format_summary(summary), flush=True)
+    if args.json is not None:
+        try:  # checked before the start; the folder may have gone since
+            Path(args.json).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+        except OSError as exc:
+            print(f"demo: cannot write --json {args.json}: {exc.strerror or exc}", file=sys.stderr)
+            return 1
     return 0

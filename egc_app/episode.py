@@ -486,6 +486,11 @@ def run(args: argparse.Namespace) -> int:
         if args.record:
             raise UsageError("--record saves a single episode; it cannot be used with a batch")
         return _run_batch(args, base)
+    if args.out is not None:
+        raise UsageError(
+            "--out writes a batch's JSON lines (--batch or --random-worlds); a single episode "
+            "prints to stdout"
+        )
     if not base.map:
         raise UsageError("--map is required (a map.yaml, a .toml world or a built-in name)")
     if args.record:
@@ -656,6 +661,8 @@ def _run_batch(args: argparse.Namespace, base: EpisodeSettings) -> int:
         raise UsageError("give either --batch or --random-worlds, not both")
     if args.jobs < 1:
         raise UsageError(f"--jobs must be at least 1, got {args.jobs}")
+    if args.out is not None:  # now, not as a traceback after the suite is read or run
+        check_writable(args.out, "--out")
     if args.batch:
         suite = _suite_settings(args.batch, base)
     else:
@@ -667,7 +674,10 @@ def _run_batch(args: argparse.Namespace, base: EpisodeSettings) -> int:
             replace(base, map=f"random:{seed}", seed=seed)
             for seed in range(base.seed, base.seed + args.random_worlds)
         ]
-    out = open(args.out, "w", encoding="utf-8") if args.out else sys.stdout  # noqa: SIM115
+    try:
+        out = open(args.out, "w", encoding="utf-8") if args.out else sys.stdout  # noqa: SIM115
+    except OSError as exc:  # checked above; the folder may have gone since
+        raise UsageError(f"--out {args.out}: {exc.strerror or exc}") from None
     counts = {"reached": 0, "collided": 0, "stalled": 0, "timeout": 0, "error": 0}
     t0 = time.perf_counter()
     done = 0

@@ -51,6 +51,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from egc_common.cli_args import check_writable
 from egc_common.errors import UsageError
 from egc_common.profiles import PROFILES, get_profile
 from egc_robot.pipeline import FILTERS
@@ -156,9 +157,11 @@ def run(args: argparse.Namespace) -> int:
     if not path.exists():
         raise UsageError(f"{path}: no such file or directory")
     path = log_file_in(path)
-    for out in (args.record, args.summary):
+    for option, out in (("--record", args.record), ("--summary", args.summary)):
         if out is not None and not Path(out).resolve().parent.is_dir():
             raise UsageError(f"{out}: its folder does not exist")
+        if out is not None:  # a directory, /proc: one line now, not a traceback after the run
+            check_writable(out, option)
     with _problems_named(path):
         summary = replay(
             path,
