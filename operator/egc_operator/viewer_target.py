@@ -17,6 +17,8 @@ not open a window) is not an error: driving does not depend on it, the view says
 
 from __future__ import annotations
 
+import os
+import shlex
 import shutil
 import socket
 import sys
@@ -163,15 +165,50 @@ def _rerun_executable() -> str | None:
     return shutil.which("rerun") or (str(beside) if beside.exists() else None)
 
 
+# ``rerun --serve-web FILE``'s defaults: the web viewer over HTTP, the data over gRPC.
+SERVE_WEB_HTTP_PORT = 9090
+SERVE_WEB_GRPC_PORT = 9876
+
+
+def _rerun_command() -> str:
+    """How to type the viewer here: ``rerun`` when it is on PATH, else the venv's own, by path
+    (``make demo`` runs from a venv that is not activated)."""
+    if shutil.which("rerun"):
+        return "rerun"
+    return _rerun_executable() or "rerun"
+
+
+def open_hint(where: Path, display: bool, rerun: str = "rerun") -> str:
+    """How to open the saved view ``where`` (a full path, so the hint works from any directory).
+
+    With a display, the viewer: ``rerun FILE``. Without one, that fails on this machine (winit
+    finds no X server): the viewer elsewhere (``rerun`` there; ``rerun`` is this machine's way
+    to type it), or here ``rerun --serve-web FILE`` (the web viewer
+    on HTTP port 9090, the data on gRPC port 9876; the page shows the recording only with the
+    ``?url=`` of the data, the bare page is Rerun's welcome screen) and a browser.
+    """
+    path = shlex.quote(str(where))
+    if display:
+        return f"open it with: {rerun} {path}"
+    proxy = urllib.parse.quote(f"rerun+http://127.0.0.1:{SERVE_WEB_GRPC_PORT}/proxy", safe="")
+    return (
+        f"on a machine with a display: rerun {path} ; from this one, in a browser: run "
+        f"{rerun} --serve-web {path} and open "
+        f"http://127.0.0.1:{SERVE_WEB_HTTP_PORT}/?url={proxy} (from another machine: this "
+        f"host's name for both 127.0.0.1, ports {SERVE_WEB_HTTP_PORT} and {SERVE_WEB_GRPC_PORT})"
+    )
+
+
 def attach(rec: rr.RecordingStream, target: ViewerTarget, blueprint: rrb.Blueprint) -> str:
     """Connect ``rec`` to ``target`` with ``blueprint`` as default layout; say where, in a line."""
     if target.kind == "save":
         assert target.path is not None
         rec.save(target.path, default_blueprint=blueprint)
         why = "no display (DISPLAY/WAYLAND_DISPLAY unset); " if target.defaulted else ""
-        # the full path twice: the hint must work from any directory, not only this one
         where = target.path.resolve()
-        return f"{why}operator view saved to {where} (open it with: rerun {where})"
+        display = has_display(os.environ) and not target.defaulted
+        hint = open_hint(where, display, _rerun_command())
+        return f"{why}operator view saved to {where} ({hint})"
     if target.kind == "connect":
         assert target.url is not None
         rec.connect_grpc(target.url, default_blueprint=blueprint)
