@@ -669,7 +669,9 @@ class RobotController:
             scan_xy=scan_xy,
             pose=self._pose,
             cmd_age_ms=cmd_age_ms,
-            scan_age_ms=None if scan is None else (now_ns - scan.rx_ns) / 1e6,
+            # A scan the driver's thread received after this cycle read its clock is 0 old,
+            # not a fraction of a millisecond from the future.
+            scan_age_ms=None if scan is None else max(0.0, (now_ns - scan.rx_ns) / 1e6),
             operator=self._controller_op,
             profile=self.config.pipeline.profile.name,
             rejected=self.counters.rejected_total,
