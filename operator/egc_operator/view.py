@@ -205,7 +205,10 @@ def open_view(
         why = reachable(address)
         if why is not None:
             view.abandon()
-            fallback = ViewerTarget("save", path=default_save_path(robot_id, stamp))
+            # The display did not take a viewer: the hint must not say "rerun FILE" here.
+            fallback = ViewerTarget(
+                "save", path=default_save_path(robot_id, stamp), viewer_failed=True
+            )
             check_target(fallback)
             view = _open(fallback, robot_id, application_id, recording_name)
             assert fallback.path is not None

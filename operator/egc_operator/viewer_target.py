@@ -47,6 +47,7 @@ class ViewerTarget:
     url: str | None = None  # connect
     web_port: int | None = None  # serve_web
     defaulted: bool = False  # save chosen because there is no display
+    viewer_failed: bool = False  # save chosen because a spawned viewer did not start here
 
     @property
     def grpc_port(self) -> int | None:
@@ -206,7 +207,7 @@ def attach(rec: rr.RecordingStream, target: ViewerTarget, blueprint: rrb.Bluepri
         rec.save(target.path, default_blueprint=blueprint)
         why = "no display (DISPLAY/WAYLAND_DISPLAY unset); " if target.defaulted else ""
         where = target.path.resolve()
-        display = has_display(os.environ) and not target.defaulted
+        display = has_display(os.environ) and not (target.defaulted or target.viewer_failed)
         hint = open_hint(where, display, _rerun_command())
         return f"{why}operator view saved to {where} ({hint})"
     if target.kind == "connect":

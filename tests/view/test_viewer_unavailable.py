@@ -133,6 +133,8 @@ def test_a_spawned_viewer_that_did_not_start_names_a_file_that_is_there(
     view.close()
     err = capsys.readouterr().err
     assert "the spawned viewer did not start (Connection refused)" in err, err
+    # that display took no viewer: the hint gives the web viewer, not "open it with: rerun"
+    assert "--serve-web" in err and "open it with:" not in err, err
     named = [word.strip("()") for word in err.split() if word.strip("()").endswith(".rrd")]
     assert named, err
     monkeypatch.chdir(tmp_path)  # read from elsewhere, as whoever follows the hint does
