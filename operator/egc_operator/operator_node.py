@@ -39,7 +39,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import Counter
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any, Protocol
@@ -47,6 +46,7 @@ from typing import Any, Protocol
 import numpy.typing as npt
 import zenoh
 from egc_common import keys
+from egc_common.event_log import EventLog
 from egc_common.joystick_file import RELEASED
 from egc_common.messages import (
     MAX_VIEW_AGE_MS,
@@ -85,29 +85,8 @@ _MAP_TIMEOUT_S = 6.0
 _MAP_RETRY_S = 1.0  # a query that got no map is repeated after this
 _MAP_ATTEMPTS = 10  # a present robot that serves no map is asked this often, then left alone
 _GOAL_POLL_S = 0.05  # the goal thread looks at the route this often (and at once on a press)
-_LOG_PERIOD_NS = NS_PER_S  # one line per kind of bad input per second, at most
 _FUTURE_TELEMETRY_MS = 1000  # ClockSync's future_tolerance_ns: telemetry further ahead is refused
 _REPLIERS_LOG_NS = 30 * NS_PER_S  # "more than one peer answers the clock query", repeated
-
-
-class EventLog:
-    """At most one line per ``period_ns`` per kind of event (each rejection reason, ...), with
-    the count of the lines held back: a robot (or a peer on its keys) sending thousands of bad
-    messages a second must not flood the log (an outside check: 49,532 lines in 10 s)."""
-
-    def __init__(self, period_ns: int = _LOG_PERIOD_NS) -> None:
-        self._period_ns = period_ns
-        self._last_ns: dict[str, int] = {}
-        self._held: Counter[str] = Counter()
-
-    def allow(self, kind: str, now_ns: int) -> int | None:
-        """None: hold this line back; else log it, with this many held back since the last."""
-        last = self._last_ns.get(kind)
-        if last is not None and now_ns - last < self._period_ns:
-            self._held[kind] += 1
-            return None
-        self._last_ns[kind] = now_ns
-        return self._held.pop(kind, 0)
 
 
 def goal_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:

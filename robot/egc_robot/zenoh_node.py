@@ -28,12 +28,12 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import Counter
 from collections.abc import Callable
 from typing import Protocol
 
 import zenoh
 from egc_common import keys
+from egc_common.event_log import EventLog
 from egc_common.messages import BaseCommand, StateMessage, encode_clock_reply
 from egc_common.scan import Scan
 from egc_common.transport import data_publisher, payload_bytes
@@ -45,7 +45,6 @@ from egc_robot.run_stats import RunStats
 log = logging.getLogger("egc.robot")
 
 _STATE_PERIOD_NS = 1_000_000_000
-_LOG_PERIOD_NS = 1_000_000_000
 
 
 class Recorder(Protocol):
@@ -58,26 +57,6 @@ class Recorder(Protocol):
     def on_scan(self, scan: Scan, now_ns: int) -> None: ...
     def on_state(self, state: StateMessage) -> None: ...
     def close(self) -> None: ...
-
-
-class EventLog:
-    """At most one line per second per kind of event (liveliness, via points, each rejection
-    reason), with the count of the lines held back: a peer declaring thousands of tokens, or
-    sending thousands of routes, must not flood the log (an outside check got 10,000 and 7,188
-    lines)."""
-
-    def __init__(self) -> None:
-        self._last_ns: dict[str, int] = {}
-        self._held: Counter[str] = Counter()
-
-    def allow(self, kind: str, now_ns: int) -> int | None:
-        """None: hold this line back; else log it, with this many held back since the last."""
-        last = self._last_ns.get(kind)
-        if last is not None and now_ns - last < _LOG_PERIOD_NS:
-            self._held[kind] += 1
-            return None
-        self._last_ns[kind] = now_ns
-        return self._held.pop(kind, 0)
 
 
 class RejectionLog:

@@ -21,8 +21,9 @@ from dataclasses import replace
 import msgpack
 import zenoh
 from egc_common import keys
+from egc_common.event_log import EventLog
 from egc_common.messages import OperatorCommand, StateMessage, Telemetry, encode_clock_reply
-from egc_operator.operator_node import EventLog, OperatorNode, view_age_ms
+from egc_operator.operator_node import OperatorNode, view_age_ms
 from egc_operator.status_line import (
     Episode,
     RecentRejections,

@@ -67,7 +67,7 @@ def test_failed_cycles_send_zero_and_the_loop_keeps_running(caplog):
 
 
 def test_event_lines_are_held_back_to_one_a_second_with_a_count():
-    from egc_robot.zenoh_node import EventLog
+    from egc_common.event_log import EventLog
 
     events, s = EventLog(), 1_000_000_000
     assert events.allow("alive", 0) == 0
