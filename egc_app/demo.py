@@ -43,7 +43,7 @@ from egc_common.cli_args import check_writable
 from egc_common.errors import UsageError
 from egc_common.profiles import get_profile
 from egc_common.transport import free_port
-from egc_experiments.link_cli import _schedules as link_schedules
+from egc_experiments.link_cli import link_schedules
 from egc_experiments.link_model import SpecError
 from egc_experiments.relay import EndpointError, Relay, parse_endpoint
 from egc_operator.command_source import load_script, script_names
@@ -203,9 +203,7 @@ def check_arguments(args: argparse.Namespace) -> None:
     open_simulator(args.world, profile, None, 0)  # the robot's (and sim's) own check and message
     if args.up is not None or args.down is not None or args.scenario is not None:
         # egc-teleop link's own checks: the SPECs or the scenario, and what a TCP link refuses.
-        up, down = link_schedules(
-            argparse.Namespace(up=args.up or "", down=args.down or "", scenario=args.scenario)
-        )
+        up, down = link_schedules(args.up or "", args.down or "", args.scenario)
         somewhere = parse_endpoint(f"{args.transport}/127.0.0.1:1")
         try:
             Relay(somewhere, somewhere, up, down, seed=args.link_seed)

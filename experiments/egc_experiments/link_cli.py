@@ -94,16 +94,18 @@ def _endpoint(option: str, text: str) -> Endpoint:
         raise UsageError(f"{option}: {exc}") from None
 
 
-def _schedules(args: argparse.Namespace) -> tuple[Schedule, Schedule]:
-    if args.scenario is not None:
-        if args.up or args.down:
+def link_schedules(up: str, down: str, scenario: str | None) -> tuple[Schedule, Schedule]:
+    """The up and down schedules of ``--up``/``--down`` SPECs or a ``--scenario`` file (also
+    the demo's, checked before it starts anything); a bad one is a UsageError naming it."""
+    if scenario is not None:
+        if up or down:
             raise UsageError("--scenario gives both directions; leave out --up and --down")
         try:
-            return load_scenario(args.scenario)
+            return load_scenario(scenario)
         except SpecError as exc:
             raise UsageError(f"--scenario: {exc}") from None
     schedules = []
-    for option, text in (("--up", args.up), ("--down", args.down)):
+    for option, text in (("--up", up), ("--down", down)):
         try:
             schedules.append(Schedule.constant(parse_spec(text)))
         except SpecError as exc:
@@ -129,7 +131,7 @@ def build_relay(args: argparse.Namespace) -> Relay:
         raise UsageError(f"--duration must be > 0 seconds, got {args.duration}")
     if args.stats is not None:  # a directory or an unwritable path: now, not after the run
         check_writable(args.stats, "--stats")
-    up, down = _schedules(args)
+    up, down = link_schedules(args.up, args.down, args.scenario)
     log = (lambda line: None) if args.quiet else None
     try:
         relay = Relay(listen, connect, up, down, seed=args.seed, log=log)
