@@ -36,6 +36,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "egc_experiments.experiment_cli",
         "run a grid of network-delay experiments; runs.jsonl, report.md and plots out",
     ),
+    "robots": ("egc_app.robots_cmd", "list the robots on the Zenoh network (DESIGN 15)"),
     "router": ("egc_app.router_cmd", "an embedded Zenoh router, for sites without zenohd"),
     "replay": (
         "egc_app.replay_cmd",

@@ -33,6 +33,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import gc
+import importlib.metadata
 import json
 import logging
 import math
@@ -50,6 +51,7 @@ from egc_common.errors import UsageError
 from egc_common.joystick import JoystickMapping
 from egc_common.messages import BaseCommand
 from egc_common.profiles import PROFILES, get_profile
+from egc_common.robot_info import RobotInfo
 from egc_common.transport import (
     DEFAULT_ENDPOINT,
     LEASE_MS,
@@ -62,6 +64,7 @@ from egc_robot.controller import ControllerConfig, RobotController
 from egc_robot.drivers import Driver, SensorUpdate
 from egc_robot.filters.assist import AssistParams
 from egc_robot.filters.dwa import DwaParams
+from egc_robot.info_server import InfoServer
 from egc_robot.pipeline import FILTERS, PipelineConfig
 from egc_robot.ros2_core import CMD_TYPES, ROS2_KEYS, Ros2Settings, ros2_settings
 from egc_robot.run_stats import RunStats
@@ -389,6 +392,39 @@ def resume_window_caveat(config: ControllerConfig, lease_ms: int | None) -> str 
     )
 
 
+def _describer(args: argparse.Namespace, controller: RobotController) -> Any:
+    """What ``egc/<robot>/info`` answers (DESIGN 15): fixed facts, plus the controller's state
+    and operator read at the time of the query (two attribute reads: a snapshot may be one
+    cycle old, never inconsistent enough to matter for a listing)."""
+    half_length, half_width = get_profile(args.profile).half_size_m
+    footprint = (
+        (half_length, half_width),
+        (-half_length, half_width),
+        (-half_length, -half_width),
+        (half_length, -half_width),
+    )
+    try:
+        version = importlib.metadata.version("egc-teleop")
+    except importlib.metadata.PackageNotFoundError:
+        version = "unknown"
+    camera = str(getattr(args, "camera", None) or "none")
+
+    def describe() -> RobotInfo:
+        return RobotInfo(
+            robot=args.robot,
+            state=controller.state.value,
+            driver=args.driver,
+            profile=args.profile,
+            filter=args.filter,
+            camera=camera,
+            version=version,
+            footprint_m=footprint,
+            operator=controller.operator,
+        )
+
+    return describe
+
+
 def run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=args.log_level, format="robot: %(message)s")
     try:
@@ -441,6 +477,7 @@ def run(args: argparse.Namespace) -> int:
         stats=stats,
         clock_id=monotonic_clock_id(),
     )
+    info = InfoServer(session, args.robot, _describer(args, node.controller))
     log.info(
         "robot %r ready: driver %s, profile %s, filter %s, %.6g Hz",
         args.robot,
@@ -460,6 +497,7 @@ def run(args: argparse.Namespace) -> int:
         # gone at the same moment: "close operation timed out") ended the process with a
         # traceback and without its summary.
         for what, step in (
+            ("stop answering info queries", info.close),
             ("stop the node", node.shutdown),
             ("close the driver", driver.close),
             ("close the Zenoh session", session.close),
