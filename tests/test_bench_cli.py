@@ -71,10 +71,11 @@ def test_list_and_several_names_still_work() -> None:
     assert proc.returncode == 0 and {"view", "link", "filter"} <= set(proc.stdout.split())
 
 
-def test_split_words() -> None:
-    from egc_app.bench import split_words
-
-    assert split_words([]) == ([], [])
-    assert split_words(["filter", "sim"]) == (["filter", "sim"], [])
-    assert split_words(["view", "--minutes", "0.3"]) == (["view"], ["--minutes", "0.3"])
-    assert split_words(["view", "--", "--minutes", "1"]) == (["view"], ["--minutes", "1"])
+def test_the_words_before_the_first_option_are_names_and_a_double_dash_is_dropped() -> None:
+    """How the command line splits into names and the script's options (a test of the real
+    process: nothing imports egc_app, DESIGN 2)."""
+    proc = egc("nosuch", "other")  # both are names: both are named as unknown
+    assert proc.returncode == 2 and "unknown benchmark(s) nosuch, other " in proc.stderr
+    proc = egc("view", "--", "--help")  # "--" after the name goes, the option reaches the script
+    assert proc.returncode == 0, proc.stderr
+    assert "bench_view.py" in proc.stdout and "--minutes" in proc.stdout
