@@ -72,3 +72,8 @@ def operator_id_from_alive_key(key: str) -> str | None:
     if len(parts) == 5 and parts[0] == "egc" and parts[2:4] == ["alive", "operator"]:
         return parts[4]
     return None
+
+
+def camera(robot: str) -> str:
+    """Robot -> operators, the camera's encoded frames (DESIGN 12, view plane)."""
+    return f"egc/{validate_id(robot)}/camera"
