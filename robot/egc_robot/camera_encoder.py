@@ -19,8 +19,9 @@ JPEG (every frame stands alone): the quality follows the frame-size target
 ``kbps / fps`` by ``next_jpeg_quality``.
 
 ``plan_stream`` is the pure choice of what to send for an allotment: below a few hundredths of
-a bit per pixel the picture halves (down to ``MIN_SIDE_PX``), and at one frame a second or less
-it is JPEG (each H.264 frame would be a keyframe anyway, and a JPEG needs no decoder state).
+a bit per pixel for H.264 (a few tenths for JPEG) the picture halves (down to
+``MIN_SIDE_PX``), and at one frame a second or less it is JPEG (each H.264 frame would be a
+keyframe anyway, and a JPEG needs no decoder state).
 """
 
 from __future__ import annotations
@@ -43,7 +44,9 @@ NS_PER_S: Final = 1_000_000_000
 KEYFRAME_PERIOD_NS: Final = NS_PER_S  # DESIGN 12: a viewer that joins sees a picture within 1 s
 VBV_SECONDS: Final = 0.5
 MIN_SIDE_PX: Final = 64  # the picture is not halved below this (height)
-MIN_BITS_PER_PIXEL: Final = 0.03  # H.264 below this is mush: halve the picture instead
+# Below these bits per pixel a frame is mush (H.264) or cannot be made that small at all
+# (JPEG at quality 10 is ~0.27 bit/pixel at 320x240): halve the picture instead.
+MIN_BITS_PER_PIXEL: Final = {"h264": 0.03, "jpeg": 0.3}
 JPEG_MAX_FPS: Final = 1.0  # at or below this rate every frame is JPEG
 JPEG_QUALITY: Final = (10, 90)  # the controller's range
 JPEG_START_QUALITY: Final = 70
@@ -98,7 +101,7 @@ def plan_stream(
     w, h = even(width_px), even(height_px)
     if codec == "h264" and fps <= JPEG_MAX_FPS:
         codec = "jpeg"
-    while h // 2 >= MIN_SIDE_PX and kbps * 1000.0 / (fps * w * h) < MIN_BITS_PER_PIXEL:
+    while h // 2 >= MIN_SIDE_PX and kbps * 1000.0 / (fps * w * h) < MIN_BITS_PER_PIXEL[codec]:
         w, h = even(w / 2), even(h / 2)
     return StreamPlan(codec, w, h, fps, kbps)
 

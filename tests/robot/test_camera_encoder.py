@@ -66,7 +66,9 @@ def test_h264_round_trip_annex_b_one_picture_per_frame(renderer):
     frames = [drive(renderer, k, 10.0) for k in range(20)]
     for k, rgb in enumerate(frames):
         out = encoder.encode(rgb, k * 100 * MS)
-        assert out is not None and out.codec == "h264" and (out.width_px, out.height_px) == (320, 240)
+        assert (
+            out is not None and out.codec == "h264" and (out.width_px, out.height_px) == (320, 240)
+        )
         assert out.data.startswith(b"\x00\x00\x00\x01")  # Annex B
         if out.key:
             assert {7, 8, 5} <= set(h264_nal_types(out.data))  # SPS, PPS, IDR slice
@@ -179,6 +181,9 @@ def test_plan_stream_steps_down_for_small_budgets():
     # One frame a second or less: each frame stands alone, JPEG
     assert plan_stream("h264", 320, 240, 1.0, 50.0).codec == "jpeg"  # type: ignore[union-attr]
     assert plan_stream("jpeg", 320, 240, 10.0, 300.0).codec == "jpeg"  # type: ignore[union-attr]
+    # JPEG cannot go below ~0.3 bit/pixel: 100 kbit/s at 10 frames/s is 160x120 in JPEG
+    jpeg = plan_stream("jpeg", 320, 240, 10.0, 100.0)
+    assert jpeg is not None and (jpeg.width_px, jpeg.height_px) == (160, 120)
 
 
 @pytest.mark.parametrize(
