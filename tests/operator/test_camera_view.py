@@ -198,6 +198,32 @@ def test_a_gap_in_seq_waits_for_a_keyframe(renderer):
     assert not receiver.refused
 
 
+def test_the_stream_switching_size_and_codec_is_shown_throughout(renderer):
+    # What a budget does to the stream: 320x240 H.264, then 160x120, then JPEG at 1 frame/s,
+    # then back: every frame decodes, nothing is refused or skipped.
+    encoder = CameraEncoder()
+    receiver = CameraReceiver()
+    plans = {
+        0: StreamPlan("h264", 320, 240, 10.0, 300.0),
+        10: StreamPlan("h264", 160, 120, 10.0, 50.0),
+        20: StreamPlan("jpeg", 320, 240, 1.0, 50.0),
+        25: StreamPlan("h264", 320, 240, 10.0, 300.0),
+    }
+    for k in range(30):
+        if k in plans:
+            encoder.set_plan(plans[k])
+        stamp = T0 + k * 100 * MS
+        out = encoder.encode(renderer.render((0.6 + 0.05 * k, 1.4, 0.0)), stamp)
+        assert out is not None
+        frame = CameraFrame(k, stamp, out.codec, out.width_px, out.height_px, out.key, out.data)
+        shown = receiver.receive(frame.encode(), 0, at(frame))
+        assert isinstance(shown, ShownFrame) and (shown.width, shown.codec) == (
+            out.width_px,
+            out.codec,
+        )
+    assert not receiver.refused and receiver.skipped == 0
+
+
 def test_a_future_frame_within_the_clock_error_is_taken():
     # The clock sync's error is half its round trip: a stamp within it is not "the future".
     receiver = CameraReceiver()
