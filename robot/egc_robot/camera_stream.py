@@ -26,6 +26,7 @@ egc_robot may not import egc_sim), ``--camera ros2:TOPIC`` (``Ros2Driver.newest_
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections import deque
@@ -107,16 +108,16 @@ class CameraStreamer:
         self.codec: str | None = None
         self.width_px: int | None = None
         self.height_px: int | None = None
-        self.encode_ns = 0  # time spent taking, encoding and publishing frames
 
     # -- the budget's interface ---------------------------------------------------------------
 
     def set_allotment(self, fps: float, kbps: float) -> None:
         """At most ``fps`` frames a second (0: off) and ``kbps`` kbit/s, from the next frame;
         the configured ``--camera-fps`` stays the ceiling."""
+        fps, kbps = float(fps), float(kbps)
         with self._cond:
-            self._fps = max(0.0, min(float(fps), self._config.max_fps))
-            self._kbps = max(0.0, float(kbps))
+            self._fps = min(fps, self._config.max_fps) if math.isfinite(fps) and fps > 0 else 0.0
+            self._kbps = kbps if math.isfinite(kbps) and kbps > 0 else 0.0
             self._changed = True
             self._cond.notify_all()
 
@@ -209,7 +210,6 @@ class CameraStreamer:
                 next_ns = self._clock() + period
 
     def _one_frame(self, fps: float, kbps: float) -> None:
-        began = self._clock()
         grabbed = self._source()
         if grabbed is None:
             return
@@ -248,9 +248,5 @@ class CameraStreamer:
         self.frames_sent += 1
         self.bytes_sent += len(payload)
         self.keyframes_sent += int(encoded.key)
-        self.codec, self.width_px, self.height_px = (
-            encoded.codec,
-            encoded.width_px,
-            encoded.height_px,
-        )
-        self.encode_ns += sent_at - began
+        self.codec = encoded.codec
+        self.width_px, self.height_px = encoded.width_px, encoded.height_px

@@ -181,10 +181,12 @@ def test_allotments_from_another_thread_while_it_runs(streamer_factory):
 def test_a_small_budget_steps_down_to_jpeg_and_a_smaller_picture(streamer_factory):
     sink = Sink()
     streamer = streamer_factory(Source(), sink, max_fps=10.0)
-    streamer.set_allotment(1.0, 10.0)
+    streamer.set_allotment(1.0, 30.0)
     wait_for(lambda: any(f.codec == "jpeg" for f in sink.frames()), "a JPEG frame")
     jpeg = [f for f in sink.frames() if f.codec == "jpeg"][-1]
-    assert (jpeg.width, jpeg.height) == (320, 240)  # 10 kbit/s at 1 frame/s: 0.13 bit/pixel
+    assert (jpeg.width, jpeg.height) == (320, 240)  # 30 kbit/s at 1 frame/s: 0.39 bit/pixel
+    streamer.set_allotment(1.0, 10.0)  # 0.13 bit/pixel: JPEG cannot, at half the size it can
+    wait_for(lambda: any(f.width == 160 for f in sink.frames()), "160x120 JPEG")
     streamer.set_allotment(10.0, 15.0)  # 0.02 bit/pixel at 320x240: half the size
     wait_for(
         lambda: any(f.codec == "h264" and f.width == 160 for f in sink.frames()), "160x120 H.264"
