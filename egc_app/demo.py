@@ -87,6 +87,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--json", metavar="FILE", help="also write the summary as JSON")
     parser.add_argument(
+        "--camera",
+        choices=("sim", "none"),
+        default=None,
+        help="the robot's camera (DESIGN 12): sim, the simulator's forward camera in the view, "
+        "or none (default: sim; none with --ros2, whose simulator publishes no images)",
+    )
+    parser.add_argument(
         "--ros2",
         action="store_true",
         help="ROS 2 in the loop: 'egc-teleop sim --ros2' as the robot's base and lidar, the "
@@ -148,6 +155,13 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"{summary.get('latency_limited_s', 0.0):.1f} s",
         f"  rejected        {summary.get('rejected') or 'none'}",
     ]
+    camera = summary.get("camera")
+    if camera:
+        lines.append(
+            f"  camera          {camera['codec']} {camera['width']}x{camera['height']}, "
+            f"{camera['frames_sent']} frames sent, {camera['fps']:g} frames/s, "
+            f"{camera['kbps']:g} kbit/s"
+        )
     return "\n".join(lines)
 
 
@@ -195,6 +209,11 @@ def check_arguments(args: argparse.Namespace) -> None:
         check_writable(args.save, "--save")
     if args.json is not None:  # now, not as a traceback once the whole demo has run
         check_writable(args.json, "--json")
+    if args.camera == "sim" and args.ros2:
+        raise UsageError(
+            "--camera sim needs the simulator in the robot process; with --ros2 the robot runs "
+            "--driver ros2 and the ROS 2 simulator publishes no images (use --camera none)"
+        )
     try:
         profile = get_profile(args.profile)
         load_script(args.script)
@@ -231,6 +250,7 @@ def run(args: argparse.Namespace) -> int:
     robot_cmd += ["--listen", endpoint, "--summary", str(summary_path)]
     if args.no_link_aware:
         robot_cmd.append("--no-link-aware")
+    robot_cmd += ["--camera", args.camera or ("none" if args.ros2 else "sim")]
     operator_cmd = ["operator", "--script", args.script, "--operator-id", "demo-operator"]
     operator_cmd += ["--zenoh-connect", operator_endpoint]
     if args.duration is not None:

@@ -20,6 +20,8 @@ flags. Tables and keys (units in the names):
     [sim]      scan_hz, beams, seed
     [ros2]     scan, odom, cmd, cmd_type, namespace, laser_pose ("X,Y,YAW" or [x, y, yaw]),
                laser_upside_down (flags --ros-scan ... --laser-upside-down override them)
+    [camera]   source ("sim", "ros2:TOPIC", "none"), size ("WxH"), fps, codec ("h264", "jpeg")
+               (DESIGN 12; flags --camera, --camera-size, --camera-fps, --camera-codec)
 
 ``pipeline.no_return_is_free`` unset (the default): each scan's sensor says whether a beam with no
 return means free. The simulator's lidar says so, the ROS 2 driver says so for REP 117 scans
@@ -60,6 +62,8 @@ from egc_common.transport import (
     options_from_args,
     serve_static,
 )
+from egc_robot.camera_config import CAMERA_KEYS, CameraConfig, camera_config
+from egc_robot.camera_stream import CameraStreamer
 from egc_robot.controller import ControllerConfig, RobotController
 from egc_robot.drivers import Driver, SensorUpdate
 from egc_robot.filters.assist import AssistParams
@@ -95,6 +99,7 @@ SECTIONS: dict[str, tuple[str, ...]] = {
     "pipeline": ("horizon_s", "gamma_v", "gamma_w", "no_return_is_free"),
     "sim": ("scan_hz", "beams", "seed"),
     "ros2": ROS2_KEYS,
+    "camera": CAMERA_KEYS,
 }
 ROBOT_TABLES = (*SECTIONS, "dwa", "assist")  # [dwa] and [assist] are checked by their params
 
@@ -113,6 +118,19 @@ class SimDriver:
 
     def send(self, command: BaseCommand) -> None:
         self._rt.set_command(command.linear_mps, command.angular_radps)
+
+    def camera_source(self, width_px: int, height_px: int) -> Any:
+        """``--camera sim``: a callable rendering the forward camera from the simulator's pose
+        now (DESIGN 12), stamped with the robot's monotonic clock; for the camera's thread."""
+        from egc_sim.camera import CameraModel, CameraRenderer
+
+        renderer = CameraRenderer(self._rt.sim.world, CameraModel(width_px, height_px))
+
+        def grab() -> tuple[Any, int]:
+            stamp = time.monotonic_ns()
+            return renderer.render(self._rt.sim.pose), stamp
+
+        return grab
 
     def close(self) -> None:
         if self._map_server is not None:
@@ -191,7 +209,72 @@ def configure(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="the laser is mounted upside down (mirrors its sweep)",
     )
+    cam = parser.add_argument_group("camera (DESIGN 12; same keys in the config's [camera] table)")
+    cam.add_argument(
+        "--camera",
+        metavar="SOURCE",
+        help="sim (the simulator renders a forward camera; the default with --driver sim), "
+        "ros2:TOPIC (sensor_msgs/Image or CompressedImage, with --driver ros2) or none "
+        "(the default otherwise)",
+    )
+    cam.add_argument("--camera-size", metavar="WxH", help="largest picture sent (default 320x240)")
+    cam.add_argument(
+        "--camera-fps", type=float, metavar="N", help="most frames a second (default 10)"
+    )
+    cam.add_argument(
+        "--camera-codec", choices=("h264", "jpeg"), default=None, help="(default: h264)"
+    )
     add_zenoh_arguments(parser, default_listen=(DEFAULT_ENDPOINT,))
+
+
+def _camera_config(args: argparse.Namespace, cfg: dict[str, Any]) -> CameraConfig:
+    """``[camera]`` and the --camera flags, checked before anything opens (one line if bad)."""
+    flags = {
+        "source": args.camera,
+        "size": args.camera_size,
+        "fps": args.camera_fps,
+        "codec": args.camera_codec,
+    }
+    try:
+        return camera_config(config_mod.section(cfg, "camera", CAMERA_KEYS), flags, args.driver)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _open_camera(
+    config: CameraConfig, robot: str, session: Any, driver: Driver
+) -> tuple[CameraStreamer, Any] | None:
+    """The camera stream on ``egc/<robot>/camera`` (DESIGN 12), started, and the liveliness
+    subscriber that gives each new operator a keyframe at once; None for ``none``."""
+    from egc_robot.camera_stream import camera_publisher, keyframe_for_new_operators
+
+    if not config.enabled:
+        return None
+    if isinstance(driver, SimDriver):
+        source = driver.camera_source(config.width_px, config.height_px)
+    else:
+        source = driver.newest_image  # type: ignore[attr-defined]  # the Ros2Driver's
+    publisher = camera_publisher(session, keys.camera(robot))
+    streamer = CameraStreamer(source, publisher.put, config)
+    viewers = keyframe_for_new_operators(session, robot, streamer)
+    streamer.start()
+    what = config.source if config.topic is None else f"ros2 topic {config.topic}"
+    log.info(
+        "camera: %s, up to %dx%d at %g frames/s, %s",
+        what,
+        config.width_px,
+        config.height_px,
+        config.max_fps,
+        config.codec,
+    )
+    return streamer, viewers
+
+
+def _close_camera(streamer: CameraStreamer | None, viewers: Any) -> None:
+    if viewers is not None:
+        viewers.undeclare()
+    if streamer is not None:
+        streamer.close()
 
 
 def _number(table: dict[str, Any], key: str, default: float) -> float:
@@ -317,14 +400,16 @@ def _ros2_settings(
     return settings
 
 
-def _open_driver(args: argparse.Namespace, cfg: dict[str, Any], session: Any) -> Driver:
+def _open_driver(
+    args: argparse.Namespace, cfg: dict[str, Any], session: Any, camera_topic: str | None = None
+) -> Driver:
     if args.driver == "ros2":
         from egc_robot.ros2_driver import Ros2Driver
 
         settings = _ros2_settings(args, cfg)
         try:
             footprint = get_profile(args.profile).half_size_m
-            return Ros2Driver(settings, footprint_half_m=footprint)
+            return Ros2Driver(settings, footprint_half_m=footprint, camera_topic=camera_topic)
         except Exception as exc:  # rclpy's own errors (e.g. ROS_DOMAIN_ID out of range)
             raise UsageError(f"cannot start the ROS 2 node: {exc}") from None
     if args.driver == "zenoh":
@@ -441,6 +526,7 @@ def run(args: argparse.Namespace) -> int:
     # Bad ROS 2 flags are one line whatever the driver (a typo now, not on the day it runs on
     # --driver ros2); without rclpy only --driver ros2 stops.
     _ros2_settings(args, cfg, need_rclpy=args.driver == "ros2")
+    camera = _camera_config(args, cfg)
     if args.driver == "ros2":
         # DESIGN 11: a zero twist in HOLD; a ROS 2 base brakes at its own limits.
         controller_config = dataclasses.replace(controller_config, hold_ramp=False)
@@ -456,13 +542,15 @@ def run(args: argparse.Namespace) -> int:
     recorder = _open_recorder(args)  # a bad path: one line, before any session or driver opens
     session = open_session(options_from_args(args))
     try:
-        driver = _open_driver(args, cfg, session)
+        driver = _open_driver(args, cfg, session, camera.topic)
+        opened = _open_camera(camera, args.robot, session, driver)
     except BaseException:
         # The session's threads would keep the process alive, deaf to SIGTERM: close it.
         session.close()
         if recorder is not None:
             recorder.close()
         raise
+    streamer, viewers = (None, None) if opened is None else opened
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
@@ -499,6 +587,7 @@ def run(args: argparse.Namespace) -> int:
         for what, step in (
             ("stop answering info queries", info.close),
             ("stop the node", node.shutdown),
+            ("stop the camera", lambda: _close_camera(streamer, viewers)),
             ("close the driver", driver.close),
             ("close the Zenoh session", session.close),
         ):
@@ -512,6 +601,8 @@ def run(args: argparse.Namespace) -> int:
         received, missing = node.controller.link_totals
         summary["seq_received"] = received
         summary["seq_missing"] = missing
+        if streamer is not None:
+            summary["camera"] = streamer.summary()  # DESIGN 12, pinned keys
         log.info("stopped: %s", json.dumps(summary))
         if args.summary:
             try:

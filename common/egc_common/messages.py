@@ -90,6 +90,10 @@ class RejectReason(enum.Enum):
     OUT_OF_ORDER = "out_of_order"
     NOT_IN_CONTROL = "not_in_control"
     NO_INFORMATION = "no_information"  # a scan with no valid, +inf or -inf beam (REP 117)
+    # Camera frames (DESIGN 12, ``egc_common.camera_msg``; the operator's camera view):
+    UNKNOWN_CODEC = "unknown_codec"
+    CORRUPT = "corrupt"  # the picture does not decode (a cut H.264 frame, a broken JPEG)
+    FUTURE = "future"  # stamped after the robot's clock now, beyond the clock sync's error
 
 
 @dataclass(frozen=True, slots=True)

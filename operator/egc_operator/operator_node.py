@@ -18,6 +18,10 @@
   changes) and the robot's own telemetry decides whose clock the stamps follow.
 - Sends ``view_age_ms`` with every command (DESIGN 7, 9): the age, on the robot's clock, of the
   newest telemetry received (and handed to the view), once the clock is synchronised.
+- Subscribes to the robot's camera (DESIGN 12, ``egc_operator.camera_view.CameraFeed``): frames
+  decoded in their own thread and shown in the view with their age; ``camera.camera_age_ms()``
+  is the newest shown frame's age on the robot's clock (``robot_clock``: the clock sync's
+  estimate and its error, which also bounds how far ahead a frame's stamp may be).
 - Keeps a bounded history of the commands it sent (robot-clock stamps) and hands it to the view
   after every command, for the predictive display (DESIGN 9, ``egc_operator.prediction``).
 - Sends ``filter`` with every command (DESIGN 6): the source's pick (a gamepad button, a file's
@@ -63,6 +67,7 @@ from egc_common.messages import (
 )
 from egc_common.transport import command_publisher, payload_bytes
 
+from egc_operator.camera_view import CameraFeed, CameraView, RobotClock
 from egc_operator.clock_sync import ClockSync
 from egc_operator.command_source import CommandSource
 from egc_operator.prediction import CommandHistory, SentCommand
@@ -205,6 +210,17 @@ class OperatorNode:
         self._route_pending_since_ns: int | None = None
         self._last_route: Route | None = None
         self.goals_published = 0
+        # The robot's camera (DESIGN 12): decoded in its own thread, shown in the view, its
+        # newest frame's age for the command (camera_age_ms()), refusals counted with the
+        # rest. Made before the robot's liveliness subscriber, whose callback resets it.
+        self.camera = CameraFeed(
+            session,
+            robot_id,
+            self.robot_clock,
+            view if isinstance(view, CameraView) else None,
+            local_clock,
+            on_reject=self._reject,
+        )
         self._publisher = command_publisher(session, keys.cmd(robot_id))
         self._goal_publisher = goal_publisher(session, keys.goal(robot_id))
         liveliness = session.liveliness()
@@ -216,6 +232,15 @@ class OperatorNode:
                 keys.alive_robot(robot_id), self._on_robot_alive, history=True
             ),
         ]
+
+    def robot_clock(self, local_ns: int) -> RobotClock | None:
+        """The clock sync's estimate of the robot's clock at ``local_ns`` and its error (half
+        the best round trip), or None before it is synchronised."""
+        with self._lock:
+            best = self._sync.best
+            if best is None or not self._sync.synchronised:
+                return None
+            return RobotClock(self._sync.robot_now(local_ns), best.rtt_ns // 2)
 
     # -- callbacks ----------------------------------------------------------------------------
 
@@ -302,6 +327,8 @@ class OperatorNode:
                 self._episode = Episode()
                 self._sync = ClockSync()
                 self._robot_epoch += 1
+        if changed:
+            self.camera.reset()  # the old robot's frames are not this one's
         if alive:
             self._map_wake.set()  # its map, again (a restarted robot may serve another one)
         text = "robot present" if alive else "robot gone (its liveliness token was withdrawn)"
@@ -531,8 +558,10 @@ class OperatorNode:
                 )
                 if self._view is not None:
                     self._view.on_commands(self.history, stamp)
-            if self._status is not None and now >= next_status:
-                self._status.show(self._status_of(command), now / NS_PER_S)
+            if now >= next_status:
+                if self._status is not None:
+                    self._status.show(self._status_of(command), now / NS_PER_S)
+                self.camera.tick()  # the camera's age line, and its stale mark
                 next_status = now + _STATUS_PERIOD_NS
             deadline += self._period_ns
             if deadline <= now:
@@ -641,6 +670,7 @@ class OperatorNode:
         return status
 
     def close(self) -> None:
+        self.camera.close()
         for entity in self._entities:
             entity.undeclare()
         self._token.undeclare()

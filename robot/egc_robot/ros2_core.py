@@ -107,6 +107,11 @@ class Ros2Settings:
         object.__setattr__(self, "namespace", namespace)
 
 
+def is_topic_name(name: str) -> bool:
+    """A valid ROS 2 topic name (absolute or relative; no ``~`` or substitutions)."""
+    return bool(_TOPIC.match(name))
+
+
 def normalise_namespace(namespace: str) -> str:
     """A ROS 2 namespace as rclpy takes it (``robot1`` is ``/robot1``); ValueError if invalid."""
     if not namespace:
