@@ -91,10 +91,12 @@ _REPLIERS_LOG_NS = 30 * NS_PER_S  # "more than one peer answers the clock query"
 
 def goal_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
     """Via points: rare and must not be lost, so reliable and blocking under congestion (unlike
-    the best-effort command and data publishers); the goal thread is the only one it blocks."""
+    the best-effort command and data publishers); the goal thread is the only one it blocks.
+    Control plane (DESIGN 12): INTERACTIVE_HIGH, express."""
     return session.declare_publisher(
         key,
-        priority=zenoh.Priority.INTERACTIVE_LOW,
+        priority=zenoh.Priority.INTERACTIVE_HIGH,
+        express=True,
         congestion_control=zenoh.CongestionControl.BLOCK,
         reliability=zenoh.Reliability.RELIABLE,
     )

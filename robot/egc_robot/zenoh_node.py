@@ -36,7 +36,12 @@ from egc_common import keys
 from egc_common.event_log import EventLog
 from egc_common.messages import BaseCommand, StateMessage, encode_clock_reply
 from egc_common.scan import Scan
-from egc_common.transport import data_publisher, payload_bytes
+from egc_common.transport import (
+    CONTROL_REPLY,
+    control_publisher,
+    payload_bytes,
+    view_publisher,
+)
 
 from egc_robot.controller import CommandVerdict, RobotController
 from egc_robot.drivers import Driver
@@ -109,8 +114,8 @@ class RobotNode:
         self._shut_down = False  # set under the lock: the zero command sent last stays last
         self._rejections = RejectionLog()
         self._events = EventLog()
-        self._telemetry = data_publisher(session, keys.telemetry(robot_id))
-        self._state = data_publisher(session, keys.state(robot_id))
+        self._telemetry = view_publisher(session, keys.telemetry(robot_id))
+        self._state = control_publisher(session, keys.state(robot_id))
         liveliness = session.liveliness()
         self._token = liveliness.declare_token(keys.alive_robot(robot_id))
         self._entities = [
@@ -243,7 +248,8 @@ class RobotNode:
 
     def _on_clock_query(self, query: zenoh.Query) -> None:
         try:
-            query.reply(query.key_expr, encode_clock_reply(self._clock(), self._clock_id))
+            reply = encode_clock_reply(self._clock(), self._clock_id)
+            query.reply(query.key_expr, reply, **CONTROL_REPLY)  # control plane (DESIGN 12)
         except Exception as exc:  # a querier that went away must not kill the callback
             log.debug("clock reply failed: %s", exc)
 
