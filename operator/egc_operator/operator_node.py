@@ -18,6 +18,11 @@
   changes) and the robot's own telemetry decides whose clock the stamps follow.
 - Sends ``view_age_ms`` with every command (DESIGN 7, 9): the age, on the robot's clock, of the
   newest telemetry received (and handed to the view), once the clock is synchronised.
+- Sends ``rx_kbps`` with every command once view data came (DESIGN 12): the view plane's payload
+  bytes received over the last second (telemetry, and camera samples counted through
+  ``count_view_bytes``), in kbit/s, the robot's downlink budget's measure of what the link
+  delivers; and ``camera_age_ms`` when there is a camera view (``CameraAge``), like
+  ``view_age_ms`` for the newest frame shown. The status line says what the link carries.
 - Keeps a bounded history of the commands it sent (robot-clock stamps) and hands it to the view
   after every command, for the predictive display (DESIGN 9, ``egc_operator.prediction``).
 - Sends ``filter`` with every command (DESIGN 6): the source's pick (a gamepad button, a file's
@@ -62,6 +67,7 @@ from egc_common.messages import (
     decode_telemetry,
 )
 from egc_common.transport import command_publisher, payload_bytes
+from egc_common.view_budget import RateMeter
 
 from egc_operator.clock_sync import ClockSync
 from egc_operator.command_source import CommandSource
@@ -102,6 +108,13 @@ def goal_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
     )
 
 
+class CameraAge(Protocol):
+    """The camera decoder's report (``egc_operator.camera_view``, DESIGN 12): the age on the
+    robot's clock of the newest frame shown, in ms, None when none is shown."""
+
+    def camera_age_ms(self) -> int | None: ...
+
+
 class View(Protocol):
     """The operator view's interface (``egc_operator.view.OperatorView``)."""
 
@@ -140,6 +153,19 @@ def view_age_ms(
     return max(0, min(MAX_VIEW_AGE_MS, age_ms))
 
 
+def _camera_age(camera: CameraAge) -> int | None:
+    """The camera view's ``camera_age_ms`` for a command: an int in [0, MAX_VIEW_AGE_MS], None
+    when unknown or when the decoder fails (it must not stop the commands)."""
+    try:
+        age = camera.camera_age_ms()
+    except Exception as exc:
+        log.debug("camera age unknown: %s", exc)
+        return None
+    if age is None:
+        return None
+    return max(0, min(MAX_VIEW_AGE_MS, int(age)))
+
+
 def _replier_of(reply: zenoh.Reply) -> str:
     """Who answered a query: the replier's Zenoh session id and its queryable's entity id
     (``zid/eid``), "" when the reply does not say."""
@@ -164,8 +190,11 @@ class OperatorNode:
         status: StatusLine | None = None,
         route: Route | None = None,
         filter_default: str | None = None,
+        camera: CameraAge | None = None,
     ) -> None:
         self._session = session
+        self._camera = camera
+        self._rx = RateMeter()  # view-plane payload bytes received (DESIGN 12 rx_kbps)
         self._robot = robot_id
         self._op = operator_id
         self._source = source
@@ -247,8 +276,17 @@ class OperatorNode:
         except Exception as exc:  # nothing from the network raises out of the callback
             log.warning("telemetry callback failed: %s: %s", type(exc).__name__, exc)
 
+    def count_view_bytes(self, nbytes: int) -> None:
+        """View-plane payload bytes received (telemetry here; a camera subscriber calls it for
+        its samples), for ``rx_kbps`` (DESIGN 12). Any thread."""
+        now = self._clock()
+        with self._lock:
+            self._rx.add(now, nbytes)
+
     def _telemetry_in(self, sample: zenoh.Sample) -> None:
-        t = decode_telemetry(payload_bytes(sample))
+        payload = payload_bytes(sample)
+        self.count_view_bytes(len(payload))  # refused or not, it crossed the link
+        t = decode_telemetry(payload)
         if isinstance(t, Rejection):
             self._reject("telemetry", t)
             return
@@ -510,6 +548,10 @@ class OperatorNode:
                 age = view_age_ms(
                     stamp, self._sync.synchronised, None if shown is None else shown.stamp_ns
                 )
+                rx = round(self._rx.kbps(now)) if self._rx.total_bytes else None
+            camera_age = None
+            if self._camera is not None and age is not None:  # synchronised, like view_age_ms
+                camera_age = _camera_age(self._camera)
             command = OperatorCommand(
                 seq=seq,
                 stamp_ns=stamp,
@@ -522,6 +564,8 @@ class OperatorNode:
                 op=self._op,
                 view_age_ms=age,
                 filter=sample.filter if sample.filter is not None else self._filter_default,
+                rx_kbps=rx,
+                camera_age_ms=camera_age,
             )
             self._publisher.put(command.encode())
             self.published += 1
@@ -631,6 +675,7 @@ class OperatorNode:
                 state_age_s=state_age_s,
                 rejections=self.rejections.recent(now),
                 clock_note=self._sync.note(),
+                rx_kbps=command.rx_kbps,
             )
         pending = self._route_pending_since_ns
         if (
