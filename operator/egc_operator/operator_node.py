@@ -519,6 +519,7 @@ class OperatorNode:
         next_status = opened
         ended_at: int | None = None
         seq = 0
+        last: OperatorCommand | None = None
         while not stop.is_set():
             stop.wait(max(0, deadline - self._clock()) / NS_PER_S)
             now = self._clock()
@@ -583,10 +584,28 @@ class OperatorNode:
             deadline += self._period_ns
             if deadline <= now:
                 deadline = now + self._period_ns
+            last = command
+        if last is not None and last.deadman:
+            self._release_on_exit(last)
         stop.set()
         self._goal_wake.set()
         sync_thread.join(timeout=2 * _CLOCK_TIMEOUT_S)
         goal_thread.join(timeout=2 * _CLOCK_TIMEOUT_S)
+
+    def _release_on_exit(self, last: OperatorCommand) -> None:
+        """Stopped (a --duration, a signal) with the deadman held: one last command releases it,
+        so the robot holds because the operator let go, before the liveliness token goes (it
+        would otherwise see an operator lost while driving)."""
+        with self._lock:
+            stamp = self._sync.robot_now(self._clock())
+        try:
+            release = replace(
+                last, seq=last.seq + 1, stamp_ns=stamp, x=0.0, y=0.0, deadman=False, estop=False
+            )
+            self._publisher.put(release.encode())
+            self.published += 1
+        except Exception as exc:  # a closing session: the token's withdrawal stops it anyway
+            log.debug("release on exit not sent: %s", exc)
 
     # -- via points thread ------------------------------------------------------------------------
 
