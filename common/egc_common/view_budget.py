@@ -14,8 +14,9 @@ less than the link carries, so no queue stands.
 is the downlink's one-way delay + the queueing delay + the time since that message arrived
 (up to one message period) + the clock-sync error. So
 
-- ``current``: the smallest age reported over the last ``short_s`` (at least one message
-  period): it removes the message-period sawtooth;
+- ``current``: the smallest age reported over the last two and a half telemetry periods (at
+  least ``short_s``; the camera's: one and a half frame periods): it removes the
+  message-period sawtooth and no more, so a queue is seen within a few reports;
 - ``base``: the smallest of those over the last ``base_s`` (10 s, in one-second buckets): the
   delay with no queue. The clock-sync error is in both and cancels; no symmetry between uplink
   and downlink is assumed (the commands' age, DESIGN 9, measures the uplink only);
@@ -26,20 +27,29 @@ is the downlink's one-way delay + the queueing delay + the time since that messa
 ``base`` is a clean one) and
 
 - *multiplicative decrease at once* when ``queue_ms > margin_ms``: the operator's ``rx_kbps``
-  measured while a queue stands is what the link delivers, so the budget goes to ``beta`` (0.7)
-  times the smaller of it and the budget; ``drain_beta`` (0.5) when the queue is already long
-  (``> drain_ms``), so the queue drains within a second or two instead of many. One cut, then
+  measured while a queue stands is what the link delivers (C), so the budget goes to
+  ``beta`` times the smaller of it and the budget, with ``beta = 1 - queue / drain_s`` within
+  [``min_beta``, ``max_beta``] (0.3-0.7): sending at C (1 - Q / T) for T drains a queue of Q
+  seconds in about T (1 s), so a long queue gets a deep cut and a short one a mild cut. One cut,
+  then
   ``hold_s`` (1 s, about one report round trip on a 500 ms link) before another unless the
   queue grew by half again: the reports lag the cut by a round trip, and cutting on each stale
   report would spiral down (the usual AIMD oscillation);
-- *additive increase, slowly*, while the ages stay flat (``queue_ms < margin_ms / 2``) and
-  ``hold_s`` after the last cut: ``ai_kbps`` plus ``ai_fraction`` of the budget per second,
-  only while the view plane actually fills the budget (a probe the data never used proves
-  nothing). From 100 kbit/s this is about 3 s to 200 kbit/s and 5 s to 350 kbit/s: slow enough
-  that an overshoot builds a queue of a few hundred milliseconds at most, fast enough that the
-  camera comes back within seconds after the link widens;
+- *back to cruise* once the queue has drained (``queue_ms < margin_ms / 2``): a cut deep
+  enough to drain a long queue quickly is too deep to stay at, so the budget returns at once
+  to ``cruise`` (0.85) times the rate the link delivered at the last cut (BBR's drain, then
+  cruise);
+- *additive increase, slowly*, while the ages stay flat and ``hold_s`` after the last cut:
+  ``ai_kbps`` per second between ``cruise`` and 1.1 times the rate at the last cut (where the
+  last queue stood: the sawtooth's peak overshoots by little and comes seconds apart), and
+  ``ai_kbps`` plus ``ai_fraction`` of the budget per second elsewhere (past it with the ages
+  still flat: the link widened), only while the view plane actually fills the budget (a probe
+  the data never used proves nothing). From 130 kbit/s that is 1.5 s to 300 kbit/s and 3 s to
+  600 kbit/s, so the camera comes back within seconds after the link widens; a probe into a
+  link that did not widen overshoots by the growth of one report round trip, a queue of tens
+  of milliseconds, before the cut;
 - the link estimate ``link_kbps`` is the ``rx_kbps`` at the last cut, raised by any higher
-  ``rx_kbps`` later (the link widened); None until a queue was first seen.
+  ``rx_kbps`` received with no queue (the link widened); None until a queue was first seen.
 
 A fixed ``downlink_kbps`` (``--downlink-kbps N``) skips all that: the budget is N.
 
@@ -72,15 +82,16 @@ class BudgetConfig:
     camera_min_kbps: float = 24.0  # 1 frame/s
     start_kbps: float = 96.0
     max_kbps: float = 1400.0
-    floor_kbps: float = 16.0
+    floor_kbps: float = 32.0  # about what telemetry costs at 5 Hz with min_beams anyway
     margin_ms: float = 100.0
-    drain_ms: float = 300.0
-    beta: float = 0.7
-    drain_beta: float = 0.5
+    drain_s: float = 1.0
+    max_beta: float = 0.7
+    min_beta: float = 0.3
     hold_s: float = 1.0
     ai_kbps: float = 16.0
-    ai_fraction: float = 0.25
-    short_s: float = 0.5
+    ai_fraction: float = 0.5
+    cruise: float = 0.85
+    short_s: float = 0.1
     base_s: float = 10.0
 
     def __post_init__(self) -> None:
@@ -98,8 +109,8 @@ class BudgetConfig:
             raise ValueError("camera_max_fps must be >= 1")
         if not 0 < self.floor_kbps <= self.start_kbps <= self.max_kbps:
             raise ValueError("auto budget: 0 < floor_kbps <= start_kbps <= max_kbps")
-        if not (0 < self.drain_beta <= self.beta < 1):
-            raise ValueError("0 < drain_beta <= beta < 1")
+        if not (0 < self.min_beta <= self.max_beta < 1):
+            raise ValueError("0 < min_beta <= max_beta < 1")
 
     @property
     def fixed(self) -> bool:
@@ -150,6 +161,7 @@ class BudgetState:
 
     budget_kbps: float
     link_kbps: float | None = None
+    cut_rx_kbps: float | None = None  # what the link delivered at the last cut
     view: _AgeFilter = _AgeFilter()
     camera: _AgeFilter = _AgeFilter()
     queue_ms: float | None = None
@@ -178,10 +190,17 @@ def initial_state(cfg: BudgetConfig) -> BudgetState:
 
 
 def on_report(
-    state: BudgetState, cfg: BudgetConfig, report: Report, now_ns: int, camera_fps: float = 0.0
+    state: BudgetState,
+    cfg: BudgetConfig,
+    report: Report,
+    now_ns: int,
+    camera_fps: float = 0.0,
+    telemetry_hz: float | None = None,
 ) -> BudgetState:
-    """One report of the operator in control; cuts at once when a queue stands."""
-    short_ns = int(cfg.short_s * NS_PER_S)
+    """One report of the operator in control; cuts at once when a queue stands. ``camera_fps``,
+    ``telemetry_hz``: the plan in force (the windows that remove each stream's sawtooth)."""
+    hz = telemetry_hz if telemetry_hz is not None and telemetry_hz > 0 else cfg.telemetry_hz
+    short_ns = int(max(cfg.short_s, 2.5 / hz) * NS_PER_S)
     view, camera = state.view, state.camera
     if report.view_age_ms is not None:
         view = view.add(now_ns, report.view_age_ms, short_ns, cfg.base_s)
@@ -195,7 +214,8 @@ def on_report(
     state = replace(state, view=view, camera=camera, queue_ms=queue)
     rx = report.rx_kbps
     link = state.link_kbps
-    if link is not None and rx is not None and rx > link:
+    no_queue = queue is not None and queue < cfg.margin_ms / 2
+    if link is not None and rx is not None and rx > link and no_queue:
         state = replace(state, link_kbps=rx)  # the link carries more than we thought
     if cfg.fixed or queue is None or queue <= cfg.margin_ms:
         return state
@@ -203,12 +223,14 @@ def on_report(
     growing = queue > 1.5 * state.queue_at_cut_ms + cfg.margin_ms
     if since_cut is not None and since_cut < cfg.hold_s * NS_PER_S and not growing:
         return state  # the last cut has not reached the reports yet
-    beta = cfg.drain_beta if queue > cfg.drain_ms else cfg.beta
+    beta = min(cfg.max_beta, max(cfg.min_beta, 1.0 - queue / (cfg.drain_s * 1000.0)))
     delivered = state.budget_kbps if rx is None or rx <= 0 else min(rx, state.budget_kbps)
+    measured = rx is not None and rx > 0
     return replace(
         state,
         budget_kbps=max(cfg.floor_kbps, beta * delivered),
-        link_kbps=rx if rx is not None and rx > 0 else link,
+        link_kbps=rx if measured else link,
+        cut_rx_kbps=rx if measured else state.cut_rx_kbps,
         last_cut_ns=now_ns,
         queue_at_cut_ms=queue,
         cuts=state.cuts + 1,
@@ -228,10 +250,14 @@ def on_cycle(
         return state
     if state.last_cut_ns is not None and now_ns - state.last_cut_ns < cfg.hold_s * NS_PER_S:
         return state
-    if sent_kbps is None or sent_kbps < 0.7 * state.budget_kbps:
+    budget, at_cut = state.budget_kbps, state.cut_rx_kbps
+    if at_cut is not None and budget < cfg.cruise * at_cut:
+        return replace(state, budget_kbps=min(cfg.max_kbps, cfg.cruise * at_cut))
+    if sent_kbps is None or sent_kbps < 0.7 * budget:
         return state  # the view plane does not use what it has: a probe would prove nothing
-    grown = state.budget_kbps + (cfg.ai_kbps + cfg.ai_fraction * state.budget_kbps) * dt_s
-    return replace(state, budget_kbps=min(cfg.max_kbps, grown))
+    near = at_cut is not None and budget <= 1.1 * at_cut
+    rate = cfg.ai_kbps if near else cfg.ai_kbps + cfg.ai_fraction * budget
+    return replace(state, budget_kbps=min(cfg.max_kbps, budget + rate * dt_s))
 
 
 def telemetry_kbps(hz: float, beams: int, overhead_bytes: float) -> float:

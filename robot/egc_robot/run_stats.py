@@ -16,7 +16,10 @@
   sliding one-second window sampled once a second), ``camera_age_ms`` like ``view_age_ms`` from
   the operators' reports (``{"n", "p50_ms", ...}``; n 0 without a camera), ``telemetry_sent``
   and ``telemetry_bytes_mean`` (bytes a message), ``operator_lost`` (liveliness of the operator
-  in control lost: the session was lost, DESIGN 8).
+  in control lost: the session was lost, DESIGN 8); ``view_timeline``: per second of the robot's
+  monotonic clock (``t_s``, the same clock as every process's on this machine), the largest
+  ``view_age_ms`` reported while driving and the view plane's kbit/s (at most an hour of it):
+  how the budget followed a link that changed (DESIGN 12).
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from egc_common.messages import Odometry, Telemetry
 from egc_robot.pipeline import INTERVENING_NAMES
 
 _MAX_LATENCIES = 1_000_000
+_MAX_TIMELINE_S = 3600
 
 
 class RunStats:
@@ -57,6 +61,7 @@ class RunStats:
         self.telemetry_sent = 0
         self.telemetry_bytes = 0
         self.operator_lost = 0
+        self._timeline: dict[int, dict[str, float]] = {}
 
     def on_cycle(self, telemetry: Telemetry) -> None:
         self.cycles += 1
@@ -77,6 +82,10 @@ class RunStats:
                 self._loop_delay_ms.append(telemetry.loop_delay_ms)
             if telemetry.view_age_ms is not None:
                 self._view_age_ms.append(telemetry.view_age_ms)
+                entry = self._second(telemetry.stamp_ns)
+                if entry is not None:
+                    age = max(entry.get("view_age_ms", 0.0), telemetry.view_age_ms)
+                    entry["view_age_ms"] = age
         limiting = telemetry.limiter in INTERVENING_NAMES
         if limiting:
             self.interventions += 1
@@ -108,6 +117,16 @@ class RunStats:
         elif second > self._rate_second and len(self._downlink_kbps) < _MAX_LATENCIES:
             self._rate_second = second
             self._downlink_kbps.append(kbps)
+            entry = self._second(now_ns)
+            if entry is not None:
+                entry["kbps"] = round(kbps, 1)
+
+    def _second(self, now_ns: int) -> dict[str, float] | None:
+        second = now_ns // 1_000_000_000
+        entry = self._timeline.get(second)
+        if entry is None and len(self._timeline) < _MAX_TIMELINE_S:
+            entry = self._timeline[second] = {}
+        return entry
 
     def on_telemetry_sent(self, nbytes: int) -> None:
         self.telemetry_sent += 1
@@ -143,6 +162,7 @@ class RunStats:
             if self.telemetry_sent
             else None,
             "operator_lost": self.operator_lost,
+            "view_timeline": [{"t_s": t, **v} for t, v in sorted(self._timeline.items())],
         }
 
 

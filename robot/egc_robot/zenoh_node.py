@@ -427,7 +427,12 @@ class RobotNode:
             camera_age_ms=None if cmd.camera_age_ms is None else float(cmd.camera_age_ms),
         )
         self._budget = on_report(
-            self._budget, self._budget_cfg, report, rx_ns, self._plan.camera_fps
+            self._budget,
+            self._budget_cfg,
+            report,
+            rx_ns,
+            camera_fps=self._plan.camera_fps,
+            telemetry_hz=self._plan.telemetry_hz,
         )
 
     def _replan(self, now: int) -> None:
