@@ -82,6 +82,7 @@ _STATUS_PERIOD_NS = 200_000_000
 # Via points sent this long without the robot echoing one of them: say so on the status line.
 VIA_UNTAKEN_NS = 3_000_000_000
 _RELEASE_AFTER_END_NS = 300_000_000
+_RELEASE_FLUSH_S = 0.1
 _CLOCK_TIMEOUT_S = 3.0  # above the round trip of a satellite link (2 x 500 ms + jitter)
 _START_WAIT_NS = 10 * NS_PER_S  # a script starts when the robot is seen, or after this
 # The map is one large reply (a 500 x 500 grid is ~30 kB): over a 500 ms +- 100 ms link it
@@ -604,6 +605,9 @@ class OperatorNode:
             )
             self._publisher.put(release.encode())
             self.published += 1
+            # Closing the session right away can close the transport before the release has
+            # left the transmission queue; the robot then sees the token go first.
+            time.sleep(_RELEASE_FLUSH_S)
         except Exception as exc:  # a closing session: the token's withdrawal stops it anyway
             log.debug("release on exit not sent: %s", exc)
 
