@@ -148,6 +148,16 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"{summary.get('latency_limited_s', 0.0):.1f} s",
         f"  rejected        {summary.get('rejected') or 'none'}",
     ]
+    downlink = summary.get("downlink_kbps") or {}
+    if downlink.get("p50") is not None:  # DESIGN 12: what the view plane cost
+        view = (summary.get("view_age_ms") or {}).get("p50_ms")
+        lines.append(
+            f"  view plane      {downlink['p50']:.0f} kbit/s p50, {downlink['max']:.0f} max; "
+            f"telemetry {summary.get('telemetry_sent', 0)} messages of "
+            f"{summary.get('telemetry_bytes_mean') or 0:.0f} bytes; view age p50 "
+            f"{'n/a' if view is None else f'{view:.0f} ms'}; operator lost "
+            f"{summary.get('operator_lost', 0)} times while driving"
+        )
     return "\n".join(lines)
 
 
