@@ -162,6 +162,16 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"{camera['frames_sent']} frames sent, {camera['fps']:g} frames/s, "
             f"{camera['kbps']:g} kbit/s"
         )
+    downlink = summary.get("downlink_kbps") or {}
+    if downlink.get("p50") is not None:  # DESIGN 12: what the view plane cost
+        view = (summary.get("view_age_ms") or {}).get("p50_ms")
+        lines.append(
+            f"  view plane      {downlink['p50']:.0f} kbit/s p50, {downlink['max']:.0f} max; "
+            f"telemetry {summary.get('telemetry_sent', 0)} messages of "
+            f"{summary.get('telemetry_bytes_mean') or 0:.0f} bytes; view age p50 "
+            f"{'n/a' if view is None else f'{view:.0f} ms'}; operator lost "
+            f"{summary.get('operator_lost', 0)} times while driving"
+        )
     return "\n".join(lines)
 
 
@@ -274,6 +284,7 @@ def run(args: argparse.Namespace) -> int:
         base = _start(["sim", "--ros2", "--map", args.world, "--profile", args.profile], ros_env)
     robot = _start(robot_cmd, ros_env)
     relay: subprocess.Popen[bytes] | None = None
+    link_started_s: float | None = None
     operator: subprocess.Popen[bytes] | None = None
     try:
         if linked:
@@ -281,6 +292,7 @@ def run(args: argparse.Namespace) -> int:
             # listens on TCP, for Zenoh's reliable control link, on the same port).
             _wait_ready(robot, "127.0.0.1", int(endpoint.rsplit(":", 1)[1]))
             relay = _start(_link_cmd(args, operator_endpoint, endpoint))
+            link_started_s = time.monotonic()  # a scenario's time 0, on the robot's clock too
             _wait_ready(relay, "127.0.0.1", link_port)
         operator = _start(operator_cmd)
         while not stop.wait(0.1):
@@ -309,6 +321,10 @@ def run(args: argparse.Namespace) -> int:
     except (OSError, ValueError) as exc:
         print(f"demo: no robot summary ({exc})", file=sys.stderr)
         return 1
+    if link_started_s is not None:
+        # the view_timeline's t_s is on the same monotonic clock (DESIGN 12: how the budget
+        # followed a scenario's phases)
+        summary["link_started_s"] = round(link_started_s, 3)
     print(format_summary(summary), flush=True)
     if args.json is not None:
         try:  # checked before the start; the folder may have gone since

@@ -10,7 +10,8 @@ and ``/cmd_vel`` (``egc_robot.ros2_driver``, DESIGN 11).
 Configuration: defaults < ``--config FILE`` (TOML) < ``--set section.key=value`` < explicit
 flags. Tables and keys (units in the names):
 
-    [robot]    rate_hz, telemetry_scan_decimation
+    [robot]    rate_hz, telemetry_scan_decimation, telemetry_hz, downlink_kbps (a number of
+               kbit/s or "auto"; DESIGN 12; flags --telemetry-hz, --downlink-kbps)
     [safety]   max_command_age_s (direct mode), max_command_age_filtered_s, command_timeout_s,
                scan_timeout_s, release_timeout_s, centre_tolerance, require_clock_sync
     [link]     link_aware, resume_window_s, reaction_time_s, blind_time_direct_s,
@@ -62,6 +63,7 @@ from egc_common.transport import (
     options_from_args,
     serve_static,
 )
+from egc_common.view_budget import BudgetConfig
 from egc_robot.camera_config import CAMERA_KEYS, CameraConfig, camera_config
 from egc_robot.camera_stream import CameraStreamer
 from egc_robot.controller import ControllerConfig, RobotController
@@ -78,7 +80,7 @@ from egc_robot.zenoh_node import Recorder, RobotNode
 log = logging.getLogger("egc.robot")
 
 SECTIONS: dict[str, tuple[str, ...]] = {
-    "robot": ("rate_hz", "telemetry_scan_decimation"),
+    "robot": ("rate_hz", "telemetry_scan_decimation", "telemetry_hz", "downlink_kbps"),
     "safety": (
         "max_command_age_s",
         "max_command_age_filtered_s",
@@ -172,6 +174,21 @@ def configure(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="turn link-aware driving off (one max command age, no short-gap resume, no latency "
         "governor), for comparisons; same as --set link.link_aware=false",
+    )
+    parser.add_argument(
+        "--telemetry-hz",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="telemetry rate to the operators (DESIGN 12; default: 20; the downlink budget may "
+        "lower it to 5)",
+    )
+    parser.add_argument(
+        "--downlink-kbps",
+        default=None,
+        metavar="N|auto",
+        help="the view plane's budget in kbit/s (telemetry and camera), or auto: estimated from "
+        "what the operator reports (DESIGN 12; default: auto)",
     )
     parser.add_argument("--start", metavar="X,Y,YAW", help="start pose for --driver sim")
     parser.add_argument("--config", metavar="FILE", help="robot TOML configuration")
@@ -375,6 +392,35 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
         raise UsageError(str(exc)) from None
 
 
+def build_budget_config(args: argparse.Namespace, cfg: dict[str, Any]) -> BudgetConfig:
+    """DESIGN 12: ``--telemetry-hz`` / ``robot.telemetry_hz`` and ``--downlink-kbps`` /
+    ``robot.downlink_kbps`` (kbit/s or "auto")."""
+    try:
+        robot = config_mod.section(cfg, "robot", SECTIONS["robot"])
+    except config_mod.ConfigError as exc:
+        raise UsageError(str(exc)) from None
+    defaults = BudgetConfig()
+    hz = args.telemetry_hz
+    if hz is None:
+        hz = _number(robot, "telemetry_hz", defaults.telemetry_hz)
+    if not math.isfinite(hz) or not defaults.min_telemetry_hz <= hz <= 1000:
+        raise UsageError(
+            f"--telemetry-hz must be within [{defaults.min_telemetry_hz:g}, 1000], got {hz:g}"
+        )
+    raw = args.downlink_kbps if args.downlink_kbps is not None else robot.get("downlink_kbps")
+    kbps: float | None = None
+    if raw is not None and raw != "auto":
+        try:
+            kbps = float(raw) if not isinstance(raw, bool) else math.nan
+        except (TypeError, ValueError):
+            kbps = math.nan
+        if not (math.isfinite(kbps) and 1.0 <= kbps <= 1e7):
+            raise UsageError(
+                f"--downlink-kbps must be auto or a number of kbit/s in [1, 10000000], got {raw!r}"
+            )
+    return BudgetConfig(downlink_kbps=kbps, telemetry_hz=hz, min_telemetry_hz=min(5.0, hz))
+
+
 def _ros2_settings(
     args: argparse.Namespace, cfg: dict[str, Any], need_rclpy: bool = True
 ) -> Ros2Settings:
@@ -523,6 +569,7 @@ def run(args: argparse.Namespace) -> int:
     except config_mod.ConfigError as exc:
         raise UsageError(str(exc)) from None
     controller_config = build_controller_config(args, cfg)
+    budget_config = build_budget_config(args, cfg)
     # Bad ROS 2 flags are one line whatever the driver (a typo now, not on the day it runs on
     # --driver ros2); without rclpy only --driver ros2 stops.
     _ros2_settings(args, cfg, need_rclpy=args.driver == "ros2")
@@ -564,15 +611,24 @@ def run(args: argparse.Namespace) -> int:
         recorder=recorder,
         stats=stats,
         clock_id=monotonic_clock_id(),
+        budget=budget_config
+        if streamer is None
+        else dataclasses.replace(budget_config, camera=True, camera_max_fps=camera.max_fps),
+        camera=streamer,
     )
     info = InfoServer(session, args.robot, _describer(args, node.controller))
     log.info(
-        "robot %r ready: driver %s, profile %s, filter %s, %.6g Hz",
+        "robot %r ready: driver %s, profile %s, filter %s, %.6g Hz, telemetry %.6g Hz, "
+        "downlink budget %s",
         args.robot,
         args.driver,
         args.profile,
         args.filter,
         rate_hz,
+        budget_config.telemetry_hz,
+        "auto"
+        if budget_config.downlink_kbps is None
+        else f"{budget_config.downlink_kbps:g} kbit/s",
     )
     # What exists now (modules, configuration, the session) lives as long as the process: keep
     # it out of the garbage collector's scans, so a collection in a control cycle stays short.

@@ -231,10 +231,10 @@ def run(args: argparse.Namespace) -> int:
         elapsed = runner.run(_serve(relay, args, companions))
     stats = relay.stats()
     lines = [f"link: stopped after {elapsed:.1f} s, {_connections(relay)}"]
-    lines += [f"link: {s.line(name)}" for name, s in stats.items()]
+    lines += [f"link: {s.line(name, elapsed)}" for name, s in stats.items()]
     for companion in companions:
         lines.append(f"link: tcp: {_connections(companion)}")
-        lines += [f"link: tcp {s.line(name)}" for name, s in companion.stats().items()]
+        lines += [f"link: tcp {s.line(name, elapsed)}" for name, s in companion.stats().items()]
     print("\n".join(lines), file=sys.stderr, flush=True)
     if args.stats:
         report = {

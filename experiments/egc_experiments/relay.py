@@ -169,11 +169,12 @@ class Recorder:
     UDP socket the kernel reports an ICMP error for an earlier datagram on the next send or
     receive, so the receive side counts those for the direction that sent through that socket.
     ``in_flight``: packets still held by a lane when it closed (relay stop, connection closed),
-    never delivered.
+    never delivered. ``bytes``: payload bytes forwarded (DESIGN 12: what each direction carries).
     """
 
     def __init__(self, seed: int) -> None:
         self.forwarded = 0
+        self.bytes = 0
         self.dropped = 0
         self.send_errors = 0
         self.in_flight = 0
@@ -183,9 +184,11 @@ class Recorder:
         self.max_late_ms = 0.0
         self._rng = random.Random(seed)
 
-    def record(self, delay_s: float, late_s: float) -> None:
-        """One packet released ``delay_s`` after it was read, ``late_s`` after it was due."""
+    def record(self, delay_s: float, late_s: float, nbytes: int = 0) -> None:
+        """One packet of ``nbytes`` released ``delay_s`` after it was read, ``late_s`` after it
+        was due."""
         self.forwarded += 1
+        self.bytes += nbytes
         delay_ms, late_ms = delay_s * 1000.0, late_s * 1000.0
         self.max_delay_ms = max(self.max_delay_ms, delay_ms)
         self.max_late_ms = max(self.max_late_ms, late_ms)
@@ -207,6 +210,7 @@ class Recorder:
             self.late_ms,
             self.send_errors,
             self.in_flight,
+            self.bytes,
         )
         if not self.forwarded:
             return s
@@ -222,6 +226,7 @@ class Recorder:
             self.max_late_ms,
             self.send_errors,
             self.in_flight,
+            self.bytes,
         )
 
 
@@ -272,7 +277,7 @@ class Lane:
         due = arrival + self._t0
         if due <= now and not self._heap and not self.held:
             if self._deliver(data):
-                self._rec.record(0.0, 0.0)
+                self._rec.record(0.0, 0.0, len(data))
             return
         self._enqueue(due, now, data)
         self.queued_bytes += len(data)
@@ -322,7 +327,7 @@ class Lane:
                 return
             self.queued_bytes -= len(data)
             if self._deliver(data):
-                self._rec.record(now - read_at, now - due)
+                self._rec.record(now - read_at, now - due, len(data))
         if self._pressed and not self._full(now, 0.5):
             self._pressed = False
             assert self._on_pressure is not None

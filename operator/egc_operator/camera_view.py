@@ -306,7 +306,8 @@ class CameraFeed:
     """The Zenoh side of the camera (module docstring). ``robot_clock(local_ns)`` is the clock
     sync's estimate (None until synchronised), ``local_clock`` this process's monotonic clock
     as the operator node reads it; ``on_reject(kind, rejection)`` counts a refusal where the
-    operator counts the rest (its status line and log)."""
+    operator counts the rest (its status line and log); ``on_bytes(n)`` is told every sample's
+    payload size (the operator's ``rx_kbps``)."""
 
     def __init__(
         self,
@@ -316,8 +317,10 @@ class CameraFeed:
         view: CameraView | None = None,
         local_clock: Callable[[], int] = time.monotonic_ns,
         on_reject: Callable[[str, Rejection], None] | None = None,
+        on_bytes: Callable[[int], None] | None = None,
     ) -> None:
         self.receiver = CameraReceiver()
+        self._on_bytes = on_bytes  # the view plane's byte count (DESIGN 12 rx_kbps)
         self._robot_clock = robot_clock
         self._view = view
         self._clock = local_clock
@@ -339,6 +342,8 @@ class CameraFeed:
         except Exception as exc:  # nothing from the network raises out of the callback
             log.debug("camera sample unreadable: %s", exc)
             return
+        if self._on_bytes is not None:  # refused or not, it crossed the link
+            self._on_bytes(len(payload))
         with self._wake:
             if len(self._queue) >= QUEUE_FRAMES:
                 self._queue.popleft()
