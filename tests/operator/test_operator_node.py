@@ -200,7 +200,11 @@ def test_commands_carry_view_age_and_the_view_gets_the_history(session: zenoh.Se
     synced = [c for c, _ in sent if c.stamp_ns]
     handed = [newest for _, _, newest in view.commands]
     assert handed[: len(synced)] == [c.stamp_ns for c in synced]  # the last may be in flight
-    assert len(node.history) == len(handed)
+    # The node's history is the newest of them: all on an idle machine; on a busy one the run
+    # can outlast the history's 4 s, or a better clock sample can move the stamps back (the
+    # history then starts over, prediction.CommandHistory)
+    kept = [c.stamp_ns for c in node.history.since(0)]
+    assert kept and kept == handed[-len(kept) :]
     assert all(now == newest for now, _, newest in view.commands)
     command = node.history.newest
     assert command is not None and (command.x, command.y, command.mode) == (0.5, 0.25, "shared")
