@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 
-def egc(*argv: str, timeout_s: float = 30.0) -> subprocess.CompletedProcess[str]:
+def egc(*argv: str, timeout_s: float = 120.0) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, "-m", "egc_app.cli", "bench", *argv],
         capture_output=True,

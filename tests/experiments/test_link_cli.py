@@ -394,7 +394,7 @@ def test_an_end_that_goes_away_mid_stream_leaves_no_noise_in_the_log() -> None:
 
 
 def one_line_exit_2(*args: str) -> str:
-    proc = subprocess.run([*LINK, *args], capture_output=True, text=True, timeout=15)
+    proc = subprocess.run([*LINK, *args], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr
