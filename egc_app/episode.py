@@ -65,10 +65,10 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from egc_common.cli_args import check_writable, plain_float
+from egc_common.cli_args import PROFILE_HELP, check_writable, plain_float
 from egc_common.errors import UsageError
 from egc_common.messages import Telemetry
-from egc_common.profiles import PROFILES, get_profile
+from egc_common.profiles import get_profile
 from egc_common.scan import Scan
 from egc_robot.pipeline import (
     FILTERS,
@@ -361,9 +361,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="via points for the filter: goal (one, at the goal; default) | route (corners of "
         "a route planned on the map) | none",
     )
-    parser.add_argument(
-        "--profile", default="pioneer3dx", help=f"robot profile: {', '.join(sorted(PROFILES))}"
-    )
+    parser.add_argument("--profile", default="pioneer3dx", help=PROFILE_HELP)
     parser.add_argument("--max-time", type=float, default=300.0, help="simulated seconds (300)")
     parser.add_argument(
         "--goal-tolerance",
@@ -393,10 +391,10 @@ def _settings_from_args(args: argparse.Namespace) -> EpisodeSettings:
         raise UsageError(f"--filter must be one of {', '.join(FILTERS)}, got {args.filter!r}")
     if args.via not in VIA_CHOICES:
         raise UsageError(f"--via must be one of {', '.join(VIA_CHOICES)}, got {args.via!r}")
-    if args.profile not in PROFILES:
-        raise UsageError(
-            f"--profile must be one of {', '.join(sorted(PROFILES))}, got {args.profile!r}"
-        )
+    try:
+        get_profile(args.profile)  # a built-in name or a FILE.toml (DESIGN 14)
+    except ValueError as exc:
+        raise UsageError(f"--profile: {exc}") from None
     for name, value in (
         ("--max-time", args.max_time),
         ("--dt", args.dt),

@@ -51,9 +51,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from egc_common.cli_args import check_writable
+from egc_common.cli_args import PROFILE_HELP, check_writable
 from egc_common.errors import UsageError
-from egc_common.profiles import PROFILES, get_profile
+from egc_common.profiles import get_profile
 from egc_robot.pipeline import FILTERS
 from egc_robot.replay_core import (
     COMMAND_MAX_AGE_S,
@@ -98,8 +98,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--profile",
         default="pioneer3dx",
-        metavar="NAME",
-        help=f"robot profile: {', '.join(sorted(PROFILES))} (default: pioneer3dx)",
+        metavar="NAME|FILE",
+        help=f"{PROFILE_HELP} (default: pioneer3dx)",
     )
     parser.add_argument(
         "--scan-topic",
@@ -590,7 +590,7 @@ def _replay(
         desc=f"replay {path.name}",
     )
     try:
-        footprint = replayer.config.profile.half_size_m
+        footprint = replayer.config.profile.footprint
         for index, scan in enumerate(_scans(reader, scan_pass)):
             fault = scan if isinstance(scan, str) else scan_fault(scan)
             if fault is not None or isinstance(scan, str):

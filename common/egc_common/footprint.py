@@ -231,6 +231,55 @@ def polygon_signed_distance(vertices: FloatArray, x: FloatArray, y: FloatArray) 
     return out
 
 
+def closest_boundary_points(
+    fp: Footprint, x_m: npt.ArrayLike, y_m: npt.ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """For each point (1-D arrays), the nearest point of the footprint's edge."""
+    x = np.asarray(x_m, dtype=np.float64).ravel()
+    y = np.asarray(y_m, dtype=np.float64).ravel()
+    if fp.is_disc:
+        r = np.hypot(x, y)
+        safe = np.where(r > 0.0, r, 1.0)
+        ux, uy = np.where(r > 0.0, x / safe, 1.0), np.where(r > 0.0, y / safe, 0.0)
+        bx: FloatArray = fp.radius_m * ux
+        by: FloatArray = fp.radius_m * uy
+        return bx, by
+    v = fp.vertices
+    x0, y0 = v[:, 0], v[:, 1]
+    ex, ey = np.roll(x0, -1) - x0, np.roll(y0, -1) - y0
+    dx, dy = x[:, None] - x0, y[:, None] - y0
+    t = np.clip((dx * ex + dy * ey) / (ex * ex + ey * ey), 0.0, 1.0)
+    cx, cy = x0 + t * ex, y0 + t * ey
+    k = np.argmin((x[:, None] - cx) ** 2 + (y[:, None] - cy) ** 2, axis=1)
+    rows = np.arange(x.size)
+    return cx[rows, k], cy[rows, k]
+
+
+def ray_exit_m(fp: Footprint, x0_m: float, y0_m: float, angles_rad: npt.ArrayLike) -> FloatArray:
+    """How far each ray from (x0, y0) at the angles runs before it leaves the footprint (its
+    first crossing of the edge); 0 for every ray when (x0, y0) is outside."""
+    a = np.asarray(angles_rad, dtype=np.float64)
+    if not bool(contains(fp, x0_m, y0_m)):
+        return np.zeros_like(a)
+    c, s = np.cos(a), np.sin(a)
+    if fp.is_disc:
+        b = x0_m * c + y0_m * s
+        q = x0_m * x0_m + y0_m * y0_m - fp.radius_m**2  # <= 0 inside
+        out_disc: FloatArray = -b + np.sqrt(np.maximum(b * b - q, 0.0))
+        return out_disc
+    v = fp.vertices
+    px, py = v[:, 0] - x0_m, v[:, 1] - y0_m  # edge starts relative to the ray's origin
+    ex, ey = np.roll(v[:, 0], -1) - v[:, 0], np.roll(v[:, 1], -1) - v[:, 1]
+    # origin + t (c, s) = p + u e:  t = cross(p, e) / cross(d, e), u = cross(p, d) / cross(d, e)
+    den = c[:, None] * ey - s[:, None] * ex
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (px * ey - py * ex) / den
+        u = (px * s[:, None] - py * c[:, None]) / den
+    hit = (den != 0.0) & (t >= 0.0) & (u >= 0.0) & (u <= 1.0)
+    out: FloatArray = np.where(hit, t, np.inf).min(axis=1)
+    return np.where(np.isfinite(out), out, 0.0)
+
+
 def mitre_factor(fp: Footprint) -> float:
     """How far the corners of ``mitred_outline(fp, g)`` reach from a polygon, per metre of g:
     max over the vertices of 1 / cos(half the turn there), at least 1."""

@@ -296,7 +296,7 @@ def load_profile(name_or_path: str | Path) -> RobotProfile:
     if not is_profile_path(text):
         known = ", ".join(sorted(PROFILES))
         raise ProfileError(
-            f"unknown robot profile {text!r} (built-in: {known}; or a profile FILE.toml)"
+            f"unknown robot profile {text!r} (known: {known}; or a profile FILE.toml)"
         )
     p = Path(text)
     try:

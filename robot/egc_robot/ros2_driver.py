@@ -37,6 +37,7 @@ from collections.abc import Callable
 from typing import Any
 
 from egc_common.errors import UsageError
+from egc_common.footprint import Footprint
 from egc_common.messages import BaseCommand, Odometry
 from egc_common.scan import Scan
 
@@ -87,9 +88,9 @@ class Ros2Driver:
         self,
         settings: Ros2Settings,
         node_name: str = NODE_NAME,
-        footprint_half_m: tuple[float, float] | None = None,
+        footprint_half_m: Footprint | tuple[float, float] | None = None,
     ) -> None:
-        """``footprint_half_m``: the profile's half length and width, for ``-inf`` readings."""
+        """``footprint_half_m``: the profile's footprint (or a centred rectangle's half sizes), for ``-inf`` readings."""
         self._footprint_half_m = footprint_half_m
         self._coverage_logged = False
         require_rclpy()

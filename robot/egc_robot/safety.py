@@ -1,7 +1,8 @@
 """Beyond-the-paper safety rules (DESIGN 5.10): footprint sweep, clearance, limits.
 
 The paper's circles judge only the end point of the predicted arc. ``sweep_scale`` checks the
-whole rectangular footprint along the commanded arc over one control period plus the stopping
+whole footprint (the profile's shape as given, polygon or disc: ``egc_common.footprint``,
+DESIGN 14) along the commanded arc over one control period plus the stopping
 distance at the profile's deceleration, and scales the command down (same curvature) until the
 sweep is clear. "Clear" means the footprint's signed clearance to every point never drops below
 ``min(margin, clearance now)``: far from obstacles the margin is kept; already closer than the
@@ -22,7 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from egc_common.kinematics import arc_displacement, ramp_toward, signed_distance_to_rectangle
+from egc_common.footprint import signed_distance
+from egc_common.kinematics import arc_displacement, ramp_toward
 from egc_common.profiles import RobotProfile
 from egc_common.scan import ObstaclePoints, obstacle_points
 
@@ -51,7 +53,7 @@ class SweepParams:
 
 def _min_clearance(x_m: FloatArray, y_m: FloatArray, profile: RobotProfile) -> float:
     """Smallest signed clearance of points given in the footprint's frame."""
-    return float(signed_distance_to_rectangle(x_m, y_m, *profile.half_size_m).min())
+    return float(signed_distance(profile.footprint, x_m, y_m).min())
 
 
 def footprint_clearance(points: FloatArray, profile: RobotProfile) -> float:
@@ -123,12 +125,17 @@ def horizon_scale(
     Jackal drove at 2 m/s until a wall came into view 0.35 m from its bumper, where it needs
     0.67 m to stop. Here the stopping distance in the direction of travel (one period at the
     command, then the profile's deceleration: |v| T + v^2 / (2 a)) must fit between the
-    footprint's edge (plus the margin) and the sensor's reach.
+    footprint's edge (its farthest point ahead, or behind when reversing, plus the margin) and
+    the sensor's reach.
     """
     if v_mps == 0.0:
         return 1.0
-    reach = obstacles.seen_ahead_m if v_mps > 0.0 else obstacles.seen_behind_m
-    room = reach - 0.5 * profile.length_m - params.margin_m
+    x_min, x_max, _, _ = profile.footprint.bounds
+    if v_mps > 0.0:
+        reach, edge = obstacles.seen_ahead_m, max(x_max, 0.0)
+    else:
+        reach, edge = obstacles.seen_behind_m, max(-x_min, 0.0)
+    room = reach - edge - params.margin_m
     speed, a, period = abs(v_mps), profile.decel_max_mps2, params.period_s
     if speed * period + speed * speed / (2.0 * a) <= room:
         return 1.0

@@ -176,7 +176,7 @@ def test_bad_paths_and_names(tmp_path):
     binary.write_bytes(b"\xff\xfe\x00garbage")
     with pytest.raises(ProfileError, match="not valid TOML"):
         load_profile(str(binary))
-    with pytest.raises(ProfileError, match=r"unknown robot profile 'roomba' \(built-in: husky"):
+    with pytest.raises(ProfileError, match=r"unknown robot profile .roomba. \(known: husky"):
         load_profile("roomba")
 
 
