@@ -183,7 +183,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     ros.add_argument(
         "--laser-pose",
         metavar="X,Y,YAW",
-        help="the laser in the base frame, metres and radians (default: 0,0,0)",
+        help="the laser in the base frame, metres and radians (default: [ros2] laser_pose, else "
+        "the profile's laser_pose, else 0,0,0)",
     )
     ros.add_argument(
         "--laser-upside-down",
@@ -309,7 +310,11 @@ def _ros2_settings(
         "laser_upside_down": args.laser_upside_down,
     }
     try:
-        settings = ros2_settings(config_mod.section(cfg, "ros2", SECTIONS["ros2"]), flags)
+        table = config_mod.section(cfg, "ros2", SECTIONS["ros2"])
+        laser = get_profile(args.profile).laser_pose
+        if laser is not None and "laser_pose" not in table:  # the profile's (DESIGN 14)
+            table = {**table, "laser_pose": list(laser)}
+        settings = ros2_settings(table, flags)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     if need_rclpy:
