@@ -16,6 +16,8 @@ The geometry here is pure and vectorised over points (numpy, no loops over point
   within ``g`` of it (DWA's margin), and ``mitre_factor``, how far beyond ``g`` its corners reach.
 - ``disc_cover``: discs whose union holds the footprint (a filter that reasons in discs, such as
   a control barrier function, stays conservative with them; DESIGN 13).
+- ``arc_samples`` / ``swept_min_distance``: the footprint swept along a command's arc, sampled
+  so that no point of it moves more than two steps between samples (the footprint sweep).
 - ``outline``: the boundary as a closed list of points (the view, the info reply).
 
 Validity (``FootprintError``, one line naming the problem): at least 3 and at most
@@ -278,6 +280,49 @@ def ray_exit_m(fp: Footprint, x0_m: float, y0_m: float, angles_rad: npt.ArrayLik
     hit = (den != 0.0) & (t >= 0.0) & (u >= 0.0) & (u <= 1.0)
     out: FloatArray = np.where(hit, t, np.inf).min(axis=1)
     return np.where(np.isfinite(out), out, 0.0)
+
+
+def arc_samples(
+    v_mps: float, w_radps: float, t_s: float, step_m: float, step_rad: float, reach_m: float
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Poses (x, y, theta) along the arc of (v, w) at k equal times in (0, t_s], in the start
+    frame (chord v t sinc(w t / 2) along w t / 2).
+
+    k is the smallest count with at most ``step_m`` of travel, ``step_rad`` of turn, and
+    ``step_m`` of the turn's sweep at ``reach_m`` (the footprint's farthest point) between
+    samples, so no footprint point moves more than 2 ``step_m`` from one sample to the next.
+    (The third bound only adds samples for footprints reaching beyond step_m / step_rad.)
+    """
+    length = abs(v_mps) * t_s
+    turn = abs(w_radps) * t_s
+    k = max(1, math.ceil(max(length / step_m, turn / step_rad, turn * reach_m / step_m)))
+    ts = np.linspace(t_s / k, t_s, k)
+    theta = w_radps * ts
+    half = 0.5 * theta
+    chord = v_mps * ts * np.sinc(half / math.pi)
+    return chord * np.cos(half), chord * np.sin(half), theta
+
+
+def swept_min_distance(
+    fp: Footprint,
+    points: FloatArray,
+    v_mps: float,
+    w_radps: float,
+    t_s: float,
+    step_m: float,
+    step_rad: float,
+) -> float:
+    """The smallest signed distance from ``points`` ((N, 2), start frame) to the footprint at
+    the poses ``arc_samples`` gives: the footprint swept along the arc. Between two samples no
+    footprint point moves more than 2 ``step_m``, so the true minimum over the whole arc is at
+    most ``step_m`` below this (the pipeline's margin covers that)."""
+    if len(points) == 0 or (v_mps == 0.0 and w_radps == 0.0):
+        return math.inf
+    x, y, theta = arc_samples(v_mps, w_radps, t_s, step_m, step_rad, fp.reach_m)
+    c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
+    dx = points[None, :, 0] - x[:, None]
+    dy = points[None, :, 1] - y[:, None]
+    return float(signed_distance(fp, c * dx + s * dy, -s * dx + c * dy).min())
 
 
 def mitre_factor(fp: Footprint) -> float:

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from egc_common.footprint import signed_distance
+from egc_common.footprint import signed_distance, swept_min_distance
 from egc_common.kinematics import arc_displacement, ramp_toward
 from egc_common.profiles import RobotProfile
 from egc_common.scan import ObstaclePoints, obstacle_points
@@ -76,23 +76,6 @@ def stopping_time_s(
     return params.period_s + 0.5 * t_brake
 
 
-def _sweep_poses(
-    v_mps: float, w_radps: float, t_s: float, params: SweepParams
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Poses (x, y, theta) along the arc at times in (0, t_s], in the start frame.
-
-    ``arc_displacement`` for all sample times at once: chord v t sinc(w t / 2) along w t / 2.
-    """
-    length = abs(v_mps) * t_s
-    turn = abs(w_radps) * t_s
-    k = max(1, math.ceil(max(length / params.step_m, turn / params.step_rad)))
-    ts = np.linspace(t_s / k, t_s, k)
-    theta = w_radps * ts
-    half = 0.5 * theta
-    chord = v_mps * ts * np.sinc(half / math.pi)
-    return chord * np.cos(half), chord * np.sin(half), theta
-
-
 def sweep_min_clearance(
     v_mps: float,
     w_radps: float,
@@ -101,14 +84,12 @@ def sweep_min_clearance(
     profile: RobotProfile,
     params: SweepParams,
 ) -> float:
-    """Smallest signed footprint clearance over the poses swept in (0, t_s]."""
-    if len(points) == 0 or (v_mps == 0.0 and w_radps == 0.0):
-        return math.inf
-    x, y, theta = _sweep_poses(v_mps, w_radps, t_s, params)
-    c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
-    dx = points[None, :, 0] - x[:, None]
-    dy = points[None, :, 1] - y[:, None]
-    return _min_clearance(c * dx + s * dy, -s * dx + c * dy, profile)
+    """Smallest signed footprint clearance over the poses swept in (0, t_s]
+    (``egc_common.footprint.swept_min_distance``: between samples no point of the footprint
+    moves more than 2 ``step_m``, so at most ``step_m`` closer than sampled, within the margin)."""
+    return swept_min_distance(
+        profile.footprint, points, v_mps, w_radps, t_s, params.step_m, params.step_rad
+    )
 
 
 def horizon_scale(

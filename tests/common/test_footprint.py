@@ -3,6 +3,7 @@ force on random shapes (hypothesis)."""
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -11,6 +12,7 @@ from egc_common.footprint import (
     DISC_SIDES,
     Footprint,
     FootprintError,
+    arc_samples,
     contains,
     disc_cover,
     mitre_factor,
@@ -18,6 +20,8 @@ from egc_common.footprint import (
     polygon_signed_distance,
     segments_cross_boxes,
     signed_distance,
+    swept_min_distance,
+    transform,
 )
 from egc_common.kinematics import signed_distance_to_rectangle
 from hypothesis import given, settings
@@ -209,3 +213,30 @@ def test_segments_cross_boxes_matches_sampling(seed):
     for e, m in zip(*np.nonzero(got & ~sampled), strict=True):
         d = np.abs(pts[e, :, :] - centres[m]).max(axis=1).min()
         assert d <= half + np.hypot(*(b[e] - a[e])) / 4000
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    shapes,
+    st.floats(-2.0, 2.0),
+    st.floats(-3.0, 3.0),
+    st.floats(0.05, 2.0),
+    st.integers(0, 2**31 - 1),
+)
+def test_the_swept_footprint_is_sampled_within_two_steps(fp, v, w, t_s, seed):
+    """No footprint point moves more than 2 step_m between samples, so the sampled minimum
+    distance is at most step_m above the true one (checked against a 50x finer sampling)."""
+    step_m, step_rad = 0.02, 0.05
+    x, y, th = arc_samples(v, w, t_s, step_m, step_rad, fp.reach_m)
+    poses = np.column_stack([np.concatenate([[0.0], x]), np.concatenate([[0.0], y])])
+    angles = np.concatenate([[0.0], th])
+    corners = fp.vertices if not fp.is_disc else fp.vertices * math.cos(math.pi / DISC_SIDES)
+    placed = [transform(corners, (px, py, a)) for (px, py), a in zip(poses, angles, strict=True)]
+    for before, after in itertools.pairwise(placed):
+        assert np.hypot(*(after - before).T).max() <= 2 * step_m + 1e-9
+    rng = np.random.default_rng(seed)
+    pts = rng.uniform(-3.0, 3.0, (60, 2))
+    sampled = swept_min_distance(fp, pts, v, w, t_s, step_m, step_rad)
+    fine = swept_min_distance(fp, pts, v, w, t_s, step_m / 50, step_rad / 50)
+    # fine is within step_m / 50 above the true minimum, which is within step_m below sampled.
+    assert fine - step_m / 50 - 1e-9 <= sampled <= fine + step_m + 1e-9
