@@ -51,6 +51,7 @@ def _pct(values: list[float], q: float) -> float:
 def sensor_process(n_scans: int, ready: Any, go: Any, out: Any) -> None:
     """The ROS 2 robot's sensor and base: scans out, /cmd_vel arrivals recorded."""
     import rclpy
+    from egc_common.executor_thread import ExecutorThread
     from geometry_msgs.msg import Twist
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import qos_profile_sensor_data
@@ -63,9 +64,8 @@ def sensor_process(n_scans: int, ready: Any, go: Any, out: Any) -> None:
     pub = node.create_publisher(LaserScan, "/scan", qos_profile_sensor_data)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    import threading
-
-    threading.Thread(target=executor.spin, daemon=True).start()
+    spinner = ExecutorThread(executor, lambda exc: print(f"bench_ros2: sensor executor: {exc}"))
+    spinner.start()
     beams = 360
     angles = -math.pi + 2 * math.pi / beams * np.arange(beams)
     c = np.cos(angles)
@@ -94,9 +94,10 @@ def sensor_process(n_scans: int, ready: Any, go: Any, out: Any) -> None:
         time.sleep(1 / 18 + rng.uniform(-0.01, 0.01))
     time.sleep(0.3)
     out.put({"published": published, "arrivals": list(arrivals)})
-    executor.shutdown()
-    node.destroy_node()
-    rclpy.shutdown()
+    if spinner.stop(10.0):  # never destroy the node under its executor's thread (issue 31)
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown()
 
 
 def _controller() -> Any:
