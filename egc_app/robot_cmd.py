@@ -250,7 +250,10 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
                 sweep=SweepParams(period_s=1.0 / rate_hz),
                 dwa=DwaParams.from_mapping(filter_tables | dwa_table, profile),
                 assist=AssistParams.from_mapping(filter_tables | assist_table, profile),
-                cbf=CbfParams.from_mapping(filter_tables | cbf_table, profile),
+                # cbf's margin counts one control period at the command, as the sweep does.
+                cbf=CbfParams.from_mapping(
+                    filter_tables | {"period_s": 1.0 / rate_hz} | cbf_table, profile
+                ),
             )
 
         rate_hz = args.rate_hz if args.rate_hz is not None else _number(robot, "rate_hz", 20.0)

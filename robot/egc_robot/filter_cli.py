@@ -5,7 +5,8 @@
 v < 0, the mirrored EK space the circles were computed in); ``--filter none`` is direct mode.
 ``--filter cbf`` (DESIGN 13) prints its own intermediates instead of the circles: ``case``,
 ``margin_m`` (the fixed margin), ``margin_ahead_m`` (the margin straight ahead at the current
-speed), ``tau_s``, ``braking_s`` (K = tau + T/2: metres of margin per m/s of approach),
+speed), ``tau_s``, ``braking_s`` (K = tau + period + T/2: metres of margin per m/s of
+approach),
 ``considered`` (points within reach), ``rounds``, ``nearest_m`` and ``active``: the
 constraints ``a v + b w >= c`` that changed the command, each with its point ``x``, ``y``, its
 ``distance_m`` from the footprint, ``margin_m``, ``kind`` (``state``: the margin at the current

@@ -45,8 +45,8 @@ def barrier_rows(
     hl, hw = profile.half_size_m
     a_dec, al_dec = profile.decel_max_mps2, profile.angular_accel_max_radps2
     t_now = max(abs(v_now) / a_dec, abs(w_now) / al_dec)
-    k_now = tau + 0.5 * t_now
-    k_cmd = tau + 0.5 * max(t_now, abs(v_ref) / a_dec, abs(w_ref) / al_dec)
+    k_now = tau + params.period_s + 0.5 * t_now
+    k_cmd = tau + params.period_s + 0.5 * max(t_now, abs(v_ref) / a_dec, abs(w_ref) / al_dec)
     rows = []
     for x, y in points:
         qx, qy = min(max(x, -hl), hl), min(max(y, -hw), hw)
@@ -277,8 +277,8 @@ def test_the_margin_grows_with_tau(profile, pts, frac, taus):
 def test_the_margin_ahead_is_the_delay_and_braking_distance():
     p = CbfParams.from_profile(JACKAL)
     res = cbf_filter(0.8, 0.0, np.array([[5.0, 5.0]]), 0.8, 0.0, 0.4, JACKAL, p)
-    # 0.12 m + 0.8 m/s x 0.4 s + 0.8^2 / (2 x 3 m/s^2)
-    assert res.margin_ahead_m == pytest.approx(0.12 + 0.32 + 0.64 / 6.0)
+    # 0.12 m + 0.8 m/s x (0.4 s + one 0.05 s period) + 0.8^2 / (2 x 3 m/s^2)
+    assert res.margin_ahead_m == pytest.approx(0.12 + 0.8 * 0.45 + 0.64 / 6.0)
 
 
 # -- driving at things -----------------------------------------------------------------------
@@ -294,7 +294,7 @@ def wall_ahead(distance_m: float, profile: RobotProfile = JACKAL) -> np.ndarray:
 def test_a_wall_ahead_is_kept_at_the_margin_plus_delay_and_braking(v):
     p = CbfParams.from_profile(JACKAL)
     tau = 0.25
-    stop_m = p.margin_m + v * tau + v * v / (2 * JACKAL.decel_max_mps2)
+    stop_m = p.margin_m + v * (tau + p.period_s) + v * v / (2 * JACKAL.decel_max_mps2)
     near = cbf_filter(v, 0.0, wall_ahead(stop_m - 0.01), v, 0.0, tau, JACKAL, p)
     assert near.v_mps <= 0.0 and near.case is CbfCase.SOLVED  # held
     assert near.active and all(c.a < 0.0 for c in near.active)  # by points ahead

@@ -18,10 +18,12 @@ beyond which nothing is known to be free):
   linearisation: the gradient of the distance to a convex set is n). The footprint *approaches*
   p_i at u_i(v, w) = n_x v - b_i w (m/s).
 - The barrier is h_i = sd_i - m_i with the margin m_i = ``margin_m`` + omega_i K u_i: a fixed
-  margin, plus the distance the footprint closes on p_i during the loop delay and the stop,
-  K = tau + T / 2 with T = max(|v| / a_dec, |w| / alpha_dec) the braking time at the profile's
-  limits (``safety.stopping_time_s``' model: straight towards a wall K u = v tau + v^2 / (2 a_dec),
-  the delay's distance plus the braking distance). omega_i in [0, 1] says how squarely p_i lies in
+  margin, plus the distance the footprint closes on p_i during the loop delay, the control
+  period and the stop, K = tau + P + T / 2 with P = ``period_s`` (a command holds until the
+  next cycle) and T = max(|v| / a_dec, |w| / alpha_dec) the braking time at the profile's
+  limits (``safety.stopping_time_s``' model: straight towards a wall
+  K u = v (tau + P) + v^2 / (2 a_dec), the delay's and the period's distance plus the braking
+  distance). omega_i in [0, 1] says how squarely p_i lies in
   the footprint's path: (cos of the angle between n_i and the velocity of q_i)^4, 1 straight
   ahead, falling off quickly for points the robot passes. A point the robot passes is never
   reached by the motion (its distance shrinks only to the lateral gap), so the stopping distance
@@ -134,6 +136,8 @@ class CbfParams:
     - ``tau_s``: the loop delay (s) when the caller knows none (a replay, ``egc-teleop
       filter``): DESIGN 9's tau on a perfect link, the operator's reaction time alone. The
       robot's controller passes its measured tau instead.
+    - ``period_s``: the control period (s), which the robot sets from its rate as for the
+      footprint sweep (``SweepParams.period_s``).
     - ``sectors``, ``points_per_sector``: the points considered first, the most violated ones
       per direction (the solver checks every point in reach afterwards; these only make it
       settle in fewer rounds).
@@ -144,6 +148,7 @@ class CbfParams:
     weight_v: float = 1.0
     weight_w: float = 1.0
     tau_s: float = 0.25
+    period_s: float = SweepParams().period_s
     sectors: int = 16
     points_per_sector: int = 2
     no_return_is_free: bool = False  # the driver's declaration (DESIGN 5.9)
@@ -153,7 +158,7 @@ class CbfParams:
             value = getattr(self, name)
             if not _is_number(value) or not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"cbf {name} must be a positive number, got {value!r}")
-        for name in ("margin_m", "tau_s"):
+        for name in ("margin_m", "tau_s", "period_s"):
             value = getattr(self, name)
             if not _is_number(value) or not (math.isfinite(value) and 0.0 <= value <= 60.0):
                 raise ValueError(f"cbf {name} must be a number within [0, 60], got {value!r}")
@@ -226,7 +231,7 @@ class CbfResult:
     case: CbfCase
     margin_m: float  # the fixed margin
     tau_s: float  # the loop delay the margins used
-    braking_s: float  # K = tau + T / 2 of (S): metres of margin per m/s of approach
+    braking_s: float  # K = tau + P + T / 2 of (S): metres of margin per m/s of approach
     considered: int = 0  # points within reach (scan points and unseen edges)
     rounds: int = 0  # cutting-plane rounds
     active: tuple[CbfConstraint, ...] = ()  # constraints the answer meets with equality
@@ -253,9 +258,9 @@ def cbf_filter(
 
     a_dec, alpha_dec = profile.decel_max_mps2, profile.angular_accel_max_radps2
     t_now = max(abs(v_now_mps) / a_dec, abs(w_now_radps) / alpha_dec)
-    k_now = tau + 0.5 * t_now  # (S)
+    k_now = tau + params.period_s + 0.5 * t_now  # (S)
     t_hi = max(t_now, abs(v_ref_mps) / a_dec, abs(w_ref_radps) / alpha_dec)
-    k_cmd = tau + 0.5 * t_hi  # (C)
+    k_cmd = tau + params.period_s + 0.5 * t_hi  # (C)
     ahead = params.margin_m + abs(v_now_mps) * k_now
 
     pts = obstacle_points(obstacles)
@@ -345,6 +350,9 @@ def cbf_filter(
     x2, y2 = np.concatenate((x, x)), np.concatenate((y, y))
     solution = _solve(a_all, b_all, c_all, x2, y2, v_ref_mps, w_ref_radps, sv, sw, profile, params)
     v_out, w_out, rounds, case = solution
+    # A stop computed as the projection onto a line through the origin comes out as 1e-17.
+    v_out = 0.0 if abs(v_out) <= _SAME else v_out
+    w_out = 0.0 if abs(w_out) <= _SAME else w_out
     # The constraints that changed the command: violated by it, met with equality by the answer.
     r_ref = a_all * v_ref_mps + b_all * w_ref_radps - c_all
     r_out = a_all * v_out + b_all * w_out - c_all
