@@ -393,12 +393,12 @@ def test_the_closed_form_projection_is_the_weighted_nearest_feasible_point(rows,
 def test_defaults_per_profile_and_the_config_table():
     assert CbfParams.from_profile(JACKAL).margin_m == pytest.approx(0.12)
     assert CbfParams.from_profile(PIONEER3DX).margin_m == pytest.approx(0.0363)
-    p = CbfParams.from_mapping({"alpha_per_s": 4, "sectors": 8.0}, JACKAL)
-    assert (p.alpha_per_s, p.sectors, p.margin_m) == (4.0, 8, pytest.approx(0.12))
+    p = CbfParams.from_mapping({"alpha_per_s": 4, "points_considered": 6.0}, JACKAL)
+    assert (p.alpha_per_s, p.points_considered, p.margin_m) == (4.0, 6, pytest.approx(0.12))
     with pytest.raises(ValueError, match="unknown keys: alpha"):
         CbfParams.from_mapping({"alpha": 4})
-    for bad in ({"alpha_per_s": 0}, {"margin_m": -0.1}, {"weight_w": "1"}, {"sectors": 0},
-                {"tau_s": math.inf}, {"points_per_sector": 1.5}):  # fmt: skip
+    for bad in ({"alpha_per_s": 0}, {"margin_m": -0.1}, {"weight_w": "1"}, {"points_considered": 0},
+                {"tau_s": math.inf}, {"points_considered": 1.5}):  # fmt: skip
         with pytest.raises(ValueError, match="cbf"):
             CbfParams.from_mapping(bad)
 

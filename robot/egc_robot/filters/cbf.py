@@ -61,10 +61,10 @@ answer; otherwise the answer is a vertex of two lines (the feasible one nearest 
 Which points enter: only those within reach (a point whose barrier no command within the box and
 within ``||u0||`` of u0 in the weighted norm can violate is dropped; the answer never lies
 farther, since the zero command is feasible), then cutting planes: the working set starts with
-the ``points_per_sector`` most violated points of each of ``sectors`` directions; the answer on
-the working set is checked against every point in reach and the violated ones are added, until
-none is (a few rounds; the answer is then optimal for the whole set, being optimal for a subset
-and feasible for all). Should that not settle within ``_MAX_ROUNDS`` rounds, or the polygon
+the ``points_considered`` rows the command violates most; the answer on the working set is
+checked against every point in reach and the most violated are added, until none is (a few
+rounds; the answer is then optimal for the whole set, being optimal for a subset and feasible
+for all). Should that not settle within ``_MAX_ROUNDS`` rounds, or the polygon
 come out empty through rounding, the filter stops translation and keeps the rotation every
 barrier allows (the interval of w at v = 0 always holds 0).
 
@@ -138,9 +138,11 @@ class CbfParams:
       robot's controller passes its measured tau instead.
     - ``period_s``: the control period (s), which the robot sets from its rate as for the
       footprint sweep (``SweepParams.period_s``).
-    - ``sectors``, ``points_per_sector``: the points considered first, the most violated ones
-      per direction (the solver checks every point in reach afterwards; these only make it
-      settle in fewer rounds).
+    - ``points_considered``: how many constraints the solver takes at a time, the most violated
+      ones (first by the command, then each round by the last answer). It checks every point in
+      reach after each round, so this sets the cost of a round, not the answer: 8 is a wall
+      ahead and one beside, each with its (S) and (C) rows and neighbours, settled in one or
+      two rounds.
     """
 
     alpha_per_s: float = 8.0
@@ -149,8 +151,7 @@ class CbfParams:
     weight_w: float = 1.0
     tau_s: float = 0.25
     period_s: float = SweepParams().period_s
-    sectors: int = 16
-    points_per_sector: int = 2
+    points_considered: int = 8
     no_return_is_free: bool = False  # the driver's declaration (DESIGN 5.9)
 
     def __post_init__(self) -> None:
@@ -162,10 +163,11 @@ class CbfParams:
             value = getattr(self, name)
             if not _is_number(value) or not (math.isfinite(value) and 0.0 <= value <= 60.0):
                 raise ValueError(f"cbf {name} must be a number within [0, 60], got {value!r}")
-        for name, top in (("sectors", 360), ("points_per_sector", 64)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= top:
-                raise ValueError(f"cbf {name} must be an integer within [1, {top}], got {value!r}")
+        value = self.points_considered
+        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 256:
+            raise ValueError(
+                f"cbf points_considered must be an integer within [1, 256], got {value!r}"
+            )
         if not isinstance(self.no_return_is_free, bool):
             raise ValueError("cbf no_return_is_free must be true or false")
 
@@ -192,7 +194,7 @@ class CbfParams:
             )
         values: dict[str, object] = {}
         for key, value in table.items():
-            if key in ("sectors", "points_per_sector"):
+            if key == "points_considered":
                 if isinstance(value, float) and value.is_integer():
                     value = int(value)
             elif key == "no_return_is_free":
@@ -221,6 +223,22 @@ class CbfConstraint:
     unseen: bool  # an edge of what the laser saw, not a scan point
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class TightRows:
+    """The constraints that changed the command, as arrays (``CbfResult.active`` unpacks them
+    when asked: the control loop does not)."""
+
+    x_m: FloatArray
+    y_m: FloatArray
+    a: FloatArray
+    b: FloatArray
+    c: FloatArray
+    distance_m: FloatArray
+    margin_m: FloatArray
+    state: npt.NDArray[np.bool_]  # (S) rows; the others are (C)
+    unseen: npt.NDArray[np.bool_]
+
+
 @dataclass(frozen=True, slots=True)
 class CbfResult:
     """The filtered command and the intermediates the view, the tool and the tests show."""
@@ -234,10 +252,26 @@ class CbfResult:
     braking_s: float  # K = tau + P + T / 2 of (S): metres of margin per m/s of approach
     considered: int = 0  # points within reach (scan points and unseen edges)
     rounds: int = 0  # cutting-plane rounds
-    active: tuple[CbfConstraint, ...] = ()  # constraints the answer meets with equality
+    tight: TightRows | None = None
     nearest_m: float = math.inf  # smallest sd_i among the points considered
     # Margin straight ahead in the direction of travel at the current speed (m), for the view.
     margin_ahead_m: float = 0.0
+
+    @property
+    def active(self) -> tuple[CbfConstraint, ...]:
+        """The constraints the command violated and the answer meets with equality (at most
+        ``_MAX_REPORTED``)."""
+        t = self.tight
+        if t is None:
+            return ()
+        columns = (t.x_m, t.y_m, t.a, t.b, t.c, t.distance_m, t.margin_m)
+        rows = zip(
+            *(col.tolist() for col in columns), t.state.tolist(), t.unseen.tolist(), strict=True
+        )
+        return tuple(
+            CbfConstraint(x, y, a, b, c, d, m, "state" if st else "command", un)
+            for x, y, a, b, c, d, m, st, un in rows
+        )
 
 
 def cbf_filter(
@@ -252,184 +286,254 @@ def cbf_filter(
 ) -> CbfResult:
     """Filter one command; see the module docstring."""
     tau = params.tau_s if tau_s is None else tau_s
-    numbers = (v_ref_mps, w_ref_radps, v_now_mps, w_now_radps)
-    if not all(abs(x) <= MAX_ABS_COORD_M for x in numbers) or not 0.0 <= tau <= MAX_ABS_COORD_M:
-        return _stop(CbfCase.INVALID_INPUT, v_ref_mps, w_ref_radps, params, 0.0, 0.0)
+    v0, w0, v_now, w_now = v_ref_mps, w_ref_radps, v_now_mps, w_now_radps
+    if not all(abs(x) <= MAX_ABS_COORD_M for x in (v0, w0, v_now, w_now)) or not (
+        0.0 <= tau <= MAX_ABS_COORD_M
+    ):
+        return _stop(CbfCase.INVALID_INPUT, v0, w0, params, 0.0, 0.0)
 
     a_dec, alpha_dec = profile.decel_max_mps2, profile.angular_accel_max_radps2
-    t_now = max(abs(v_now_mps) / a_dec, abs(w_now_radps) / alpha_dec)
+    t_now = max(abs(v_now) / a_dec, abs(w_now) / alpha_dec)
     k_now = tau + params.period_s + 0.5 * t_now  # (S)
-    t_hi = max(t_now, abs(v_ref_mps) / a_dec, abs(w_ref_radps) / alpha_dec)
+    t_hi = max(t_now, abs(v0) / a_dec, abs(w0) / alpha_dec)
     k_cmd = tau + params.period_s + 0.5 * t_hi  # (C)
-    ahead = params.margin_m + abs(v_now_mps) * k_now
+    ahead = params.margin_m + abs(v_now) * k_now
 
     pts = obstacle_points(obstacles)
     if pts.count == 0 and not params.no_return_is_free:
-        return _stop(CbfCase.NO_POINTS_UNKNOWN, v_ref_mps, w_ref_radps, params, tau, k_now)
+        return _stop(CbfCase.NO_POINTS_UNKNOWN, v0, w0, params, tau, k_now)
 
-    half_l, half_w = profile.half_size_m
-    q_max = profile.half_diagonal_m  # |b_i| <= |q_i| <= q_max
-    alpha = params.alpha_per_s
     sv = math.sqrt(params.weight_v) / profile.v_max_mps  # z = (sv v, sw w): Euclidean QP
     sw = math.sqrt(params.weight_w) / profile.w_max_radps
-    norm0 = math.hypot(sv * v_ref_mps, sw * w_ref_radps)
-    # Any command the filter can return: within the box and within norm0 of the command.
-    v_bound = max(abs(v_ref_mps), min(profile.v_max_mps, abs(v_ref_mps) + norm0 / sv))
-    w_bound = max(abs(w_ref_radps), min(profile.w_max_radps, abs(w_ref_radps) + norm0 / sw))
-    u_bound = v_bound + q_max * w_bound
-    u_now_bound = abs(v_now_mps) + q_max * abs(w_now_radps)
-    # A point farther than this from the footprint has slack in (S) and (C) for every command
-    # the filter can return: (S) alpha (sd - margin - K u_now) >= u_bound and (C)
-    # alpha (sd - margin) >= u_bound (1 + alpha K).
-    reach_sd = params.margin_m + u_bound / alpha + max(u_bound * k_cmd, k_now * u_now_bound)
-    reach = q_max + reach_sd
-
-    # Scan points in reach, then the unseen edges along the x axis.
-    x = y = _EMPTY
-    if pts.count:
-        index = pts.prepared_index
-        if index is None or index.r2_sorted[0] <= reach * reach:
-            near = pts.r2 <= reach * reach
-            x, y = pts.x[near], pts.y[near]
-    n_scan = x.size
-    geo = _geometry(x, y, half_l, half_w)
-    unseen = [
-        (sign, seen)
-        for sign, seen in ((1.0, pts.seen_ahead_m), (-1.0, pts.seen_behind_m))
-        if seen - half_l < reach_sd
-    ]
-    if unseen:
-        # A wall across the axis where the laser stopped seeing: n = (+-1, 0), q = (+-L/2, 0).
-        extra = np.array(
-            [(s * seen, 0.0, seen - half_l, s, 0.0, 0.0, s * half_l, 0.0) for s, seen in unseen]
-        ).T
-        x, y = np.concatenate((x, extra[0])), np.concatenate((y, extra[1]))
-        sd0, nx0, b0, ny0, qx0, qy0 = (
-            np.concatenate((g, e)) for g, e in zip(geo, extra[2:], strict=True)
-        )
-        geo = (sd0, nx0, b0, ny0, qx0, qy0)
-    if x.size == 0:
+    scene = _Scene(profile, params, v0, w0, v_now, w_now, k_now, k_cmd)
+    # Only points the command itself could approach too fast can make it change.
+    if scene.points_in_reach(pts, (v0, v0), abs(w0)) is None:
         case = CbfCase.NO_POINTS_FREE if pts.count == 0 else CbfCase.CLEAR
         return CbfResult(
-            v_ref_mps, w_ref_radps, False, case, params.margin_m, tau, k_now, 0, 0, (), math.inf,
-            ahead,
-        )  # fmt: skip
-
-    sd, nx, b = geo[0], geo[1], geo[2]
-    # Approach speeds of (v, w) = nx v - b w; omega from the velocity of the nearest footprint
-    # point under the current motion (S) and under the command (C).
-    u_now = nx * v_now_mps - b * w_now_radps if (v_now_mps or w_now_radps) else None
-    omega_now = _omega(u_now, geo, v_now_mps, w_now_radps)
-    u_ref = nx * v_ref_mps - b * w_ref_radps
-    omega_cmd = _omega(u_ref, geo, v_ref_mps, w_ref_radps)
-
-    room = sd - params.margin_m
-    if u_now is None:
-        c_state = -alpha * np.maximum(room, 0.0)
-        m_state: FloatArray | float = params.margin_m
-    else:
-        m_extra = omega_now * k_now * np.maximum(u_now, 0.0)
-        c_state = -alpha * np.maximum(room - m_extra, 0.0)
-        m_state = params.margin_m + m_extra
-    gain = 1.0 + alpha * k_cmd * omega_cmd  # (C): u (1 + alpha omega K) <= alpha max(room, 0)
-    c_cmd = -alpha * np.maximum(room, 0.0)
-    # Rows a v + b w >= c, (S) then (C): a = -nx, b = b for (S); scaled by the gain for (C).
-    slack_state = c_state + u_ref  # <= 0 where (S) holds: u_ref <= -c
-    slack_cmd = c_cmd + gain * u_ref
-    worst = max(float(slack_state.max()), float(slack_cmd.max()))
-    nearest = float(sd.min())
-    if worst <= _TOL:  # the command keeps every barrier: unchanged, to the bit
+            v0, w0, False, case, params.margin_m, tau, k_now, 0, 0, None, math.inf, ahead
+        )
+    # The rows of every point that any command the filter can return could approach too fast:
+    # it returns one within the box and within norm0 of the command (the zero command is
+    # feasible). The command is checked on them too (they include its own points).
+    norm0 = math.hypot(sv * v0, sw * w0)
+    v_hi = max(v0, min(profile.v_max_mps, v0 + norm0 / sv))
+    v_lo = min(v0, max(-profile.v_max_mps, v0 - norm0 / sv))
+    w_bound = max(abs(w0), min(profile.w_max_radps, abs(w0) + norm0 / sw))
+    reach = scene.points_in_reach(pts, (v_lo, v_hi), w_bound)
+    assert reach is not None  # it holds the command's
+    rows = scene.rows(*reach)
+    if rows.worst_for_command <= _TOL:  # the command keeps every barrier: unchanged, to the bit
         return CbfResult(
-            v_ref_mps, w_ref_radps, False, CbfCase.CLEAR, params.margin_m, tau, k_now, x.size,
-            0, (), nearest, ahead,
+            v0, w0, False, CbfCase.CLEAR, params.margin_m, tau, k_now, rows.n, 0, None,
+            rows.nearest, ahead,
         )  # fmt: skip
 
-    a_all = np.concatenate((-nx, -gain * nx))
-    b_all = np.concatenate((b, gain * b))
-    c_all = np.concatenate((c_state, c_cmd))
-    x2, y2 = np.concatenate((x, x)), np.concatenate((y, y))
-    solution = _solve(a_all, b_all, c_all, x2, y2, v_ref_mps, w_ref_radps, sv, sw, profile, params)
-    v_out, w_out, rounds, case = solution
+    a_all = np.concatenate((rows.a, rows.gain * rows.a))  # (S) then (C)
+    b_all = np.concatenate((rows.b, rows.gain * rows.b))
+    c_all = np.concatenate((rows.c_state, rows.c_cmd))
+    v_out, w_out, rounds, case, working = _solve(
+        a_all, b_all, c_all, v0, w0, sv, sw, profile, params.points_considered
+    )
     # A stop computed as the projection onto a line through the origin comes out as 1e-17.
     v_out = 0.0 if abs(v_out) <= _SAME else v_out
     w_out = 0.0 if abs(w_out) <= _SAME else w_out
-    # The constraints that changed the command: violated by it, met with equality by the answer.
-    r_ref = a_all * v_ref_mps + b_all * w_ref_radps - c_all
-    r_out = a_all * v_out + b_all * w_out - c_all
-    tight = np.flatnonzero((r_ref < -_TOL) & (np.abs(r_out) <= 1e-7 * (1.0 + np.abs(c_all))))
-    n = x.size
-    m_state_arr = np.broadcast_to(np.asarray(m_state, dtype=np.float64), (n,))
-    m_cmd_arr = params.margin_m + omega_cmd * k_cmd * np.maximum(u_ref, 0.0)
-    margins = np.concatenate((m_state_arr, m_cmd_arr))
-    active = tuple(
-        CbfConstraint(
-            float(x2[i]),
-            float(y2[i]),
-            float(a_all[i]),
-            float(b_all[i]),
-            float(c_all[i]),
-            float(sd[i % n]),
-            float(margins[i]),
-            "state" if i < n else "command",
-            bool(i % n >= n_scan),
-        )
-        for i in tight[:_MAX_REPORTED]
-    )
-    modified = bool(v_out != v_ref_mps or w_out != w_ref_radps)
+    # The constraints that changed the command: in the working set (violated by the command),
+    # met with equality by the answer.
+    wc = c_all[working]
+    gap = a_all[working] * v_out + b_all[working] * w_out - wc
+    tight = working[np.abs(gap) <= 1e-7 * (1.0 + np.abs(wc))][:_MAX_REPORTED]
+    n = rows.n
+    point = tight % n
+    state = tight < n
+    margins = rows.margins(point, state)
+    found = TightRows(
+        rows.x[point], rows.y[point], a_all[tight], b_all[tight], c_all[tight],
+        rows.sd[point], margins, state, point >= rows.n_scan,
+    )  # fmt: skip
+    modified = bool(v_out != v0 or w_out != w0)
     return CbfResult(
-        v_out, w_out, modified, case, params.margin_m, tau, k_now, n, rounds, active, nearest,
+        v_out, w_out, modified, case, params.margin_m, tau, k_now, n, rounds, found, rows.nearest,
         ahead,
     )  # fmt: skip
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class _Rows:
+    """Every point's two half-planes, per point: a = -n_x, b, and c for (S) and (C)."""
+
+    x: FloatArray
+    y: FloatArray
+    n_scan: int  # the first n_scan points are scan points, the rest unseen edges
+    sd: FloatArray
+    a: FloatArray
+    b: FloatArray
+    gain: FloatArray  # (C)'s rows are (S)'s times this
+    c_state: FloatArray
+    c_cmd: FloatArray
+    m_state_extra: FloatArray | None  # omega K u^+ at the current speed (None: standing)
+    m_cmd_extra: FloatArray  # ... at the commanded speed
+    margin_m: float
+    worst_for_command: float  # the command's largest shortfall over every row
+    nearest: float
+
+    @property
+    def n(self) -> int:
+        return self.x.size
+
+    def margins(self, point: IntArray, state: npt.NDArray[np.bool_]) -> FloatArray:
+        """The margins m_i of (S) rows (``state``) and (C) rows of the given points (m)."""
+        extra = self.m_cmd_extra[point]
+        if self.m_state_extra is not None:
+            extra = np.where(state, self.m_state_extra[point], extra)
+        else:
+            extra = np.where(state, 0.0, extra)
+        out: FloatArray = self.margin_m + extra
+        return out
+
+
+@dataclass(frozen=True, slots=True)
+class _Scene:
+    """One cycle's settings, shared by the command's check and the solve."""
+
+    profile: RobotProfile
+    params: CbfParams
+    v0: float
+    w0: float
+    v_now: float
+    w_now: float
+    k_now: float
+    k_cmd: float
+
+    def points_in_reach(
+        self, pts: ObstaclePoints, v_range: tuple[float, float], w_bound: float
+    ) -> tuple[FloatArray, FloatArray, int, list[tuple[float, float]]] | None:
+        """The points (x, y), how many are scan points, and the unseen edges, that a command
+        with v in ``v_range`` and |w| <= ``w_bound`` could approach faster than their barriers
+        allow; None when there is none.
+
+        A point farther from the footprint than reach_sd has slack in (S) and (C):
+        (S) alpha (sd - margin - K u_now) >= u and (C) alpha (sd - margin) >= u (1 + alpha K)
+        with u the largest approach. Points ahead (x > 0: n_x >= 0) are approached by forward
+        motion and turning only, points behind by reversing and turning only.
+        """
+        p, alpha, q_max = self.params, self.params.alpha_per_s, self.profile.half_diagonal_m
+        half_l = 0.5 * self.profile.length_m
+        reach_sd = []
+        for v_away, v_state in (
+            (max(v_range[1], 0.0), max(self.v_now, 0.0)),
+            (max(-v_range[0], 0.0), max(-self.v_now, 0.0)),
+        ):
+            u = v_away + q_max * w_bound
+            u_state = v_state + q_max * abs(self.w_now)
+            reach_sd.append(p.margin_m + u / alpha + max(u * self.k_cmd, self.k_now * u_state))
+        reach_f, reach_b = q_max + reach_sd[0], q_max + reach_sd[1]
+        x = y = _EMPTY
+        if pts.count:
+            index = pts.prepared_index
+            far = max(reach_f, reach_b)
+            if index is None or index.r2_sorted[0] <= far * far:
+                if reach_f == reach_b:
+                    near = pts.r2 <= reach_f * reach_f
+                else:
+                    near = pts.r2 <= np.where(pts.x > 0.0, reach_f * reach_f, reach_b * reach_b)
+                if near.any():
+                    x, y = pts.x[near], pts.y[near]
+        unseen = [
+            (sign, seen)
+            for sign, seen, room in (
+                (1.0, pts.seen_ahead_m, reach_sd[0]),
+                (-1.0, pts.seen_behind_m, reach_sd[1]),
+            )
+            if seen - half_l < room
+        ]
+        if x.size == 0 and not unseen:
+            return None
+        return x, y, x.size, unseen
+
+    def rows(
+        self, x: FloatArray, y: FloatArray, n_scan: int, unseen: list[tuple[float, float]]
+    ) -> _Rows:
+        """The half-planes of the points (module docstring)."""
+        p, alpha = self.params, self.params.alpha_per_s
+        half_l, half_w = self.profile.half_size_m
+        v0, w0, v_now, w_now = self.v0, self.w0, self.v_now, self.w_now
+        sd, nx, ny, qx, qy = _geometry(x, y, half_l, half_w)
+        if unseen:
+            # A wall across the axis where the laser stopped seeing: n = (+-1, 0), q = (+-L/2, 0).
+            extra = np.array(
+                [(s * seen, 0.0, seen - half_l, s, 0.0, s * half_l, 0.0) for s, seen in unseen]
+            ).T
+            x, y = np.concatenate((x, extra[0])), np.concatenate((y, extra[1]))
+            sd, nx, ny, qx, qy = (
+                np.concatenate((g, e)) for g, e in zip((sd, nx, ny, qx, qy), extra[2:], strict=True)
+            )
+        b = nx * qy - ny * qx
+        # Approach speeds u = nx v - b w under the command and under the current motion, and
+        # how squarely each point lies in that motion's path (omega).
+        u_ref = nx * v0 - b * w0
+        omega_cmd = _omega(u_ref, v0, w0, qx, qy)
+        room = sd - p.margin_m
+        c_cmd = -alpha * np.maximum(room, 0.0)
+        m_extra: FloatArray | None = None
+        c_state = c_cmd
+        if v_now or w_now:
+            if v_now == v0 and w_now == w0:  # a replay, a steady cycle: the same speeds twice
+                u_now, omega_now = u_ref, omega_cmd
+            else:
+                u_now = nx * v_now - b * w_now
+                omega_now = _omega(u_now, v_now, w_now, qx, qy)
+            m_extra = (omega_now * self.k_now) * np.maximum(u_now, 0.0)
+            c_state = -alpha * np.maximum(room - m_extra, 0.0)
+        gain = 1.0 + (alpha * self.k_cmd) * omega_cmd  # (C): u gain <= alpha max(room, 0)
+        # The command meets row i when u_ref <= -c (S), gain u_ref <= -c (C).
+        worst = max(float((c_state + u_ref).max()), float((c_cmd + gain * u_ref).max()))
+        m_extra_cmd = (omega_cmd * self.k_cmd) * np.maximum(u_ref, 0.0)
+        return _Rows(
+            x, y, n_scan, sd, -nx, b, gain, c_state, c_cmd, m_extra, m_extra_cmd, p.margin_m,
+            worst, float(sd.min()),
+        )  # fmt: skip
+
+
 def _geometry(
     x: FloatArray, y: FloatArray, half_l: float, half_w: float
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Signed distance sd, normal (nx, ny), lever b = nx qy - ny qx and the nearest footprint
-    point (qx, qy) of each point; returns (sd, nx, b, ny, qx, qy)."""
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Signed distance sd, unit normal (nx, ny) and the footprint's nearest point (qx, qy) of
+    each point (inside: the nearest edge's outward normal, the depth as a negative distance)."""
     qx = np.minimum(np.maximum(x, -half_l), half_l)
     qy = np.minimum(np.maximum(y, -half_w), half_w)
     dx = x - qx
     dy = y - qy
     sd = np.sqrt(dx * dx + dy * dy)
     inside = sd <= 0.0
-    if inside.any():  # contact: the nearest edge's normal, the depth as a negative distance
-        dx, dy, qx, qy = dx.copy(), dy.copy(), qx.copy(), qy.copy()
-        xi, yi = x[inside], y[inside]
-        to_front, to_back = half_l - xi, xi + half_l
-        to_left, to_right = half_w - yi, yi + half_w
-        depth = np.minimum(np.minimum(to_front, to_back), np.minimum(to_left, to_right))
-        ex = np.where(to_front == depth, 1.0, np.where(to_back == depth, -1.0, 0.0))
-        ey = np.where(ex != 0.0, 0.0, np.where(to_left == depth, 1.0, -1.0))
-        dx[inside], dy[inside] = ex, ey
-        qx[inside] = np.where(ex != 0.0, ex * half_l, xi)
-        qy[inside] = np.where(ey != 0.0, ey * half_w, yi)
-        sd = sd.copy()
-        sd[inside] = -depth
-        norm = np.where(inside, 1.0, sd)
-    else:
-        norm = sd
-    inv = 1.0 / norm
-    nx = dx * inv
-    ny = dy * inv
-    b = nx * qy - ny * qx
-    return sd, nx, b, ny, qx, qy
+    if not inside.any():
+        inv = 1.0 / sd
+        return sd, dx * inv, dy * inv, qx, qy
+    xi, yi = x[inside], y[inside]
+    to_front, to_back = half_l - xi, xi + half_l
+    to_left, to_right = half_w - yi, yi + half_w
+    depth = np.minimum(np.minimum(to_front, to_back), np.minimum(to_left, to_right))
+    ex = np.where(to_front == depth, 1.0, np.where(to_back == depth, -1.0, 0.0))
+    ey = np.where(ex != 0.0, 0.0, np.where(to_left == depth, 1.0, -1.0))
+    dx[inside], dy[inside] = ex, ey
+    qx[inside] = np.where(ex != 0.0, ex * half_l, xi)
+    qy[inside] = np.where(ey != 0.0, ey * half_w, yi)
+    sd[inside] = -depth
+    norm = np.where(inside, 1.0, sd)
+    return sd, dx / norm, dy / norm, qx, qy
 
 
-def _omega(u: FloatArray | None, geo: tuple[FloatArray, ...], v: float, w: float) -> FloatArray:
+def _omega(u: FloatArray, v: float, w: float, qx: FloatArray, qy: FloatArray) -> FloatArray:
     """(cos of the angle between n_i and the velocity of q_i under (v, w))^PATH_POWER, 0 for
-    points the footprint does not approach."""
-    if u is None:
-        return np.zeros(geo[0].size)
+    points the footprint does not approach (u_i <= 0)."""
     if w == 0.0:
-        speed: FloatArray | float = abs(v)
+        if v == 0.0:
+            return np.zeros(u.size)
+        cos = np.maximum(u, 0.0) / abs(v)  # u = nx v <= |v|: no overflow, even for subnormal v
     else:
-        _, _, _, _, qx, qy = geo
         gx = v - w * qy
         gy = w * qx
         speed = np.sqrt(gx * gx + gy * gy)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cos = np.where(u > 0.0, u / np.maximum(speed, _SAME), 0.0)
+        cos = np.maximum(u, 0.0) / np.maximum(speed, _SAME)
     cos = np.minimum(cos, 1.0)
     c2 = cos * cos
     out: FloatArray = c2 * c2
@@ -440,58 +544,39 @@ def _solve(
     a: FloatArray,
     b: FloatArray,
     c: FloatArray,
-    x: FloatArray,
-    y: FloatArray,
     v0: float,
     w0: float,
     sv: float,
     sw: float,
     profile: RobotProfile,
-    params: CbfParams,
-) -> tuple[float, float, int, CbfCase]:
-    """Cutting planes over the rows a v + b w >= c; see the module docstring."""
-    r0 = a * v0 + b * w0 - c
-    norms = np.sqrt((a / sv) ** 2 + (b / sw) ** 2)
-    working = _pick(np.flatnonzero(r0 < -_TOL), r0, norms, x, y, params)
-    v, w = v0, w0
+    k: int,
+) -> tuple[float, float, int, CbfCase, IntArray]:
+    """Cutting planes over the rows a v + b w >= c (module docstring): the ``k`` most violated
+    rows first, then each round the ``k`` most violated by the last answer. Returns the
+    answer, the rounds, the case and the working set."""
+    # By how much each row is violated (m/s): the order in which rows join, not the answer.
+    short = a * v0 + b * w0 - c
+    working = _most_violated(short, k)
     for rounds in range(1, _MAX_ROUNDS + 1):
         found = _project(a[working], b[working], c[working], v0, w0, sv, sw, profile)
         if found is None:
             break
         v, w = found
-        r = a * v + b * w - c
-        bad = np.flatnonzero(r < -_TOL)
-        if bad.size == 0:
-            return v, w, rounds, CbfCase.SOLVED
-        add = _pick(bad, r, norms, x, y, params)
-        working = np.union1d(working, add)
+        short = a * v + b * w - c
+        add = _most_violated(short, k)
+        if add.size == 0:
+            return v, w, rounds, CbfCase.SOLVED, working
+        working = np.concatenate((working, add))
     v, w = _stop_and_turn(b, c, w0, profile)
-    return v, w, _MAX_ROUNDS, CbfCase.STOP_TURN
+    return v, w, _MAX_ROUNDS, CbfCase.STOP_TURN, working
 
 
-def _pick(
-    rows: IntArray,
-    r: FloatArray,
-    norms: FloatArray,
-    x: FloatArray,
-    y: FloatArray,
-    params: CbfParams,
-) -> IntArray:
-    """The ``points_per_sector`` most violated rows of each direction sector."""
-    k = params.points_per_sector
-    if rows.size <= k:
-        return rows
-    depth = r[rows] / np.maximum(norms[rows], _SAME)  # negative: violated, in the QP's metric
-    sector = np.floor(
-        (np.arctan2(y[rows], x[rows]) + math.pi) * (params.sectors / (2.0 * math.pi))
-    ).astype(np.intp)
-    order = np.lexsort((depth, sector))
-    s_sorted = sector[order]
-    first = np.flatnonzero(np.concatenate(([True], s_sorted[1:] != s_sorted[:-1])))
-    start = np.repeat(first, np.diff(np.concatenate((first, [s_sorted.size]))))
-    keep = order[np.arange(s_sorted.size) - start < k]
-    out: IntArray = rows[keep]
-    return out
+def _most_violated(short: FloatArray, k: int) -> IntArray:
+    """Indices of the (at most) ``k`` rows with the most negative ``short`` below -tolerance."""
+    bad = np.flatnonzero(short < -_TOL)
+    if bad.size > k:
+        bad = bad[np.argpartition(short[bad], k)[:k]]
+    return bad
 
 
 def _project(
@@ -505,33 +590,45 @@ def _project(
     profile: RobotProfile,
 ) -> tuple[float, float] | None:
     """The closest point to (v0, w0) (weighted) in the polygon of the rows and the box, or None
-    when none of the candidates is feasible (empty polygon, through rounding)."""
+    when none of the candidates is feasible (empty polygon, through rounding). The box's rows
+    join only when the answer without them leaves it."""
     vm, wm = profile.v_max_mps, profile.w_max_radps
-    # Scaled rows g . z >= e, z = (sv v, sw w); the box as four more rows.
-    gx = np.concatenate((a / sv, [1.0 / sv, -1.0 / sv, 0.0, 0.0]))
-    gy = np.concatenate((b / sw, [0.0, 0.0, 1.0 / sw, -1.0 / sw]))
-    e = np.concatenate((c, [-vm, -vm, -wm, -wm]))
-    z0x, z0y = sv * v0, sw * w0
-    n2 = gx * gx + gy * gy
-    ok_rows = n2 > _SAME
-    gx, gy, e, n2 = gx[ok_rows], gy[ok_rows], e[ok_rows], n2[ok_rows]
-    r0 = gx * z0x + gy * z0y - e
-    tol = _TOL * (1.0 + np.abs(e))
+    found = _nearest_in(a * (1.0 / sv), b * (1.0 / sw), c, sv * v0, sw * w0)
+    if found is not None and abs(found[0]) <= sv * vm and abs(found[1]) <= sw * wm:
+        return found[0] / sv, found[1] / sw
+    m = a.size
+    gx = np.empty(m + 4)
+    gy = np.empty(m + 4)
+    e = np.empty(m + 4)
+    gx[:m], gy[:m], e[:m] = a * (1.0 / sv), b * (1.0 / sw), c
+    gx[m:], gy[m:] = (1.0 / sv, -1.0 / sv, 0.0, 0.0), (0.0, 0.0, 1.0 / sw, -1.0 / sw)
+    e[m:] = (-vm, -vm, -wm, -wm)
+    found = _nearest_in(gx, gy, e, sv * v0, sw * w0)
+    return None if found is None else (found[0] / sv, found[1] / sw)
 
-    # One line: the projection onto a violated row, optimal whenever feasible (KKT).
+
+def _nearest_in(
+    gx: FloatArray, gy: FloatArray, e: FloatArray, z0x: float, z0y: float
+) -> tuple[float, float] | None:
+    """The point of {z : gx zx + gy zy >= e} nearest to z0 (Euclidean), or None when no
+    candidate is feasible."""
+    n2 = gx * gx + gy * gy
+    keep = n2 > _SAME
+    if not keep.all():
+        gx, gy, e, n2 = gx[keep], gy[keep], e[keep], n2[keep]
+    r0 = gx * z0x + gy * z0y - e
     bad = np.flatnonzero(r0 < 0.0)
-    if bad.size:
-        step = -r0[bad] / n2[bad]
-        zx = z0x + step * gx[bad]
-        zy = z0y + step * gy[bad]
-        feasible = ((np.outer(zx, gx) + np.outer(zy, gy) - e) >= -tol).all(axis=1)
-        if feasible.any():
-            i = int(
-                np.flatnonzero(feasible)[np.argmin(step[feasible] * np.sqrt(n2[bad][feasible]))]
-            )
-            return float(zx[i] / sv), float(zy[i] / sw)
-    else:
-        return v0, w0
+    if bad.size == 0:
+        return z0x, z0y
+    tol = _TOL * (1.0 + np.abs(e))
+    # One line: the projection onto a violated row, optimal whenever feasible (KKT).
+    step = -r0[bad] / n2[bad]
+    zx = z0x + step * gx[bad]
+    zy = z0y + step * gy[bad]
+    feasible = (np.outer(zx, gx) + np.outer(zy, gy) - e >= -tol).all(axis=1)
+    if feasible.any():
+        i = int(np.argmax(feasible))  # all feasible ones are the one optimum
+        return float(zx[i]), float(zy[i])
     # Two lines: every vertex, the feasible one nearest the command.
     p, q = np.triu_indices(gx.size, 1)
     det = gx[p] * gy[q] - gy[p] * gx[q]
@@ -541,12 +638,12 @@ def _project(
         return None
     zx = (e[p] * gy[q] - e[q] * gy[p]) / det
     zy = (gx[p] * e[q] - gx[q] * e[p]) / det
-    feasible = ((np.outer(zx, gx) + np.outer(zy, gy) - e) >= -tol).all(axis=1)
+    feasible = (np.outer(zx, gx) + np.outer(zy, gy) - e >= -tol).all(axis=1)
     if not feasible.any():
         return None
     d2 = (zx - z0x) ** 2 + (zy - z0y) ** 2
-    k = int(np.argmin(np.where(feasible, d2, np.inf)))
-    return float(zx[k] / sv), float(zy[k] / sw)
+    i = int(np.argmin(np.where(feasible, d2, np.inf)))
+    return float(zx[i]), float(zy[i])
 
 
 def _stop_and_turn(
