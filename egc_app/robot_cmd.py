@@ -19,6 +19,8 @@ flags. Tables and keys (units in the names):
                latency governor; latency_turn_cap = false caps the speed alone)
     [pipeline] horizon_s, gamma_v, gamma_w, no_return_is_free
     [sim]      scan_hz, beams, seed
+    [dwa], [assist], [cbf]  the filters' parameters (DESIGN 6, 13; defaults from the profile:
+               ``DwaParams``, ``AssistParams``, ``CbfParams`` say why each default is what it is)
     [ros2]     scan, odom, cmd, cmd_type, namespace, laser_pose ("X,Y,YAW" or [x, y, yaw]),
                laser_upside_down (flags --ros-scan ... --laser-upside-down override them)
     [camera]   source ("sim", "ros2:TOPIC", "none"), size ("WxH"), fps, codec ("h264", "jpeg")
@@ -69,6 +71,7 @@ from egc_robot.camera_stream import CameraStreamer
 from egc_robot.controller import ControllerConfig, RobotController
 from egc_robot.drivers import Driver, SensorUpdate
 from egc_robot.filters.assist import AssistParams
+from egc_robot.filters.cbf import CbfParams
 from egc_robot.filters.dwa import DwaParams
 from egc_robot.info_server import InfoServer
 from egc_robot.pipeline import FILTERS, PipelineConfig
@@ -103,7 +106,8 @@ SECTIONS: dict[str, tuple[str, ...]] = {
     "ros2": ROS2_KEYS,
     "camera": CAMERA_KEYS,
 }
-ROBOT_TABLES = (*SECTIONS, "dwa", "assist")  # [dwa] and [assist] are checked by their params
+# [dwa], [assist] and [cbf] are checked by their params
+ROBOT_TABLES = (*SECTIONS, "dwa", "assist", "cbf")
 
 
 class SimDriver:
@@ -331,8 +335,9 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
         )
         dwa_table = cfg.get("dwa", {})
         assist_table = cfg.get("assist", {})
-        if not isinstance(dwa_table, dict) or not isinstance(assist_table, dict):
-            raise UsageError("[dwa] and [assist] must be tables")
+        cbf_table = cfg.get("cbf", {})
+        if not all(isinstance(t, dict) for t in (dwa_table, assist_table, cbf_table)):
+            raise UsageError("[dwa], [assist] and [cbf] must be tables")
 
         def pipeline_config(free: bool) -> PipelineConfig:
             filter_tables = {"no_return_is_free": free}
@@ -349,6 +354,10 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
                 sweep=SweepParams(period_s=1.0 / rate_hz),
                 dwa=DwaParams.from_mapping(filter_tables | dwa_table, profile),
                 assist=AssistParams.from_mapping(filter_tables | assist_table, profile),
+                # cbf's margin counts one control period at the command, as the sweep does.
+                cbf=CbfParams.from_mapping(
+                    filter_tables | {"period_s": 1.0 / rate_hz} | cbf_table, profile
+                ),
             )
 
         rate_hz = args.rate_hz if args.rate_hz is not None else _number(robot, "rate_hz", 20.0)

@@ -60,7 +60,7 @@ MAX_RACE_MS: Final = 1000.0
 
 MODES: Final = ("direct", "shared")
 # The filter family of DESIGN 6, pinned names ("none" is direct mode).
-FILTER_NAMES: Final = ("none", "egc", "ek-egc", "assist", "dwa")
+FILTER_NAMES: Final = ("none", "egc", "ek-egc", "assist", "dwa", "cbf")
 GOAL_FRAMES: Final = ("odom", "map")
 MAX_GOAL_POINTS: Final = 64
 MAX_GOAL_COORD_M: Final = 1e6

@@ -137,10 +137,11 @@ def test_filter_button_cycles_the_shared_filters_in_design_order(caplog):
     assert js.sample(0.0).filter is None  # no pick: the robot runs its default
     picks = []
     with caplog.at_level("INFO", logger="egc.operator.joystick"):
-        for i in range(5):
+        for i in range(6):
             pad.push((EV_KEY, BTN_NORTH, 1), (EV_KEY, BTN_NORTH, 2), (EV_KEY, BTN_NORTH, 0))
             picks.append(js.sample(0.1 * (i + 1)).filter)
-    assert picks == ["egc", "ek-egc", "assist", "dwa", "egc"]  # FILTER_NAMES without "none"
+    # FILTER_NAMES without "none", then round again
+    assert picks == ["egc", "ek-egc", "assist", "dwa", "cbf", "egc"]
     assert "filter ek-egc" in caplog.text  # each pick is logged
 
 
