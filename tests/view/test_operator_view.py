@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from egc_common.messages import StateMessage
+from egc_common.messages import StateMessage, Telemetry
 from egc_operator import view_blueprint as paths
 from egc_operator.view import OperatorView, record_episode
 from egc_operator.view_scene import command_vector, status_text
@@ -270,3 +270,10 @@ def test_text_without_any_robot_is_kept_at_time_zero(tmp_path: Path) -> None:
     log = read_recording(tmp_path / "alone.rrd")[_entity(paths.TEXT_LOG)]
     assert [r[0] for r in log.column("TextLog:text")] == ["no robot answers"]
     assert log.rows.column("robot_time").cast("int64").to_pylist() == [0]
+
+
+def test_the_status_text_names_the_source_and_the_lock():
+    """DESIGN 14: which source drives and which lock holds, in the robot-frame view."""
+    t = Telemetry(1, 1, "DRIVING", "shared", 0.1, 0.0, 0.1, 0.0, 1.0, source="nav", lock="pause")
+    assert status_text(t).endswith(" · source nav · lock pause")
+    assert "source" not in status_text(Telemetry(1, 1, "IDLE", "shared", 0, 0, 0, 0, 1.0))
