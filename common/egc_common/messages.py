@@ -568,6 +568,12 @@ class Telemetry:
     cam_fps: float | None = None
     cam_kbps: float | None = None
     cut: tuple[str, ...] = ()
+    # Command sources (DESIGN 14; absent without [[source]] tables): the source that drives and
+    # the highest active lock (None: none), and the age on the robot's clock of the newest
+    # command of the source that drives, since it arrived.
+    source: str | None = None
+    lock: str | None = None
+    source_age_ms: float | None = None
 
     def encode(self) -> bytes:
         d = _shallow_fields(self)
@@ -601,6 +607,9 @@ _TELEMETRY_OPTIONAL: Final = (
     "cam_fps",
     "cam_kbps",
     "cut",
+    "source",
+    "lock",
+    "source_age_ms",
 )
 
 
@@ -748,6 +757,9 @@ def _build_telemetry(m: Mapping[Any, Any]) -> Telemetry:
         "cam_fps": _opt_range(m, "cam_fps", 0.0, MAX_CAMERA_FPS),
         "cam_kbps": _opt_range(m, "cam_kbps", 0.0, MAX_KBPS),
         "cut": _cuts(m),
+        "source": _opt_str(m, "source"),
+        "lock": _opt_str(m, "lock"),
+        "source_age_ms": _opt_range(m, "source_age_ms", -MAX_RACE_MS, MAX_CLOCK_MS),
     }
     for key, value in values.items():
         object.__setattr__(t, key, value)
@@ -837,9 +849,16 @@ class StateMessage:
     reason: str
     operator: str | None = None
     rejected: int = 0
+    # DESIGN 14, as in the telemetry; left out when None (a robot without [[source]] tables).
+    source: str | None = None
+    lock: str | None = None
 
     def encode(self) -> bytes:
-        return _pack({"v": SCHEMA_VERSION, **_shallow_fields(self)})
+        d = _shallow_fields(self)
+        for key in ("source", "lock"):
+            if d[key] is None:
+                del d[key]
+        return _pack({"v": SCHEMA_VERSION, **d})
 
 
 def _build_state(m: Mapping[Any, Any]) -> StateMessage:
@@ -849,6 +868,8 @@ def _build_state(m: Mapping[Any, Any]) -> StateMessage:
         reason=_str(m, "reason", max_chars=256),
         operator=_opt_str(m, "operator"),
         rejected=_int(m, "rejected") if "rejected" in m else 0,
+        source=_opt_str(m, "source"),
+        lock=_opt_str(m, "lock"),
     )
 
 

@@ -297,7 +297,7 @@ class OperatorView:
         self._last: Telemetry | None = None
         self._world_profile: str | None = None
         self._trajectory_end: tuple[float, float] | None = None
-        self._state_key: tuple[str, str, str | None] | None = None
+        self._state_key: tuple[str, str, str | None, str | None, str | None] | None = None
         self._rejected_seen = 0
         self._offset_ns: int | None = None
         self._robot_ns: int | None = None  # the latest robot stamp seen
@@ -363,9 +363,13 @@ class OperatorView:
             self._robot_ns = s.stamp_ns
             self._log_pending_text(rec)
             _set_time(rec, s.stamp_ns, self._cycle)
-            key = (s.state, s.reason, s.operator)
+            key = (s.state, s.reason, s.operator, s.source, s.lock)
             if key != self._state_key:
                 who = f" (operator {s.operator})" if s.operator else ""
+                if s.source is not None:
+                    who += f" (source {s.source})"
+                if s.lock is not None:
+                    who += f" (lock {s.lock})"
                 text = f"robot state {s.state}: {s.reason}{who}"
                 rec.log(paths.TEXT_LOG, rr.TextLog(text, level=STATE_LEVELS.get(s.state, "INFO")))
                 self._state_key = key

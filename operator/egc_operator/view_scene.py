@@ -146,6 +146,8 @@ def status_text(t: Telemetry) -> str:
     A robot that is not driving says why (``HOLD (command timeout) · ...``); the latency limiter
     says its cap (``limit: latency <= 0.10 m/s``). The filter that runs follows the mode
     (``shared (ek-egc)``), and the active via point comes last (``via 2.0,1.0 +1 more``).
+    A robot with command sources (DESIGN 14) says which drives and which lock holds
+    (``source nav · lock pause``).
     """
     limiter = LIMITER_TEXT.get(t.limiter, t.limiter)
     if t.limiter == "latency" and t.v_lim_latency is not None:
@@ -160,6 +162,10 @@ def status_text(t: Telemetry) -> str:
     if t.goal is not None:
         more = f" +{t.goals_left} more" if t.goals_left else ""
         text += f" · via {t.goal[0]:.1f},{t.goal[1]:.1f}{more}"
+    if t.source is not None:
+        text += f" · source {t.source}"
+    if t.lock is not None:
+        text += f" · lock {t.lock}"
     return text
 
 

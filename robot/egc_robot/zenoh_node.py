@@ -23,7 +23,12 @@ command, or the loop thread at each deadline. So there are
 - the liveliness token ``egc/<robot>/alive/robot`` and a liveliness subscriber (with history)
   on ``egc/<robot>/alive/operator/*``,
 - every rejected command counted by reason (in the controller) and logged, rate-limited per
-  reason so a flood cannot flood the log.
+  reason so a flood cannot flood the log,
+- with command sources (DESIGN 14, ``ControllerConfig.sources``): a subscriber per ``zenoh``
+  source (``egc/<robot>/source/<name>``) and per Zenoh-fed lock (``egc/<robot>/lock/<name>``),
+  and the driver's ROS 2 sources and locks (``set_input_listeners``); each goes to the
+  controller under the lock, and a cycle runs at once when it may change what drives (a lock
+  that engages stops the base within one pipeline run).
 
 Nothing received from the network can raise out of a callback or the loop: the decoders are
 non-raising, and the callbacks guard the little they do. Should a cycle fail anyway (a bug),
@@ -62,7 +67,7 @@ from egc_common.view_budget import (
     plan,
 )
 
-from egc_robot.controller import CommandVerdict, CycleOutput, RobotController
+from egc_robot.controller import CommandVerdict, CycleOutput, InputVerdict, RobotController
 from egc_robot.drivers import Driver
 from egc_robot.run_stats import RunStats
 from egc_robot.state_machine import LINK_REASONS, State
@@ -184,6 +189,7 @@ class RobotNode:
         attach = getattr(driver, "set_scan_listener", None)
         if callable(attach):
             attach(self._on_fresh_scan)
+        self._entities += self._declare_source_inputs(session, robot_id, driver)
 
     @property
     def controller(self) -> RobotController:
@@ -312,6 +318,90 @@ class RobotNode:
         except Exception as exc:  # a querier that went away must not kill the callback
             log.debug("clock reply failed: %s", exc)
 
+    # -- command sources and locks (DESIGN 14) -------------------------------------------------
+
+    def _declare_source_inputs(
+        self, session: zenoh.Session, robot_id: str, driver: Driver
+    ) -> list[zenoh.Subscriber[None]]:
+        """Subscribers for the ``zenoh`` sources and Zenoh-fed locks; the driver's ROS 2 ones
+        report through ``set_input_listeners`` (none without ``[[source]]`` tables)."""
+        mux = self._controller.config.sources
+        if mux is None:
+            return []
+        subscribers = []
+        for source in mux.sources:
+            if source.kind == "zenoh":
+                key = keys.source(robot_id, source.name)
+                subscribers.append(
+                    session.declare_subscriber(
+                        key, lambda s, n=source.name: self._on_source_sample(n, s)
+                    )
+                )
+        for lock in mux.locks:
+            if lock.topic is None:
+                key = keys.lock(robot_id, lock.name)
+                subscribers.append(
+                    session.declare_subscriber(
+                        key, lambda s, n=lock.name: self._on_lock_sample(n, s)
+                    )
+                )
+        attach = getattr(driver, "set_input_listeners", None)
+        if callable(attach):
+            attach(self._on_ros_velocity, self._on_ros_lock)
+        return subscribers
+
+    def _on_source_sample(self, name: str, sample: zenoh.Sample) -> None:
+        rx_ns = self._clock()
+        payload = payload_bytes(sample)
+        self._source_input(
+            f"source {name}", lambda: self._controller.on_source(name, payload, rx_ns)
+        )
+
+    def _on_lock_sample(self, name: str, sample: zenoh.Sample) -> None:
+        rx_ns = self._clock()
+        payload = payload_bytes(sample)
+        self._source_input(f"lock {name}", lambda: self._controller.on_lock(name, payload, rx_ns))
+
+    def _on_ros_velocity(self, name: str, v_mps: float, w_radps: float, rx_ns: int) -> None:
+        """A ``ros2`` source's Twist (the driver's executor thread)."""
+        self._source_input(
+            f"source {name}",
+            lambda: self._controller.on_source_velocity(name, v_mps, w_radps, rx_ns),
+        )
+
+    def _on_ros_lock(self, name: str, value: bool, rx_ns: int) -> None:
+        """A ROS 2 lock's ``std_msgs/Bool`` (the driver's executor thread)."""
+        self._source_input(
+            f"lock {name}", lambda: self._controller.on_lock_value(name, value, rx_ns)
+        )
+
+    def _source_input(self, what: str, apply: Callable[[], InputVerdict]) -> None:
+        """Hand one source command or lock value to the controller; run a cycle on it now when
+        it may change what drives. Never raises (a Zenoh or rclpy callback)."""
+        with self._lock:
+            if self._shut_down:
+                return
+            try:
+                verdict = apply()
+                if verdict.urgent:
+                    now = self._clock()
+                    self._poll_driver(now)
+                    self._cycle(now)
+            except Exception as exc:
+                self._fail_safe(exc)
+                return
+        rejection = verdict.rejection
+        if rejection is not None:
+            held = self._events.allow(f"{what} {rejection.reason.value}", self._clock())
+            if held is not None:  # a flood must not flood the log
+                log.warning(
+                    "rejected %s (%s): %s%s",
+                    what,
+                    rejection.reason.value,
+                    rejection.detail,
+                    f" (+{held} more since the last line)" if held else "",
+                )
+
     # -- the fixed-rate loop ------------------------------------------------------------------
 
     def run(self, stop: threading.Event) -> None:
@@ -394,6 +484,12 @@ class RobotNode:
             self._recorder.on_command(payload, verdict.accepted, reason, rx_ns)
         if verdict.rejection is not None:
             self._rejections.log(verdict, controller.counters.rejected_total, rx_ns)
+        elif verdict.took_from is not None:
+            log.info(
+                "operator %s took control from %s (higher priority)",
+                controller.operator,
+                verdict.took_from,
+            )
         elif verdict.took_control:
             log.info("operator %s took control", controller.operator)
         return verdict
@@ -497,11 +593,14 @@ class RobotNode:
         if self._stats is not None:
             self._stats.on_cycle(out.telemetry)
         if out.state_changed is not None:
+            changed = out.state_changed
             log.info(
-                "state %s (%s)%s",
-                out.state_changed.state,
-                out.state_changed.reason,
-                f", operator {out.state_changed.operator}" if out.state_changed.operator else "",
+                "state %s (%s)%s%s%s",
+                changed.state,
+                changed.reason,
+                f", operator {changed.operator}" if changed.operator else "",
+                f", source {changed.source}" if changed.source else "",
+                f", lock {changed.lock}" if changed.lock else "",
             )
             if self._recorder is not None:
                 self._recorder.on_state(out.state_changed)
