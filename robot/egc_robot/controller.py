@@ -617,6 +617,7 @@ class RobotController:
             reason=self.reason,
             operator=self._controller_op,
             rejected=self.counters.rejected_total,
+            map_pose=self._map_pose,
         )
 
     # -- helpers ------------------------------------------------------------------------------
