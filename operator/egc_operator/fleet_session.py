@@ -12,9 +12,10 @@ session, the command source, the status line and the view's recording. A switch:
 1. **Release.** The old node's source reads released from the press on (``NodeSource``): its
    next command, on the command stream, has the deadman released and the stick centred, so the
    robot holds at once for a reason it can tell (DESIGN 8 "deadman released"); then the node
-   stops (a node stopped with the deadman held sends that command itself) and closes, which
-   withdraws its liveliness token ``egc/<old>/alive/operator/<id>``: control is handed over
-   (DESIGN 8, "explicit release or loss hands it over"). The old robot is never driven again by
+   stops (a node stopped with the deadman held sends that command itself) and, once the
+   robot's state says it no longer drives for this operator (``_await_release``, at most 1 s),
+   closes, which withdraws its liveliness token ``egc/<old>/alive/operator/<id>``: control is
+   handed over (DESIGN 8, "explicit release or loss hands it over"). The old robot is never driven again by
    this operator until it is switched back to, as a new session.
 2. **Take.** A new node for the new robot starts at once, its source gated until its clock sync
    has an estimate (the first command the robot takes is stamped on its clock, DESIGN 7). Its
@@ -77,7 +78,9 @@ _WAITING_LOG_NS = 5 * NS_PER_S  # "no robot seen yet", repeated
 _PROBE_PERIOD_S = 1.0  # each robot's clock query (its round trip for the fleet panel)
 _PROBE_TIMEOUT_S = 1.0
 _FLEET_VIEW_PERIOD_NS = NS_PER_S
-_JOIN_S = 8.0  # a closing node: its clock query may wait out its timeout (3 s)
+_JOIN_S = 8.0
+_RELEASE_ACK_NS = NS_PER_S  # a released robot's state confirms it, else its session ends anyway
+_RELEASE_POLL_S = 0.005  # a closing node: its clock query may wait out its timeout (3 s)
 
 
 class DrivingNode(Protocol):
@@ -379,7 +382,7 @@ class FleetSession:
         holder.append(node)
         stop = threading.Event()
         thread = threading.Thread(
-            target=self._drive_loop, args=(node, stop), name=f"drive-{robot}", daemon=True
+            target=self._drive_loop, args=(robot, node, stop), name=f"drive-{robot}", daemon=True
         )
         drive = _Drive(robot, node, source, stop, thread, press_ns, previous)
         with self._lock:
@@ -391,16 +394,31 @@ class FleetSession:
                 "INFO", f"driving {robot}" + (f" (was {previous})" if previous else "")
             )
 
-    def _drive_loop(self, node: DrivingNode, stop: threading.Event) -> None:
+    def _drive_loop(self, robot: str, node: DrivingNode, stop: threading.Event) -> None:
         try:
             node.run(stop)
         except Exception:  # a bug in one node must not leave the others running blind
             log.exception("the node driving a robot failed")
         finally:
             stop.set()
+            self._await_release(robot)
             node.close()
             with self._lock:
                 self.published += node.published
+
+    def _await_release(self, robot: str) -> None:
+        """The node's last command released the deadman: before its liveliness token goes,
+        wait (at most ``_RELEASE_ACK_NS``) until the robot's state says it no longer drives
+        for this operator. The token's withdrawal can overtake the command on the way (a
+        router forwards declarations and data separately; seen in the switching test), and the
+        robot would then hold for "operator lost" instead of the release it was sent."""
+        deadline = self._clock() + _RELEASE_ACK_NS
+        while self._clock() < deadline:
+            seen = self.watch.states().get(robot)
+            if seen is None or seen.state.state != "DRIVING" or seen.state.operator != self._op:
+                return
+            time.sleep(_RELEASE_POLL_S)
+        log.info("robot %s did not confirm the release in time: its session ends anyway", robot)
 
     def _loop(self, stop: threading.Event) -> None:
         next_view = self._clock()
