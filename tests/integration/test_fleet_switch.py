@@ -73,9 +73,7 @@ class FleetRecord:
     """Every robot's telemetry and state messages, as (stamp_ns, message), in arrival order."""
 
     def __init__(self, port: int) -> None:
-        self.session = open_session(
-            ZenohOptions(mode="client", connect=(f"tcp/127.0.0.1:{port}",))
-        )
+        self.session = open_session(ZenohOptions(mode="client", connect=(f"tcp/127.0.0.1:{port}",)))
         self.lock = threading.Lock()
         self.telemetry: dict[str, list] = {r: [] for r in ROBOTS}
         self.state: dict[str, list] = {r: [] for r in ROBOTS}
@@ -142,6 +140,7 @@ def test_an_operator_switches_between_three_robots(port, procs, tmp_path: Path):
             robot, "robot", "--robot", robot, "--driver", "sim", "--camera", "none",
             "--summary", str(tmp_path / f"{robot}.json"), *client,
         )  # fmt: skip
+
     def ready() -> bool:
         for r in ROBOTS:
             assert procs.alive(r), procs.log(r)[-2000:]
@@ -207,7 +206,7 @@ def test_an_operator_switches_between_three_robots(port, procs, tmp_path: Path):
 
     # The released robot holds at once: the explicit release (deadman released) comes before
     # its liveliness token goes, and it is not driving once the new robot took control.
-    for old, new, _ in done:
+    for _, new, _ in done:
         took = [s.stamp_ns for s in states[new] if s.operator == OP]
         assert took, f"{new} never named {OP} in control"
     for robot in ROBOTS:
