@@ -315,3 +315,21 @@ def test_via_points_the_robot_did_not_take_are_said_so():
     line = format_status(replace(BASE, via_untaken=True))
     assert "| via points NOT taken by the robot (does the router pass egc/<robot>/goal?) |" in line
     assert "NOT taken" not in format_status(replace(BASE, via_untaken=True, goal=(1.0, 2.0)))
+
+
+def test_a_fleet_operator_s_line_names_the_driven_robot_and_the_others() -> None:
+    from egc_operator.status_line import FleetLine
+
+    out = io.StringIO()
+    fleet = [FleetLine("rb", "ra HOLD, rc IDLE")]
+    line = StatusLine(out, tty=False, fleet=lambda: fleet[0])
+    line.show(BASE, 0.0)
+    text = out.getvalue()
+    assert text.startswith("[rb] DRIVING") and text.rstrip().endswith("| fleet: ra HOLD, rc IDLE")
+    line.show(BASE, 0.1)
+    assert out.getvalue() == text  # nothing changed: no new plain line
+    fleet[0] = FleetLine("rc", "ra HOLD, rb HOLD")  # a switch prints at once
+    line.show(BASE, 0.2)
+    assert out.getvalue().count("\n") == 2 and "[rc]" in out.getvalue()
+    line.say("robots (3; * driven):")
+    assert out.getvalue().endswith("robots (3; * driven):\n")
