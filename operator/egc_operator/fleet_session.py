@@ -105,7 +105,6 @@ class FleetView(Protocol):
 
     def for_robot(self, robot_id: str) -> Any: ...
     def on_fleet(self, rows: list[FleetRow], me: str, robot_now_ns: int | None) -> None: ...
-    def on_text(self, level: str, text: str) -> None: ...
 
 
 class SessionStatus(StatusLine):
@@ -389,10 +388,8 @@ class FleetSession:
             self._drive = drive
         thread.start()
         log.info("operator %r driving robot %r", self._op, robot)
-        if self._view is not None:
-            self._view.on_text(
-                "INFO", f"driving {robot}" + (f" (was {previous})" if previous else "")
-            )
+        if view is not None:  # at that robot's time, in its view
+            view.on_text("INFO", f"driving {robot}" + (f" (was {previous})" if previous else ""))
 
     def _drive_loop(self, robot: str, node: DrivingNode, stop: threading.Event) -> None:
         try:
