@@ -123,9 +123,10 @@ ROBOT_TABLES = (*SECTIONS, "dwa", "assist", "cbf", "source", "lock", "operator")
 class SimDriver:
     """sim_robot in this process, stepped in real time on every poll."""
 
-    def __init__(self, rt: Any, map_server: Any = None) -> None:
+    def __init__(self, rt: Any, map_server: Any = None, map_id: str | None = None) -> None:
         self._rt = rt
         self._map_server = map_server  # the queryable egc/<robot>/map, for the operator view
+        self.map_id = map_id  # the map frame's id in egc/<robot>/info (DESIGN 15)
 
     def poll(self, now_ns: int) -> SensorUpdate:
         self._rt.advance(now_ns)
@@ -526,7 +527,7 @@ def _open_driver(
 
         return ZenohDriver(session, args.robot, get_profile(args.profile).footprint)
     from egc_sim.bridge import RealTimeSim, open_simulator, parse_pose
-    from egc_sim.grid_world import map_message
+    from egc_sim.grid_world import map_message, world_id
 
     try:
         sim_cfg = config_mod.section(cfg, "sim", SECTIONS["sim"])
@@ -545,6 +546,7 @@ def _open_driver(
     return SimDriver(
         RealTimeSim(sim, time.monotonic_ns(), 1.0 / scan_hz),
         serve_static(session, keys.world_map(args.robot), world_map),
+        map_id=world_id(sim.world),
     )
 
 
@@ -586,10 +588,13 @@ def resume_window_caveat(config: ControllerConfig, lease_ms: int | None) -> str 
     )
 
 
-def _describer(args: argparse.Namespace, controller: RobotController) -> Any:
+def _describer(
+    args: argparse.Namespace, controller: RobotController, map_id: str | None = None
+) -> Any:
     """What ``egc/<robot>/info`` answers (DESIGN 15): fixed facts, plus the controller's state
     and operator read at the time of the query (two attribute reads: a snapshot may be one
-    cycle old, never inconsistent enough to matter for a listing)."""
+    cycle old, never inconsistent enough to matter for a listing). ``map_id``: the map frame
+    the driver's map poses are in, when it gives them (the simulator: its world's id)."""
     profile = get_profile(args.profile)
     footprint = tuple(profile.footprint.outline()[:-1])  # as given (DESIGN 14), open
     try:
@@ -609,6 +614,7 @@ def _describer(args: argparse.Namespace, controller: RobotController) -> Any:
             version=version,
             footprint_m=footprint,
             operator=controller.operator,
+            map=map_id,
         )
 
     return describe
@@ -674,7 +680,8 @@ def run(args: argparse.Namespace) -> int:
         else dataclasses.replace(budget_config, camera=True, camera_max_fps=camera.max_fps),
         camera=streamer,
     )
-    info = InfoServer(session, args.robot, _describer(args, node.controller))
+    map_id = getattr(driver, "map_id", None)
+    info = InfoServer(session, args.robot, _describer(args, node.controller, map_id))
     mux = controller_config.sources
     if mux is not None:
         log.info(

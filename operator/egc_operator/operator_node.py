@@ -230,6 +230,7 @@ class OperatorNode:
         # each, and a clock reply to a query sent before one is not this robot's.
         self._robot_epoch = 0
         self._map_wake = threading.Event()
+        self._sync_wake = threading.Event()  # the clock sync's thread: ask the robot's clock now
         self.published = 0
         self._filter_default = filter_default
         self._planner = RoutePlanner(route)
@@ -374,6 +375,8 @@ class OperatorNode:
                 self._robot_epoch += 1
         if changed:
             self.camera.reset()  # the old robot's frames are not this one's
+        if changed:
+            self._sync_wake.set()
         if alive:
             self._map_wake.set()  # its map, again (a restarted robot may serve another one)
         text = "robot present" if alive else "robot gone (its liveliness token was withdrawn)"
@@ -434,9 +437,14 @@ class OperatorNode:
                 log.debug("clock query failed: %s", exc)
             with self._lock:
                 confirmed = self._sync.confirmed
+                raced = epoch != self._robot_epoch
+            if raced:  # the robot (re)appeared during the query, its reply was dropped: ask now
+                continue
             # 10 Hz until the robot's telemetry confirms the clock in use (a second replier
-            # that comes later is then seen within 0.1 s), then 1 Hz
-            stop.wait(1.0 if confirmed else 0.1)
+            # that comes later is then seen within 0.1 s), then 1 Hz; at once when the robot
+            # (re)appears (its clock was forgotten: a new operator session waits for it)
+            self._sync_wake.wait(1.0 if confirmed else 0.1)
+            self._sync_wake.clear()
 
     def _say_repliers(self) -> None:
         """More than one peer answers the clock query: name them in the log (at once when the
@@ -625,6 +633,7 @@ class OperatorNode:
             self._release_on_exit(last)
         stop.set()
         self._goal_wake.set()
+        self._sync_wake.set()
         sync_thread.join(timeout=2 * _CLOCK_TIMEOUT_S)
         goal_thread.join(timeout=2 * _CLOCK_TIMEOUT_S)
 

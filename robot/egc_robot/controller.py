@@ -857,6 +857,7 @@ class RobotController:
             rejected=self.counters.rejected_total,
             source=None if verdict is None else verdict.source,
             lock=None if verdict is None else verdict.lock,
+            map_pose=self._map_pose,
         )
 
     @property

@@ -21,8 +21,12 @@
   ``view_age_ms`` reported while driving and its median (``view_age_p50_ms``: the telemetry
   period's sawtooth is in the largest), the view plane's kbit/s, the budget (``budget_kbps``),
   the camera's frames sent (``cam_frames``), the smallest ``camera_age_ms`` reported (the
-  newest frame's age at best) and the largest command latency (``cmd_age_ms``) in that second (at most an hour of it): how the budget followed a
-  link that changed (DESIGN 12).
+  newest frame's age at best) and the largest command latency (``cmd_age_ms``) in that second
+  (at most an hour of it): how the budget followed a link that changed (DESIGN 12);
+- the fixed-rate loop's timing: ``loop_period_ms`` and ``loop_late_ms`` (percentiles of how
+  late each fixed-rate cycle started after its deadline, waiting for the node's lock
+  included), and ``loop_overrun_p99`` (``loop_late_ms`` p99 over the period: above 0.5 the
+  loop missed its period by more than half in more than 1 % of its cycles; ``bench fleet``).
 """
 
 from __future__ import annotations
@@ -68,6 +72,8 @@ class RunStats:
         self.telemetry_bytes = 0
         self.operator_lost = 0
         self._timeline: dict[int, dict[str, float]] = {}
+        self._loop_late_ms: list[float] = []
+        self._loop_period_ns: int | None = None
 
     def on_cycle(self, telemetry: Telemetry) -> None:
         self.cycles += 1
@@ -171,6 +177,12 @@ class RunStats:
     def on_operator_lost(self) -> None:
         self.operator_lost += 1
 
+    def on_loop_start(self, late_ns: int, period_ns: int) -> None:
+        """A fixed-rate cycle started ``late_ns`` after its deadline (period ``period_ns``)."""
+        self._loop_period_ns = period_ns
+        if len(self._loop_late_ms) < _MAX_LATENCIES:
+            self._loop_late_ms.append(max(0, late_ns) / 1e6)
+
     def on_latency(self, latency_ns: int, now_ns: int | None = None) -> None:
         """An accepted command's latency (its age on arrival), received at ``now_ns``."""
         if len(self._latencies_ms) < _MAX_LATENCIES:
@@ -203,8 +215,16 @@ class RunStats:
             if self.telemetry_sent
             else None,
             "operator_lost": self.operator_lost,
+            **self._loop_summary(),
             "view_timeline": [{"t_s": t, **v} for t, v in sorted(self._timeline.items())],
         }
+
+    def _loop_summary(self) -> dict[str, Any]:
+        late = _percentiles(self._loop_late_ms)
+        period_ms = None if self._loop_period_ns is None else self._loop_period_ns / 1e6
+        p99 = late["p99_ms"]
+        overrun = None if p99 is None or not period_ms else round(float(p99) / period_ms, 3)
+        return {"loop_period_ms": period_ms, "loop_late_ms": late, "loop_overrun_p99": overrun}
 
 
 def _rate_summary(values: list[float]) -> dict[str, float | None]:

@@ -412,6 +412,8 @@ class RobotNode:
         while not stop.wait(max(0, deadline - self._clock()) / 1e9):
             now = self._clock()
             with self._lock:
+                if self._stats is not None:  # how late the cycle starts (the lock included)
+                    self._stats.on_loop_start(self._clock() - deadline, period)
                 try:
                     self._poll_driver(now)
                     self._cycle(now)

@@ -65,3 +65,16 @@ def test_view_timeline_per_second():
     assert "kbps" not in first  # a partial first window is left out
     assert first["camera_age_ms"] == 80.0 and first["cmd_age_ms"] == 24.0
     assert later["cmd_age_ms"] == 84.0
+
+
+def test_the_fixed_rate_loop_s_lateness_against_its_period():
+    stats = RunStats()
+    assert stats.summary()["loop_overrun_p99"] is None  # no cycle yet
+    for k in range(200):  # 50 ms period; two cycles in a hundred start 40 ms late
+        stats.on_loop_start(40_000_000 if k % 50 == 0 else 1_000_000, 50_000_000)
+    stats.on_loop_start(-5, 50_000_000)  # early (a clock read before the deadline): 0
+    s = stats.summary()
+    assert s["loop_period_ms"] == 50.0 and s["loop_late_ms"]["n"] == 201
+    assert s["loop_late_ms"]["p50_ms"] == pytest.approx(1.0)
+    assert s["loop_overrun_p99"] == pytest.approx(s["loop_late_ms"]["p99_ms"] / 50.0, abs=1e-3)
+    assert s["loop_overrun_p99"] > 0.5  # 2 % of the cycles more than half a period late
