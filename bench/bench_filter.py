@@ -18,16 +18,15 @@ expensive case). DWA's cost is reported as a ratio to EGC's, without a target.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import platform
 import statistics
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 from egc_common.profiles import JACKAL, PIONEER3DX, RobotProfile
+from egc_experiments.bench_results import write_result
 from egc_robot.filters.dwa import DwaParams, dwa_filter
 from egc_robot.filters.egc import EgcCase, EgcParams, egc_filter
 
@@ -166,7 +165,7 @@ def family_rows(cases: dict, egc_by_points: dict, repeats: int) -> list[dict]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=2000)
-    ap.add_argument("--out", default="bench/results/bench_filter.json")
+    ap.add_argument("--out", help="JSON file (default bench/results/filter.json)")
     args = ap.parse_args(argv)
 
     cases = {f"scan {n}": room_scan(n) for n in (360, 720, 1440)}
@@ -227,13 +226,8 @@ def main(argv: list[str] | None = None) -> int:
             targets[f"ek-egc <= 2x egc at {n} points"] = ratio <= 2.0
     for k, ok in targets.items():
         print(f"target {k}: {'met' if ok else 'MISSED'}")
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(
-        json.dumps(
-            {"rows": rows, "family": family, "targets": targets, "python": sys.version}, indent=2
-        )
-    )
+    result = {"rows": rows, "family": family, "targets": targets, "python": sys.version}
+    out = write_result("filter", result, args.out)
     print(f"wrote {out}")
     return 0 if all(targets.values()) else 1
 
