@@ -8,7 +8,7 @@ A result file is the benchmark's own JSON object plus two records the benchmark 
   ``cores_usable`` (this process's CPU affinity), ``arch``, ``platform``, ``python``;
 - ``run``: ``bench`` (the name), ``date`` (UTC, ISO 8601, when the result was written),
   ``commit`` (``git rev-parse --short HEAD`` of the checkout, ``null`` outside one) and
-  ``dirty`` (tracked files changed, other than the results and the page rendered from them),
+  ``dirty`` (tracked files changed, other than the results and the documentation),
   ``load_average`` (1, 5 and 15 min, when the result was written: the 5- and 15-minute
   figures cover most benchmarks' whole run), ``options`` (the script's command-line options).
 
@@ -29,8 +29,9 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS_DIR = ROOT / "bench" / "results"
 PAGE = ROOT / "docs" / "benchmarks.md"
-# Changing these does not make a checkout "dirty": they are what a benchmark run writes.
-GENERATED = ("bench/results", "docs/benchmarks.md")
+# Changing these does not make a checkout "dirty": what a benchmark run writes, and the
+# documentation (which measures nothing).
+NOT_CODE = ("bench/results", "docs", "*.md")
 
 
 def cpu_model() -> str:
@@ -72,12 +73,12 @@ def _git(root: Path, *args: str) -> str | None:
 
 
 def commit_record(root: Path = ROOT) -> dict[str, Any]:
-    """The checkout's commit, and whether tracked files (other than the generated ones) differ
-    from it; ``None`` for both outside a git checkout."""
+    """The checkout's commit, and whether tracked files other than the results and the
+    documentation differ from it; ``None`` for both outside a git checkout."""
     commit = _git(root, "rev-parse", "--short=10", "HEAD")
     if commit is None:
         return {"commit": None, "dirty": None}
-    excluded = [f":(exclude){p}" for p in GENERATED]
+    excluded = [f":(exclude){p}" for p in NOT_CODE]
     status = _git(root, "status", "--porcelain", "--untracked-files=no", "--", ".", *excluded)
     return {"commit": commit, "dirty": bool(status) if status is not None else None}
 
