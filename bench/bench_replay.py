@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from egc_common.cli_args import PROFILE_HELP, profile_arg
 from egc_common.profiles import get_profile
 from egc_experiments.bench_results import write_result
 from egc_experiments.log_replay import replay
@@ -110,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scans", type=int, default=2000)
     ap.add_argument("--filter", default="egc")
-    ap.add_argument("--profile", default="pioneer3dx")
+    ap.add_argument("--profile", default="pioneer3dx", type=profile_arg, help=PROFILE_HELP)
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--out", type=Path, help="JSON file (default bench/results/replay.json)")
     args = ap.parse_args(argv)

@@ -39,7 +39,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from egc_common.cli_args import check_writable
+from egc_common.cli_args import PROFILE_HELP, check_writable
 from egc_common.errors import UsageError
 from egc_common.profiles import get_profile
 from egc_common.transport import free_port
@@ -65,7 +65,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--profile",
         default="pioneer3dx",
-        help="robot profile: jackal, pioneer3dx (default: pioneer3dx)",
+        metavar="NAME|FILE",
+        help=f"{PROFILE_HELP} (default: pioneer3dx)",
     )
     parser.add_argument(
         "--script",

@@ -48,12 +48,12 @@ from typing import Any
 
 from egc_common import config as config_mod
 from egc_common import keys
-from egc_common.cli_args import check_writable
+from egc_common.cli_args import PROFILE_HELP, check_writable
 from egc_common.clock_id import monotonic_clock_id
 from egc_common.errors import UsageError
 from egc_common.joystick import JoystickMapping
 from egc_common.messages import BaseCommand
-from egc_common.profiles import PROFILES, get_profile
+from egc_common.profiles import get_profile
 from egc_common.robot_info import RobotInfo
 from egc_common.transport import (
     DEFAULT_ENDPOINT,
@@ -160,8 +160,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--profile",
         default="pioneer3dx",
-        metavar="NAME",
-        help=f"{', '.join(sorted(PROFILES))} (default: pioneer3dx)",
+        metavar="NAME|FILE",
+        help=f"{PROFILE_HELP} (default: pioneer3dx)",
     )
     parser.add_argument(
         "--filter", choices=FILTERS, default="egc", help="filter of shared mode (default: egc)"
@@ -218,7 +218,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     ros.add_argument(
         "--laser-pose",
         metavar="X,Y,YAW",
-        help="the laser in the base frame, metres and radians (default: 0,0,0)",
+        help="the laser in the base frame, metres and radians (default: [ros2] laser_pose, else "
+        "the profile's laser_pose, else 0,0,0)",
     )
     ros.add_argument(
         "--laser-upside-down",
@@ -438,7 +439,11 @@ def _ros2_settings(
         "laser_upside_down": args.laser_upside_down,
     }
     try:
-        settings = ros2_settings(config_mod.section(cfg, "ros2", SECTIONS["ros2"]), flags)
+        table = config_mod.section(cfg, "ros2", SECTIONS["ros2"])
+        laser = get_profile(args.profile).laser_pose
+        if laser is not None and "laser_pose" not in table:  # the profile's (DESIGN 14)
+            table = {**table, "laser_pose": list(laser)}
+        settings = ros2_settings(table, flags)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     if need_rclpy:
@@ -454,14 +459,14 @@ def _open_driver(
 
         settings = _ros2_settings(args, cfg)
         try:
-            footprint = get_profile(args.profile).half_size_m
+            footprint = get_profile(args.profile).footprint
             return Ros2Driver(settings, footprint_half_m=footprint, camera_topic=camera_topic)
         except Exception as exc:  # rclpy's own errors (e.g. ROS_DOMAIN_ID out of range)
             raise UsageError(f"cannot start the ROS 2 node: {exc}") from None
     if args.driver == "zenoh":
         from egc_robot.zenoh_driver import ZenohDriver
 
-        return ZenohDriver(session, args.robot, get_profile(args.profile).half_size_m)
+        return ZenohDriver(session, args.robot, get_profile(args.profile).footprint)
     from egc_sim.bridge import RealTimeSim, open_simulator, parse_pose
     from egc_sim.grid_world import map_message
 
@@ -527,13 +532,8 @@ def _describer(args: argparse.Namespace, controller: RobotController) -> Any:
     """What ``egc/<robot>/info`` answers (DESIGN 15): fixed facts, plus the controller's state
     and operator read at the time of the query (two attribute reads: a snapshot may be one
     cycle old, never inconsistent enough to matter for a listing)."""
-    half_length, half_width = get_profile(args.profile).half_size_m
-    footprint = (
-        (half_length, half_width),
-        (-half_length, half_width),
-        (-half_length, -half_width),
-        (half_length, -half_width),
-    )
+    profile = get_profile(args.profile)
+    footprint = tuple(profile.footprint.outline()[:-1])  # as given (DESIGN 14), open
     try:
         version = importlib.metadata.version("egc-teleop")
     except importlib.metadata.PackageNotFoundError:
@@ -545,7 +545,7 @@ def _describer(args: argparse.Namespace, controller: RobotController) -> Any:
             robot=args.robot,
             state=controller.state.value,
             driver=args.driver,
-            profile=args.profile,
+            profile=profile.name,
             filter=args.filter,
             camera=camera,
             version=version,

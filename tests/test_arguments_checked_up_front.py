@@ -54,7 +54,10 @@ DEMO = ("demo", "--no-view", "--duration", "1")
         (("--json", "."), "--json .: is a directory"),
         (("--json", "/proc/x.json"), "--json /proc/x.json: not writable"),
         (("--world", "nosuch"), "cannot load world 'nosuch': unknown world 'nosuch'"),
-        (("--profile", "foo"), "unknown robot profile 'foo' (known: jackal, pioneer3dx)"),
+        (
+            ("--profile", "foo"),
+            "unknown robot profile 'foo' (known: husky, jackal, pioneer3dx, turtlebot4",
+        ),
         (("--script", "nosuch"), "unknown script 'nosuch' (known: demo)"),
         (("--up", "delay=abc"), "--up 'delay=abc': delay='abc' is not a number"),
         (("--down", "jitter=-1"), "--down 'jitter=-1'"),

@@ -90,6 +90,16 @@ ABOUT: dict[str, tuple[str, str]] = {
         "of its target up to 600 kbit/s, keyframes <= 1 s apart, the robot with the camera "
         "<= 25% of a core and <= 150 MB.",
     ),
+    "soak": (
+        "robot, operator and view for N minutes",
+        "A real robot process (`--driver sim`, the simulated camera unless `--camera none`) and "
+        "a real operator process (the demo script on a loop, its view served to the web viewer's "
+        "buffer) on loopback for `--minutes`; each process's CPU and RSS from /proc every "
+        "`--sample-s`, and the view lag from the robot's `view_timeline`, compared between the "
+        "first and the last window. Targets: CPU and RSS in the last window within 5% of the "
+        "first's, view lag flat (within 20 ms), the robot without a camera <= 10% of a core and "
+        "<= 100 MB (with it <= 25% and <= 150 MB). `soak.json` (camera) and `soak-none.json`.",
+    ),
     "bandwidth": (
         "what the robot sends back",
         "A robot process (`--driver sim`) and a scripted operator on loopback at defaults: "
@@ -125,8 +135,9 @@ def _table(
 
 def targets_of(name: str, r: Result) -> dict[str, bool]:
     """The targets a result says it met or missed, by name."""
-    if isinstance(r.get("targets"), dict):
-        return {str(k): bool(v) for k, v in r["targets"].items()}
+    for key in ("targets", "checks"):
+        if isinstance(r.get(key), dict):
+            return {str(k): bool(v) for k, v in r[key].items()}
     if name == "replay" and "met" in r:
         return {f"720 beams >= {_num(r.get('target_scans_per_s'), 0)} scans/s": bool(r["met"])}
     if name.startswith("view") and "keeps_up" in r:
@@ -484,6 +495,30 @@ def _bandwidth(r: Result) -> list[str]:
     return out
 
 
+def _soak(r: Result) -> list[str]:
+    rows = [
+        [
+            name,
+            f"{_num(r[name]['first']['cpu_pct'], 1)} -> {_num(r[name]['last']['cpu_pct'], 1)}",
+            f"{_num(r[name]['first']['rss_mb'], 1)} -> {_num(r[name]['last']['rss_mb'], 1)}",
+        ]
+        for name in ("robot", "operator")
+        if name in r
+    ]
+    lag = r["view_lag_ms"]
+    return [
+        f"{r['minutes']:g} minutes, camera `{r['camera']}`, windows of {r['window_s']:.0f} s, "
+        f"{r['samples']} samples.",
+        "",
+        *_table(
+            ["process", "CPU % of a core, first -> last window", "RSS MB, first -> last"], rows
+        ),
+        "",
+        f"View lag (median of the per-second view ages while driving): {_num(lag['first'], 0)} "
+        f"-> {_num(lag['last'], 0)} ms.",
+    ]
+
+
 def _generic(r: Result) -> list[str]:
     """Any other result: its top-level numbers."""
     rows = [
@@ -507,6 +542,7 @@ RENDERERS: dict[str, Callable[[Result], list[str]]] = {
     "ros2": _ros2,
     "camera": _camera,
     "bandwidth": _bandwidth,
+    "soak": _soak,
 }
 
 
@@ -522,43 +558,63 @@ def anchor(text: str) -> str:
     return kept.replace(" ", "-")
 
 
+# Benchmarks that write one file per variant (``--sink web``, ``--camera none``).
+VARIANTS: dict[str, tuple[str, ...]] = {"view": ("view", "view-web"), "soak": ("soak", "soak-none")}
+
+
+def _rendered(renderer: Callable[[Result], list[str]], r: Result) -> list[str]:
+    try:
+        return [*renderer(r), ""]
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+        return [
+            f"The result file does not have the shape this page expects ({exc!r}); its "
+            "top-level numbers:",
+            "",
+            *_generic(r),
+            "",
+        ]
+
+
+def _targets_line(targets: Mapping[str, bool]) -> list[str]:
+    if not targets:
+        return []
+    said = "; ".join(f"{k}: {'met' if ok else '**missed**'}" for k, ok in targets.items())
+    return [f"Targets: {said}.", ""]
+
+
+def all_targets(name: str, results: Mapping[str, Result]) -> dict[str, bool]:
+    """Every variant's targets, prefixed with the file's name when there are several."""
+    files = [n for n in VARIANTS.get(name, (name,)) if n in results]
+    found: dict[str, bool] = {}
+    for n in files:
+        prefix = f"{n}: " if len(files) > 1 else ""
+        found |= {prefix + k: v for k, v in targets_of(name, results[n]).items()}
+    return found
+
+
 def _section(name: str, results: Mapping[str, Result], first_line: str) -> list[str]:
     about = ABOUT.get(name, ("", ""))[1]
     out = [f"## {heading(name, first_line)}", ""]
     if about:
         out += [about, ""]
-    files = [n for n in (name, f"{name}-web") if n in results] if name == "view" else [name]
-    measured = [results[n] for n in files if n in results]
-    if not measured:
-        return [
-            *out,
-            f"Not run yet: `egc-teleop bench {name}` writes `bench/results/{name}.json`.",
-            "",
-        ]
-    for n, r in zip(files, measured, strict=True):
-        out += [(f"`{n}.json`: " if len(files) > 1 else "") + provenance(r), ""]
-    renderer = _view(results) if name == "view" else RENDERERS.get(name, _generic)
-    try:
-        out += [*renderer(measured[0]), ""]
-    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
-        out += [
-            f"The result file does not have the shape this page expects ({exc!r}); its "
-            "top-level numbers:",
-            "",
-            *_generic(measured[0]),
-            "",
-        ]
-    targets: dict[str, bool] = {}
-    for n, r in zip(files, measured, strict=True):
-        prefix = f"{n}: " if len(files) > 1 else ""
-        targets |= {prefix + k: v for k, v in targets_of(name, r).items()}
-    if targets:
-        out += [
-            "Targets: "
-            + "; ".join(f"{k}: {'met' if ok else '**missed**'}" for k, ok in targets.items())
-            + ".",
-            "",
-        ]
+    variants = VARIANTS.get(name, (name,))
+    files = [n for n in variants if n in results]
+    if not files:
+        written = " or ".join(f"`bench/results/{n}.json`" for n in variants)
+        return [*out, f"Not run yet: `egc-teleop bench {name}` writes {written}.", ""]
+    several = len(files) > 1
+    if name == "view":  # one table for both sinks
+        for n in files:
+            out += [(f"`{n}.json`: " if several else "") + provenance(results[n]), ""]
+        out += _rendered(_view(results), results[files[0]])
+        return out + _targets_line(all_targets(name, results))
+    for n in files:
+        r = results[n]
+        if several:
+            out += [f"`{n}.json`:", ""]
+        out += [provenance(r), ""]
+        out += _rendered(RENDERERS.get(name, _generic), r)
+        out += _targets_line(targets_of(name, r))
     return out
 
 
@@ -584,12 +640,13 @@ def render(
     ]
     summary = []
     for name in benches:
-        r = results.get(name) or (results.get("view-web") if name == "view" else None)
+        found = [results[n] for n in VARIANTS.get(name, (name,)) if n in results]
+        r = max(found, key=lambda x: str(x.get("run", {}).get("date", ""))) if found else None
         link = f"[{name}](#{anchor(heading(name, first_lines.get(name, '')))})"
         if r is None:
             summary.append([link, "not run yet", "", ""])
             continue
-        t = targets_of(name, r)
+        t = all_targets(name, results)
         met = f"{sum(t.values())} of {len(t)} met" if t else "-"
         run = r.get("run", {})
         summary.append([link, str(run.get("date", "?"))[:10], f"`{run.get('commit') or '?'}`", met])

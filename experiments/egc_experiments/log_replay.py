@@ -493,7 +493,7 @@ def _replay(
         desc=f"replay {path.name}",
     )
     try:
-        footprint = replayer.config.profile.half_size_m
+        footprint = replayer.config.profile.footprint
         for index, scan in enumerate(_scans(reader, scan_pass)):
             fault = scan if isinstance(scan, str) else scan_fault(scan)
             if fault is not None or isinstance(scan, str):

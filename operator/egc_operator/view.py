@@ -70,6 +70,8 @@ from egc_operator.view_scene import (
     VIA_ORANGE,
     WORLD_TO_SCREEN,
     footprint_half_size,
+    footprint_is_box,
+    footprint_outline,
     ghost_scene,
     is_stale,
     link_text,
@@ -706,8 +708,11 @@ class OperatorView:
         scene = robot_frame_scene(t)
         colour = _colour_array(scene.region_colour)
         rec.log(paths.SCAN, rr.Points2D(scene.scan_xy))
-        half = [] if scene.footprint_half_size is None else [scene.footprint_half_size]
-        rec.log(paths.FOOTPRINT, rr.Boxes2D(half_sizes=half, colors=colour))
+        if scene.footprint_outline is not None:  # a polygon or a disc, as given (DESIGN 14)
+            rec.log(paths.FOOTPRINT, rr.LineStrips2D([scene.footprint_outline], colors=colour))
+        else:
+            half = [] if scene.footprint_half_size is None else [scene.footprint_half_size]
+            rec.log(paths.FOOTPRINT, rr.Boxes2D(half_sizes=half, colors=colour))
         rec.log(
             paths.STATUS, rr.Points2D([scene.status_anchor], colors=colour, labels=[scene.status])
         )
@@ -779,11 +784,18 @@ class OperatorView:
         )
         profile = profile_named(t.profile)
         if profile is not None and t.profile != self._world_profile:
-            rec.log(
-                paths.POSE_FOOTPRINT,
+            shape: Any = (
                 rr.Boxes2D(
                     half_sizes=[footprint_half_size(profile)], colors=SCAN_INK, radii=THICK_LINE
-                ),
+                )
+                if footprint_is_box(profile)
+                else rr.LineStrips2D(
+                    [footprint_outline(profile)], colors=SCAN_INK, radii=THICK_LINE
+                )
+            )
+            rec.log(
+                paths.POSE_FOOTPRINT,
+                shape,
                 rr.Arrows2D(
                     origins=[(0.0, 0.0)], vectors=[(profile.length_m, 0.0)], colors=SCAN_INK
                 ),

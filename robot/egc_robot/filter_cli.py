@@ -22,8 +22,9 @@ import math
 import sys
 from typing import Any, TextIO
 
+from egc_common.cli_args import PROFILE_HELP
 from egc_common.errors import UsageError
-from egc_common.profiles import PROFILES, get_profile
+from egc_common.profiles import get_profile
 
 from egc_robot.filters.egc import EgcResult
 from egc_robot.pipeline import PipelineConfig, filter_velocity
@@ -43,8 +44,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--profile",
         default="pioneer3dx",
-        metavar="NAME",
-        help=f"robot profile: {', '.join(sorted(PROFILES))} (default: pioneer3dx)",
+        metavar="NAME|FILE",
+        help=f"{PROFILE_HELP} (default: pioneer3dx)",
     )
     parser.add_argument(
         "--horizon",

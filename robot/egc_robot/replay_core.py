@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from egc_common.footprint import Footprint
 from egc_common.profiles import RobotProfile
 from egc_common.scan import (
     ObstaclePoints,
@@ -197,7 +198,9 @@ def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
-def scan_points(scan: LogScan, footprint_half_m: tuple[float, float] | None = None) -> ScanPoints:
+def scan_points(
+    scan: LogScan, footprint_half_m: Footprint | tuple[float, float] | None = None
+) -> ScanPoints:
     """REP 117 ranges to points in {R}: finite readings within [range_min, range_max], plus
     ``-inf`` readings as obstacles at range_min (and, given the footprint's half length and
     width, just outside the footprint: ``egc_common.scan.too_close_points``); ``+inf``, ``NaN``

@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from egc_common.errors import UsageError
+from egc_common.footprint import Footprint
 from egc_common.messages import BaseCommand, Odometry
 from egc_common.scan import Scan
 
@@ -90,11 +91,12 @@ class Ros2Driver:
         self,
         settings: Ros2Settings,
         node_name: str = NODE_NAME,
-        footprint_half_m: tuple[float, float] | None = None,
+        footprint_half_m: Footprint | tuple[float, float] | None = None,
         camera_topic: str | None = None,
     ) -> None:
-        """``footprint_half_m``: the profile's half length and width, for ``-inf`` readings;
-        ``camera_topic``: an image topic for ``--camera ros2:TOPIC`` (``newest_image``)."""
+        """``footprint_half_m``: the profile's footprint (or a centred rectangle's half sizes),
+        for ``-inf`` readings; ``camera_topic``: an image topic for ``--camera ros2:TOPIC``
+        (``newest_image``)."""
         self._footprint_half_m = footprint_half_m
         self._coverage_logged = False
         require_rclpy()
