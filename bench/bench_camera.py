@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import argparse
 import io
-import json
 import math
 import os
 import platform
@@ -45,12 +44,12 @@ from typing import Any
 
 import av
 import numpy as np
+from egc_experiments.bench_results import write_result
 from egc_robot.camera_encoder import CameraEncoder, StreamPlan, plan_stream
 from egc_sim.camera import CameraModel, CameraRenderer
 from egc_sim.worlds import load_world
 from PIL import Image
 
-RESULTS = Path(__file__).resolve().parent / "results"
 FPS = 10.0
 WIDTH, HEIGHT = 320, 240
 DEFAULT_KBPS = 300.0
@@ -218,7 +217,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seconds", type=float, default=10.0, help="video per bitrate (default 10)")
     ap.add_argument("--process-seconds", type=float, default=10.0, help="(default 10)")
     ap.add_argument("--no-process", action="store_true", help="skip the robot process (part 5)")
-    ap.add_argument("--out", default=str(RESULTS / "bench_camera.json"))
+    ap.add_argument("--out", help="JSON file (default bench/results/camera.json)")
     args = ap.parse_args(argv)
     if not args.seconds > 0 or not args.process_seconds > 0:
         ap.error("--seconds and --process-seconds must be positive")
@@ -238,7 +237,7 @@ def main(argv: list[str] | None = None) -> int:
             "camera_none": without,
             "cpu_ratio": with_camera["core_share"] / max(without["core_share"], 1e-9),
         }
-    return _report(results, Path(args.out))
+    return _report(results, args.out)
 
 
 def _run_in_process(args: argparse.Namespace) -> dict[str, Any]:
@@ -254,7 +253,7 @@ def _run_in_process(args: argparse.Namespace) -> dict[str, Any]:
     return {"render": render, "codecs": codecs, "operator": bench_operator(frames)}
 
 
-def _report(results: dict[str, Any], out: Path) -> int:
+def _report(results: dict[str, Any], out: str | None) -> int:
     render, codecs, operator = results["render"], results["codecs"], results["operator"]
     print(f"{'render':<10}{'ms/frame':>10}{'core at 10 fps':>16}")
     for name, r in render.items():
@@ -315,9 +314,7 @@ def _report(results: dict[str, Any], out: Path) -> int:
     results["python"] = sys.version
     for name, ok in targets.items():
         print(f"target {name}: {'met' if ok else 'MISSED'}")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(results, indent=2))
-    print(f"wrote {out}")
+    print(f"wrote {write_result('camera', results, out)}")
     return 0 if all(targets.values()) else 1
 
 
