@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from egc_app.cli import main
+from tests.cli_process import main
 from tests.replay.logs import corridor_log
 from tests.shapes import L_SHAPE_FILE, PENTAGON_FILE
 
@@ -66,14 +66,18 @@ def test_a_bad_file_is_one_line_naming_the_key(argv, tmp_path):
 
 
 @pytest.mark.parametrize("profile", ["turtlebot4", "husky", str(PENTAGON_FILE), str(L_SHAPE_FILE)])
-def test_filter_takes_names_and_files(profile, monkeypatch, capsys):
-    import io
-
+def test_filter_takes_names_and_files(profile):
     # A wall 1 m ahead: the command is cut by each robot's own radii and limits.
     line = {"v": 0.3, "w": 0.0, "points": [[1.0, y / 10] for y in range(-10, 11)]}
-    monkeypatch.setattr(sys, "stdin", io.StringIO(json.dumps(line) + "\n"))
-    assert main(["filter", "--profile", profile]) == 0
-    out = json.loads(capsys.readouterr().out)
+    proc = subprocess.run(
+        [sys.executable, "-m", "egc_app.cli", "filter", "--profile", profile],
+        input=json.dumps(line) + "\n",
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
     assert "error" not in out and out["final"]["v"] <= 0.3
 
 
