@@ -87,7 +87,8 @@ ABOUT: dict[str, tuple[str, str]] = {
         "(one core), what H.264 and JPEG give for 100-1000 kbit/s (JPEG halves its picture "
         "below 0.3 bit/pixel), the operator's decode, and the robot process with and without "
         "the camera. Targets: render <= 5 ms, render + H.264 <= 15 ms a frame, H.264 within 30% "
-        "of its target up to 600 kbit/s, keyframes <= 1 s apart, the robot with the camera "
+        "of its target up to 600 kbit/s, no H.264 frame (keyframes too) above 1.5x the target's "
+        "frame, keyframes <= 1 s apart, the robot with the camera "
         "<= 25% of a core and <= 150 MB.",
     ),
     "soak": (
