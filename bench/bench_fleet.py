@@ -36,7 +36,6 @@ import argparse
 import contextlib
 import json
 import os
-import platform
 import re
 import signal
 import subprocess
@@ -49,9 +48,9 @@ from typing import Any
 
 import numpy as np
 import psutil
+from egc_experiments.bench_results import write_result
 
 ROOT = Path(__file__).resolve().parents[1]
-RESULTS = ROOT / "bench" / "results"
 CLI = [sys.executable, "-m", "egc_app.cli"]
 SWITCH = re.compile(r"switch (\w+) -> (\w+): ([0-9.]+) ms from the press")
 SWITCH_P50_MS = 200.0
@@ -213,15 +212,6 @@ def percentiles(values: list[float]) -> dict[str, float | int | None]:
     return out
 
 
-def git_commit() -> str:
-    try:
-        return subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=ROOT
-        ).stdout.strip()
-    except OSError:
-        return "unknown"
-
-
 def run(args: argparse.Namespace, workdir: Path) -> dict[str, Any]:
     n, m = args.robots, args.operators
     port = free_port()
@@ -232,14 +222,7 @@ def run(args: argparse.Namespace, workdir: Path) -> dict[str, Any]:
     results: dict[str, Any] = {
         "robots": n,
         "operators": m,
-        "machine": {
-            "cpus": os.cpu_count(),
-            "platform": platform.platform(),
-            "python": platform.python_version(),
-            "load_average_before": [round(x, 2) for x in os.getloadavg()],
-        },
-        "date": time.strftime("%Y-%m-%d %H:%M:%S %z"),
-        "commit": git_commit(),
+        "load_average_before": [round(x, 2) for x in os.getloadavg()],
     }
     try:
         fleet.start("router", "router", "--listen", endpoint)
@@ -335,8 +318,8 @@ def report(results: dict[str, Any], n: int) -> dict[str, bool]:
     router = results["router"]
     print(
         f"fleet: {n} robots, {results['operators']} operators, one router; "
-        f"{results['machine']['cpus']} CPUs, load average before "
-        f"{results['machine']['load_average_before']}, after {results['load_average_after']}"
+        f"{os.cpu_count()} CPUs, load average before "
+        f"{results['load_average_before']}, after {results['load_average_after']}"
     )
     print(f"  robots ready after {results['robots_ready_s']:.1f} s (N processes starting)")
     print(
@@ -389,7 +372,7 @@ def main() -> int:
     ap.add_argument("--switches", type=int, default=10, help="switches per operator")
     ap.add_argument("--period-s", type=float, default=2.5, help="between switches")
     ap.add_argument("--idle-s", type=float, default=10.0, help="the idle CPU window")
-    ap.add_argument("--out", default=str(RESULTS / "bench_fleet.json"))
+    ap.add_argument("--out", help="JSON file (default bench/results/fleet.json)")
     args = ap.parse_args()
     if not 1 <= args.operators <= args.robots <= 64:
         ap.error("need 1 <= --operators <= --robots <= 64")
@@ -399,10 +382,7 @@ def main() -> int:
     results = run(args, workdir)
     results["workdir"] = str(workdir)
     results["targets"] = report(results, args.robots)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(results, indent=2) + "\n")
-    print(f"wrote {out}")
+    print(f"wrote {write_result('fleet', results, args.out)}")
     return 0 if all(results["targets"].values()) else 1
 
 
