@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from egc_common.profiles import JACKAL, PIONEER3DX, RobotProfile
+from egc_common.profiles import JACKAL, PIONEER3DX, TURTLEBOT4, RobotProfile, load_profile
 from egc_robot.filters.dwa import DwaParams, dwa_filter
 from egc_robot.filters.egc import EgcCase, EgcParams, egc_filter
 
@@ -40,9 +40,14 @@ PARAMS = EgcParams.from_profile(PIONEER3DX.r_min_m, PIONEER3DX.r_max_m, PIONEER3
 COMMAND = (0.14, 0.05)
 EK_L_M = PIONEER3DX.v_max_mps / PIONEER3DX.w_max_radps  # L = v_max / w_max (DESIGN 6)
 # DWA: the profile and the command at full speed, already driving it (goal: none).
+# Beyond the centred rectangle's closed form (DESIGN 14): a disc (two circles) and a polygon
+# (orbit x edge crossings, the documented pentagon).
+PENTAGON = load_profile(str(Path(__file__).resolve().parents[1] / "docs/profiles/pentagon.toml"))
 DWA_CASES: dict[str, tuple[RobotProfile, tuple[float, float]]] = {
     "dwa": (PIONEER3DX, COMMAND),
     "dwa jackal": (JACKAL, (2.0, 0.5)),
+    "dwa tb4": (TURTLEBOT4, (0.31, 0.5)),
+    "dwa pentagon": (PENTAGON, (0.8, 0.3)),
 }
 
 

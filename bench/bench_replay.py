@@ -27,12 +27,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from egc_common.cli_args import PROFILE_HELP, profile_arg
 from egc_common.profiles import get_profile
+from egc_experiments.log_replay import replay
 from egc_robot.replay_core import Replayer
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
-
-from egc_app.replay_cmd import replay
 
 RESULTS = Path(__file__).resolve().parent / "results"
 MAPPING1 = Path(__file__).resolve().parents[1] / ".." / "shared" / "bags" / "Mapping1.bag"
@@ -112,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scans", type=int, default=2000)
     ap.add_argument("--filter", default="egc")
-    ap.add_argument("--profile", default="pioneer3dx")
+    ap.add_argument("--profile", default="pioneer3dx", type=profile_arg, help=PROFILE_HELP)
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--out", type=Path, default=RESULTS / "bench_replay.json")
     args = ap.parse_args(argv)

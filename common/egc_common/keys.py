@@ -72,3 +72,28 @@ def operator_id_from_alive_key(key: str) -> str | None:
     if len(parts) == 5 and parts[0] == "egc" and parts[2:4] == ["alive", "operator"]:
         return parts[4]
     return None
+
+
+def info(robot: str) -> str:
+    """Robot queryable: what the robot is and does (DESIGN 15)."""
+    return f"egc/{validate_id(robot)}/info"
+
+
+ALL_ROBOTS_ALIVE = "egc/*/alive/robot"
+ALL_ROBOTS_INFO = "egc/*/info"
+
+
+def robot_id_from_key(key: str) -> str | None:
+    """The robot id of any ``egc/<robot>/...`` key, or None."""
+    parts = str(key).split("/")
+    if len(parts) >= 3 and parts[0] == "egc":
+        try:
+            return validate_id(parts[1])
+        except ValueError:
+            return None
+    return None
+
+
+def camera(robot: str) -> str:
+    """Robot -> operators, the camera's encoded frames (DESIGN 12, view plane)."""
+    return f"egc/{validate_id(robot)}/camera"

@@ -34,8 +34,9 @@ import sys
 from dataclasses import dataclass
 from typing import Any, TextIO
 
+from egc_common.cli_args import PROFILE_HELP
 from egc_common.errors import UsageError
-from egc_common.profiles import PROFILES, get_profile
+from egc_common.profiles import get_profile
 
 from egc_robot.filters.cbf import CbfResult
 from egc_robot.filters.egc import EgcResult
@@ -58,8 +59,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--profile",
         default="pioneer3dx",
-        metavar="NAME",
-        help=f"robot profile: {', '.join(sorted(PROFILES))} (default: pioneer3dx)",
+        metavar="NAME|FILE",
+        help=f"{PROFILE_HELP} (default: pioneer3dx)",
     )
     parser.add_argument(
         "--horizon",

@@ -1,10 +1,11 @@
 """Replay of a recorded robot log through a filter of the family, as pure functions (DESIGN 11).
 
-``egc-teleop replay`` (``egc_app.replay_cmd``) reads the log and hands this module plain values:
-scans (``LogScan``), the commanded velocity (``VelocitySample``, from a Twist topic or derived
-here from odometry poses with ``velocities_from_poses``) and gets back, per scan, what the
-robot's own pipeline (``egc_robot.pipeline``) would have sent (``ScanVerdict``), and for the
-whole log the summary (``ReplaySummary``). No files, no clocks, no Rerun here.
+``egc-teleop replay`` (its engine ``egc_experiments.log_replay``) reads the log and hands this
+module plain values: scans (``LogScan``), the commanded velocity (``VelocitySample``, from a
+Twist topic or derived here from odometry poses with ``velocities_from_poses``) and gets back,
+per scan, what the robot's own pipeline (``egc_robot.pipeline``) would have sent
+(``ScanVerdict``), and for the whole log the summary (``ReplaySummary``). No files, no clocks,
+no Rerun here.
 
 Times. A log has two clocks: the recorder's receive time (``log_ns``, one clock for every
 topic) and each message's header stamp (``stamp_ns``, the sensor's or the driver's clock).
@@ -39,6 +40,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from egc_common.footprint import Footprint
 from egc_common.profiles import RobotProfile
 from egc_common.scan import (
     ObstaclePoints,
@@ -206,7 +208,9 @@ def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
-def scan_points(scan: LogScan, footprint_half_m: tuple[float, float] | None = None) -> ScanPoints:
+def scan_points(
+    scan: LogScan, footprint_half_m: Footprint | tuple[float, float] | None = None
+) -> ScanPoints:
     """REP 117 ranges to points in {R}: finite readings within [range_min, range_max], plus
     ``-inf`` readings as obstacles at range_min (and, given the footprint's half length and
     width, just outside the footprint: ``egc_common.scan.too_close_points``); ``+inf``, ``NaN``
