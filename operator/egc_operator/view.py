@@ -62,6 +62,7 @@ from egc_operator.prediction import (
 )
 from egc_operator.view_blueprint import operator_blueprint
 from egc_operator.view_scene import (
+    CBF_TEAL,
     CIRCLE_COLOURS,
     CIRCLE_NAMES,
     GOAL_GREEN,
@@ -846,6 +847,10 @@ class OperatorView:
             )
         rec.log(paths.REFERENCE_ARROW, rr.Arrows2D(vectors=[scene.reference_vector]))
         rec.log(paths.SENT_ARROW, rr.Arrows2D(vectors=[scene.sent_vector]))
+        # cbf (DESIGN 13): its margin and the points that changed the command, over the scan.
+        margin = [] if scene.cbf_margin is None else [scene.cbf_margin]
+        rec.log(paths.CBF_MARGIN, rr.LineStrips2D(margin, colors=CBF_TEAL, radii=THIN_LINE))
+        rec.log(paths.CBF_POINTS, rr.Points2D(scene.cbf_xy, colors=SENT_RED, radii=0.04))
         suggested = suggested_vector(t)
         if suggested is not None:
             rec.log(paths.SUGGESTED_ARROW, rr.Arrows2D(vectors=[suggested]))

@@ -46,6 +46,8 @@ CIRCLES = "robot/circles"  # + /reachable, /igc, /agc, /egc
 REFERENCE_ARROW = "robot/command/reference"
 SENT_ARROW = "robot/command/sent"
 SUGGESTED_ARROW = "robot/suggested"  # the filter's suggested direction (assist), in {R}
+CBF_MARGIN = "robot/cbf/margin"  # cbf's margin around the footprint (DESIGN 13), in {R}
+CBF_POINTS = "robot/cbf/points"  # the points whose barriers changed the command
 ROBOT_VIA = "robot/via"  # the active via point seen from the robot (odom frame only)
 
 # World-frame view: ``world`` carries the world -> screen transform.

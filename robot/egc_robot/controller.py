@@ -65,6 +65,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from egc_common.messages import (
+    MAX_CBF_POINTS,
     MAX_SPEED_MPS,
     MAX_TURN_RADPS,
     BaseCommand,
@@ -82,6 +83,7 @@ from egc_common.scan import ObstaclePoints, Scan
 from egc_common.scan_compact import PolarScan, compact
 from egc_common.source_msg import decode_lock, decode_source_command
 
+from egc_robot.filters.cbf import CbfResult
 from egc_robot.latency_governor import govern, latency_speed_limit, latency_turn_limit
 from egc_robot.link_stats import LinkStats
 from egc_robot.pipeline import (
@@ -113,6 +115,7 @@ from egc_robot.via_points import (
 )
 
 NS_PER_S = 1_000_000_000
+_NO_POINTS = np.zeros((0, 2), np.float32)
 _MAX_TRACKED_OPERATORS = 64
 _MAX_SETTING = 3600.0
 _STOPPED_EPS = 1e-6
@@ -1056,6 +1059,7 @@ class RobotController:
             source=None if report is None else report.source,
             lock=None if report is None else report.lock,
             source_age_ms=None if report is None else report.source_age_ms,
+            **_cbf_view(result),
         )
 
     def _telemetry_scan(self) -> tuple[npt.NDArray[np.float32], PolarScan | None]:
@@ -1104,3 +1108,16 @@ class RobotController:
         self._no_operator_reason = reason
         self._route = NO_ROUTE  # via points belong to the operator who set them
         self._goal_seq = None
+
+
+def _cbf_view(result: PipelineResult | None) -> dict[str, Any]:
+    """The telemetry keys of cbf's view (DESIGN 13): the points whose barriers changed the
+    command, the margin and the margin ahead; nothing when cbf did not run this cycle."""
+    detail = None if result is None or result.family is None else result.family.detail
+    if not isinstance(detail, CbfResult):
+        return {}
+    xy = _NO_POINTS
+    if detail.tight is not None and detail.tight.x_m.size:
+        pairs = np.column_stack((detail.tight.x_m, detail.tight.y_m)).astype(np.float32)
+        xy = np.unique(pairs, axis=0)[:MAX_CBF_POINTS]  # a point's (S) and (C) rows: once
+    return {"cbf_xy": xy, "cbf_margin_m": detail.margin_m, "cbf_ahead_m": detail.margin_ahead_m}
