@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import signal
 import subprocess
 import sys
@@ -37,6 +36,8 @@ import time
 from collections import Counter
 from pathlib import Path
 from typing import Any
+
+from egc_experiments.bench_results import write_result
 
 ROBOT_ID = "bench"
 CLI = [sys.executable, "-m", "egc_app.cli"]
@@ -170,11 +171,11 @@ def main() -> int:
     parser.add_argument("--delay-ms", type=float, default=80.0, metavar="D")
     parser.add_argument("--rates", default="192,128", metavar="KBPS,...")
     parser.add_argument("--skip-demo", action="store_true", help="part 1 only")
-    parser.add_argument("--out", metavar="FILE.json")
+    parser.add_argument("--out", metavar="FILE.json", help="default bench/results/bandwidth.json")
     args = parser.parse_args()
     rates = [float(r) for r in args.rates.split(",") if r.strip()]
     missed: list[str] = []
-    result: dict[str, Any] = {"machine": platform.machine(), "cpus": os.cpu_count()}
+    result: dict[str, Any] = {}
 
     lb = result["loopback"] = loopback(args.duration)
     print(f"loopback, defaults, {args.duration:g} s (robot '{ROBOT_ID}'):")
@@ -221,8 +222,7 @@ def main() -> int:
                 f"p99 {run['cmd_age_p99_ms']:.0f} ms, view plane {run['downlink_kbps']} kbit/s"
             )
     result["missed"] = missed
-    if args.out:
-        Path(args.out).write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+    print(f"wrote {write_result('bandwidth', result, args.out)}")
     print("targets: all met" if not missed else f"targets missed: {', '.join(missed)}")
     return 1 if missed else 0
 

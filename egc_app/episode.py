@@ -38,9 +38,9 @@ import sys
 import time
 from dataclasses import replace
 
-from egc_common.cli_args import check_writable
+from egc_common.cli_args import PROFILE_HELP, check_writable
 from egc_common.errors import UsageError
-from egc_common.profiles import PROFILES
+from egc_common.profiles import get_profile
 from egc_experiments.episode import (
     DEFAULT_GOAL_TOLERANCE_M,
     VIA_CHOICES,
@@ -73,9 +73,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="via points for the filter: goal (one, at the goal; default) | route (corners of "
         "a route planned on the map) | none",
     )
-    parser.add_argument(
-        "--profile", default="pioneer3dx", help=f"robot profile: {', '.join(sorted(PROFILES))}"
-    )
+    parser.add_argument("--profile", default="pioneer3dx", help=PROFILE_HELP)
     parser.add_argument("--max-time", type=float, default=300.0, help="simulated seconds (300)")
     parser.add_argument(
         "--goal-tolerance",
@@ -105,10 +103,10 @@ def _settings_from_args(args: argparse.Namespace) -> EpisodeSettings:
         raise UsageError(f"--filter must be one of {', '.join(FILTERS)}, got {args.filter!r}")
     if args.via not in VIA_CHOICES:
         raise UsageError(f"--via must be one of {', '.join(VIA_CHOICES)}, got {args.via!r}")
-    if args.profile not in PROFILES:
-        raise UsageError(
-            f"--profile must be one of {', '.join(sorted(PROFILES))}, got {args.profile!r}"
-        )
+    try:
+        get_profile(args.profile)  # a built-in name or a FILE.toml (DESIGN 14)
+    except ValueError as exc:
+        raise UsageError(f"--profile: {exc}") from None
     for name, value in (
         ("--max-time", args.max_time),
         ("--dt", args.dt),

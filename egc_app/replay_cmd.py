@@ -19,9 +19,9 @@ import os
 import sys
 from pathlib import Path
 
-from egc_common.cli_args import check_writable
+from egc_common.cli_args import PROFILE_HELP, check_writable
 from egc_common.errors import UsageError
-from egc_common.profiles import PROFILES, get_profile
+from egc_common.profiles import get_profile
 from egc_experiments.log_replay import log_file_in, replay
 from egc_robot.pipeline import FILTERS
 from egc_robot.replay_core import COMMAND_MAX_AGE_S, Replayer
@@ -41,8 +41,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--profile",
         default="pioneer3dx",
-        metavar="NAME",
-        help=f"robot profile: {', '.join(sorted(PROFILES))} (default: pioneer3dx)",
+        metavar="NAME|FILE",
+        help=f"{PROFILE_HELP} (default: pioneer3dx)",
     )
     parser.add_argument(
         "--scan-topic",

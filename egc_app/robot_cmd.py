@@ -19,6 +19,8 @@ flags. Tables and keys (units in the names):
                latency governor; latency_turn_cap = false caps the speed alone)
     [pipeline] horizon_s, gamma_v, gamma_w, no_return_is_free
     [sim]      scan_hz, beams, seed
+    [dwa], [assist], [cbf]  the filters' parameters (DESIGN 6, 13; defaults from the profile:
+               ``DwaParams``, ``AssistParams``, ``CbfParams`` say why each default is what it is)
     [ros2]     scan, odom, cmd, cmd_type, namespace, laser_pose ("X,Y,YAW" or [x, y, yaw]),
                laser_upside_down (flags --ros-scan ... --laser-upside-down override them)
     [camera]   source ("sim", "ros2:TOPIC", "none"), size ("WxH"), fps, codec ("h264", "jpeg")
@@ -55,12 +57,12 @@ from typing import Any
 
 from egc_common import config as config_mod
 from egc_common import keys
-from egc_common.cli_args import check_writable
+from egc_common.cli_args import PROFILE_HELP, check_writable
 from egc_common.clock_id import monotonic_clock_id
 from egc_common.errors import UsageError
 from egc_common.joystick import JoystickMapping
 from egc_common.messages import BaseCommand
-from egc_common.profiles import PROFILES, get_profile
+from egc_common.profiles import get_profile
 from egc_common.robot_info import RobotInfo
 from egc_common.transport import (
     DEFAULT_ENDPOINT,
@@ -76,6 +78,7 @@ from egc_robot.camera_stream import CameraStreamer
 from egc_robot.controller import ControllerConfig, RobotController
 from egc_robot.drivers import Driver, SensorUpdate
 from egc_robot.filters.assist import AssistParams
+from egc_robot.filters.cbf import CbfParams
 from egc_robot.filters.dwa import DwaParams
 from egc_robot.info_server import InfoServer
 from egc_robot.pipeline import FILTERS, PipelineConfig
@@ -112,17 +115,18 @@ SECTIONS: dict[str, tuple[str, ...]] = {
     "ros2": ROS2_KEYS,
     "camera": CAMERA_KEYS,
 }
-# [dwa] and [assist] are checked by their params; [[source]], [[lock]], [[operator]] (DESIGN 14)
-# by egc_robot.source_config.
-ROBOT_TABLES = (*SECTIONS, "dwa", "assist", "source", "lock", "operator")
+# [dwa], [assist] and [cbf] are checked by their params; [[source]], [[lock]], [[operator]]
+# (DESIGN 14) by egc_robot.source_config.
+ROBOT_TABLES = (*SECTIONS, "dwa", "assist", "cbf", "source", "lock", "operator")
 
 
 class SimDriver:
     """sim_robot in this process, stepped in real time on every poll."""
 
-    def __init__(self, rt: Any, map_server: Any = None) -> None:
+    def __init__(self, rt: Any, map_server: Any = None, map_id: str | None = None) -> None:
         self._rt = rt
         self._map_server = map_server  # the queryable egc/<robot>/map, for the operator view
+        self.map_id = map_id  # the map frame's id in egc/<robot>/info (DESIGN 15)
 
     def poll(self, now_ns: int) -> SensorUpdate:
         self._rt.advance(now_ns)
@@ -171,8 +175,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--profile",
         default="pioneer3dx",
-        metavar="NAME",
-        help=f"{', '.join(sorted(PROFILES))} (default: pioneer3dx)",
+        metavar="NAME|FILE",
+        help=f"{PROFILE_HELP} (default: pioneer3dx)",
     )
     parser.add_argument(
         "--filter", choices=FILTERS, default="egc", help="filter of shared mode (default: egc)"
@@ -229,7 +233,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     ros.add_argument(
         "--laser-pose",
         metavar="X,Y,YAW",
-        help="the laser in the base frame, metres and radians (default: 0,0,0)",
+        help="the laser in the base frame, metres and radians (default: [ros2] laser_pose, else "
+        "the profile's laser_pose, else 0,0,0)",
     )
     ros.add_argument(
         "--laser-upside-down",
@@ -341,8 +346,9 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
         )
         dwa_table = cfg.get("dwa", {})
         assist_table = cfg.get("assist", {})
-        if not isinstance(dwa_table, dict) or not isinstance(assist_table, dict):
-            raise UsageError("[dwa] and [assist] must be tables")
+        cbf_table = cfg.get("cbf", {})
+        if not all(isinstance(t, dict) for t in (dwa_table, assist_table, cbf_table)):
+            raise UsageError("[dwa], [assist] and [cbf] must be tables")
 
         def pipeline_config(free: bool) -> PipelineConfig:
             filter_tables = {"no_return_is_free": free}
@@ -359,6 +365,10 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
                 sweep=SweepParams(period_s=1.0 / rate_hz),
                 dwa=DwaParams.from_mapping(filter_tables | dwa_table, profile),
                 assist=AssistParams.from_mapping(filter_tables | assist_table, profile),
+                # cbf's margin counts one control period at the command, as the sweep does.
+                cbf=CbfParams.from_mapping(
+                    filter_tables | {"period_s": 1.0 / rate_hz} | cbf_table, profile
+                ),
             )
 
         rate_hz = args.rate_hz if args.rate_hz is not None else _number(robot, "rate_hz", 20.0)
@@ -479,7 +489,11 @@ def _ros2_settings(
         "laser_upside_down": args.laser_upside_down,
     }
     try:
-        settings = ros2_settings(config_mod.section(cfg, "ros2", SECTIONS["ros2"]), flags)
+        table = config_mod.section(cfg, "ros2", SECTIONS["ros2"])
+        laser = get_profile(args.profile).laser_pose
+        if laser is not None and "laser_pose" not in table:  # the profile's (DESIGN 14)
+            table = {**table, "laser_pose": list(laser)}
+        settings = ros2_settings(table, flags)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     if need_rclpy:
@@ -498,7 +512,7 @@ def _open_driver(
         sources = () if mux is None else tuple(s for s in mux.sources if s.kind == "ros2")
         locks = () if mux is None else tuple(lk for lk in mux.locks if lk.topic is not None)
         try:
-            footprint = get_profile(args.profile).half_size_m
+            footprint = get_profile(args.profile).footprint
             return Ros2Driver(
                 settings,
                 footprint_half_m=footprint,
@@ -511,9 +525,9 @@ def _open_driver(
     if args.driver == "zenoh":
         from egc_robot.zenoh_driver import ZenohDriver
 
-        return ZenohDriver(session, args.robot, get_profile(args.profile).half_size_m)
+        return ZenohDriver(session, args.robot, get_profile(args.profile).footprint)
     from egc_sim.bridge import RealTimeSim, open_simulator, parse_pose
-    from egc_sim.grid_world import map_message
+    from egc_sim.grid_world import map_message, world_id
 
     try:
         sim_cfg = config_mod.section(cfg, "sim", SECTIONS["sim"])
@@ -532,6 +546,7 @@ def _open_driver(
     return SimDriver(
         RealTimeSim(sim, time.monotonic_ns(), 1.0 / scan_hz),
         serve_static(session, keys.world_map(args.robot), world_map),
+        map_id=world_id(sim.world),
     )
 
 
@@ -573,17 +588,15 @@ def resume_window_caveat(config: ControllerConfig, lease_ms: int | None) -> str 
     )
 
 
-def _describer(args: argparse.Namespace, controller: RobotController) -> Any:
+def _describer(
+    args: argparse.Namespace, controller: RobotController, map_id: str | None = None
+) -> Any:
     """What ``egc/<robot>/info`` answers (DESIGN 15): fixed facts, plus the controller's state
     and operator read at the time of the query (two attribute reads: a snapshot may be one
-    cycle old, never inconsistent enough to matter for a listing)."""
-    half_length, half_width = get_profile(args.profile).half_size_m
-    footprint = (
-        (half_length, half_width),
-        (-half_length, half_width),
-        (-half_length, -half_width),
-        (half_length, -half_width),
-    )
+    cycle old, never inconsistent enough to matter for a listing). ``map_id``: the map frame
+    the driver's map poses are in, when it gives them (the simulator: its world's id)."""
+    profile = get_profile(args.profile)
+    footprint = tuple(profile.footprint.outline()[:-1])  # as given (DESIGN 14), open
     try:
         version = importlib.metadata.version("egc-teleop")
     except importlib.metadata.PackageNotFoundError:
@@ -595,12 +608,13 @@ def _describer(args: argparse.Namespace, controller: RobotController) -> Any:
             robot=args.robot,
             state=controller.state.value,
             driver=args.driver,
-            profile=args.profile,
+            profile=profile.name,
             filter=args.filter,
             camera=camera,
             version=version,
             footprint_m=footprint,
             operator=controller.operator,
+            map=map_id,
         )
 
     return describe
@@ -666,7 +680,8 @@ def run(args: argparse.Namespace) -> int:
         else dataclasses.replace(budget_config, camera=True, camera_max_fps=camera.max_fps),
         camera=streamer,
     )
-    info = InfoServer(session, args.robot, _describer(args, node.controller))
+    map_id = getattr(driver, "map_id", None)
+    info = InfoServer(session, args.robot, _describer(args, node.controller, map_id))
     mux = controller_config.sources
     if mux is not None:
         log.info(

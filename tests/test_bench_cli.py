@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 
-def egc(*argv: str, timeout_s: float = 30.0) -> subprocess.CompletedProcess[str]:
+def egc(*argv: str, timeout_s: float = 120.0) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, "-m", "egc_app.cli", "bench", *argv],
         capture_output=True,
@@ -27,11 +27,17 @@ def egc(*argv: str, timeout_s: float = 30.0) -> subprocess.CompletedProcess[str]
 
 def test_options_after_a_name_go_to_that_script(tmp_path: Path) -> None:
     out = tmp_path / "filter.json"
-    proc = egc("filter", "--repeats", "3", "--out", str(out))
-    assert proc.returncode == 0, proc.stderr
-    assert f"wrote {out}" in proc.stdout
+    proc = egc("filter", "--repeats", "3", "--out", str(out), timeout_s=300.0)
+    assert f"wrote {out}" in proc.stdout, proc.stderr
     assert "== bench" not in proc.stdout  # one benchmark: no header
-    assert json.loads(out.read_text())  # written where --out said, not bench/results/
+    result = json.loads(out.read_text())  # written where --out said, not bench/results/
+    assert "benchmarks.md" not in proc.stdout  # nothing in bench/results/: the page is left alone
+    assert {row["repeats"] for row in result["rows"]} == {3}  # --repeats reached it too
+    # The script's verdict comes back as the exit status. Whether a speed target is met
+    # depends on how busy the machine is (issue 32): the status must agree with the
+    # targets the run reports, not be 0.
+    targets = result["targets"]
+    assert targets and proc.returncode == (0 if all(targets.values()) else 1), proc.stderr
 
 
 @pytest.mark.parametrize(("name", "option"), [("view", "--minutes"), ("link", "--trials")])

@@ -104,7 +104,7 @@ def run_cli(*argv: str) -> tuple[int, list[str]]:
             [sys.executable, "-m", "egc_app.cli", *argv],
             capture_output=True,
             text=True,
-            timeout=15,
+            timeout=120,  # a deadline: an interpreter start-up took 15-19 s at load average 16
         )
     except subprocess.TimeoutExpired:
         pytest.fail(f"{argv} ran on instead of refusing its arguments")

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from egc_common.errors import UsageError
+from egc_common.profiles import PROFILES, ProfileError, load_profile
 
 # A minus then a digit, a point and a digit, or nan/inf, or a single minus and a comma later:
 # a value (so "-3,abc" reaches the option's own check and its message), never an option name.
@@ -135,3 +136,20 @@ def check_writable(path: str | Path, option: str) -> None:
         raise UsageError(f"{option} {path}: not writable ({reason})") from None
     if not existed:
         target.unlink(missing_ok=True)
+
+
+PROFILE_HELP = (
+    f"robot profile: a built-in name ({', '.join(sorted(PROFILES))}) or a profile FILE.toml "
+    "with a [profile] table (DESIGN 14)"
+)
+
+
+def profile_arg(text: str) -> str:
+    """argparse ``type=`` of every ``--profile NAME|FILE.toml``: the profile is loaded now, so
+    an unknown name or a bad file is the parser's one line and exit 2 (naming the key and the
+    problem), before anything starts. The text is kept (it is handed on to child processes)."""
+    try:
+        load_profile(text)
+    except ProfileError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text

@@ -81,6 +81,7 @@ def info(robot: str) -> str:
 
 ALL_ROBOTS_ALIVE = "egc/*/alive/robot"
 ALL_ROBOTS_INFO = "egc/*/info"
+ALL_ROBOTS_STATE = "egc/*/state"
 
 
 def robot_id_from_key(key: str) -> str | None:

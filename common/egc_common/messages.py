@@ -60,7 +60,7 @@ MAX_RACE_MS: Final = 1000.0
 
 MODES: Final = ("direct", "shared")
 # The filter family of DESIGN 6, pinned names ("none" is direct mode).
-FILTER_NAMES: Final = ("none", "egc", "ek-egc", "assist", "dwa")
+FILTER_NAMES: Final = ("none", "egc", "ek-egc", "assist", "dwa", "cbf")
 GOAL_FRAMES: Final = ("odom", "map")
 MAX_GOAL_POINTS: Final = 64
 MAX_GOAL_COORD_M: Final = 1e6
@@ -852,16 +852,25 @@ class StateMessage:
     # DESIGN 14, as in the telemetry; left out when None (a robot without [[source]] tables).
     source: str | None = None
     lock: str | None = None
+    # The robot's pose in the map frame when its driver localises (x, y, theta): an optional
+    # key (DESIGN 7 additions) for the fleet's map (DESIGN 15), at the state's 1 Hz, so an
+    # operator sees where every robot is without taking every robot's telemetry.
+    map_pose: tuple[float, float, float] | None = None
 
     def encode(self) -> bytes:
         d = _shallow_fields(self)
         for key in ("source", "lock"):
             if d[key] is None:
                 del d[key]
+        if self.map_pose is None:
+            del d["map_pose"]
+        else:
+            d["map_pose"] = [float(v) for v in self.map_pose]
         return _pack({"v": SCHEMA_VERSION, **d})
 
 
 def _build_state(m: Mapping[Any, Any]) -> StateMessage:
+    map_pose = _opt_tuple(m, "map_pose", 3, _POSE)
     return StateMessage(
         stamp_ns=_int(m, "stamp_ns"),
         state=_str(m, "state", STATES),
@@ -870,6 +879,7 @@ def _build_state(m: Mapping[Any, Any]) -> StateMessage:
         rejected=_int(m, "rejected") if "rejected" in m else 0,
         source=_opt_str(m, "source"),
         lock=_opt_str(m, "lock"),
+        map_pose=None if map_pose is None else (map_pose[0], map_pose[1], map_pose[2]),
     )
 
 

@@ -29,6 +29,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from egc_common.cli_args import PROFILE_HELP, profile_arg
 from egc_sim.episodes import EpisodeResult
 
 from egc_experiments.episode import EpisodeSettings, run_settings
@@ -293,7 +294,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--out-dir", default="docs", help="where ek-egc-paper.{md,png} go")
     parser.add_argument("--scene", default=SCENE, help=f"world (default {SCENE})")
-    parser.add_argument("--profile", default=PROFILE, help=f"robot profile (default {PROFILE})")
+    parser.add_argument(
+        "--profile", default=PROFILE, type=profile_arg, help=f"{PROFILE_HELP} (default {PROFILE})"
+    )
     parser.add_argument("--max-time", type=float, default=MAX_TIME_S, help="simulated seconds")
     parser.add_argument("--stall-time", type=float, default=STALL_TIME_S, help="seconds")
     args = parser.parse_args(argv)

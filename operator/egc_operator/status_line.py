@@ -26,12 +26,18 @@ On a terminal the line is redrawn in place a few times a second, cut to the term
 so that it never wraps. When stdout is not a TTY (a log file, a pipe, CI) the same text is
 printed as plain lines, only when the robot's state or reason, the latency cap or the control
 situation changes and otherwise at most every ``plain_period_s``, so logs stay readable.
+
+An operator driving a fleet (DESIGN 15) gives the line its ``fleet`` part: the driven robot
+first, in brackets, and the others with their state at the end (``[r2] ... | fleet: r1 HOLD,
+r3 IDLE``); a change there (a switch, another robot's state) prints a plain line too.
+``say`` prints a line of its own (a robot listing) without garbling the redrawn one.
 """
 
 from __future__ import annotations
 
 import shutil
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TextIO
 
@@ -381,6 +387,14 @@ def format_status(s: Status) -> str:
     )
 
 
+@dataclass(frozen=True, slots=True)
+class FleetLine:
+    """The fleet's part of the line (DESIGN 15): the driven robot, and the others' states."""
+
+    driven: str
+    others: str
+
+
 class StatusLine:
     def __init__(
         self,
@@ -388,16 +402,26 @@ class StatusLine:
         tty: bool | None = None,
         plain_period_s: float = 5.0,
         width: int | None = None,
+        fleet: Callable[[], FleetLine | None] | None = None,
     ):
         self._stream = stream
         self._tty = stream.isatty() if tty is None else tty
         self._plain_period_s = plain_period_s
         self._width = width  # None: the terminal's, asked at every redraw
+        self._fleet = fleet
         self._last_key: tuple[object, ...] | None = None
         self._last_plain_s = -1e9
 
+    def say(self, text: str) -> None:
+        """A line of its own (on a terminal, above the redrawn status line)."""
+        self._stream.write(("\r\x1b[2K" if self._tty else "") + text + "\n")
+        self._stream.flush()
+
     def show(self, status: Status, now_s: float) -> None:
         text = format_status(status)
+        fleet = None if self._fleet is None else self._fleet()
+        if fleet is not None:
+            text = f"[{fleet.driven}] {text} | fleet: {fleet.others}"
         if self._tty:
             width = self._width or shutil.get_terminal_size(fallback=(200, 24)).columns
             if len(text) > width - 1:  # a wrapped line cannot be redrawn in place
@@ -418,6 +442,7 @@ class StatusLine:
             status.clock_note,
             status.source,  # DESIGN 14: another source drives, a lock engaged
             status.lock,
+            fleet,  # a switch, or another robot's state changed
         )
         if key != self._last_key or now_s - self._last_plain_s >= self._plain_period_s:
             self._stream.write(text + "\n")

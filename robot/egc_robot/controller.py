@@ -753,6 +753,7 @@ class RobotController:
         self._driving_epoch = self._control_epoch if state is State.DRIVING else -1
         v_lim: float | None = None
         w_lim: float | None = None
+        tau_s: float | None = None  # unknown without link awareness: cbf takes its default
         if cfg.link_aware:
             profile = cfg.pipeline.profile
             if feed is None:
@@ -812,6 +813,7 @@ class RobotController:
                 goal_xy_m=None if self._route.active is None else self._goal_in_robot_frame(),
                 now_ns=now_ns,
                 memory=self._filter_memory,
+                loop_delay_s=tau_s,
             )
             self._filter_memory = result.memory
             v, w, limiter = result.v_cmd_mps, result.w_cmd_radps, result.limiter
@@ -858,6 +860,7 @@ class RobotController:
             rejected=self.counters.rejected_total,
             source=None if verdict is None else verdict.source,
             lock=None if verdict is None else verdict.lock,
+            map_pose=self._map_pose,
         )
 
     @property

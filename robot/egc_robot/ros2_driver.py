@@ -15,10 +15,11 @@ run rather than at the next deadline (up to 50 ms later at 20 Hz; bench/bench_ro
 - ``geometry_msgs/Twist`` (or ``TwistStamped``, frame ``base_link``, stamped now) on
   ``--ros-cmd`` (``/cmd_vel``), reliable, keep last 10, every control cycle; in HOLD and ESTOP the
   controller's zero (or decelerating) command goes out like any other. ``close()`` publishes one
-  last zero twist and waits (at most 1 s) for the subscribers to acknowledge it before the node
+  last zero twist and waits (at most 3.5 s) for the subscribers to acknowledge it before the node
   goes.
-- The rclpy executor spins in its own thread. ``poll`` and ``send`` never wait on it: ``poll``
-  swaps two references under a lock the callbacks hold for no longer; ``send`` publishes.
+- The rclpy executor spins in its own thread (``egc_common.executor_thread``). ``poll`` and
+  ``send`` never wait on it: ``poll`` swaps two references under a lock the callbacks hold for
+  no longer; ``send`` publishes. ``close`` destroys the node only once that thread is out.
 - Nothing received can raise out of a callback: malformed scans and odometry are counted by
   reason and logged (rate-limited).
 
@@ -46,6 +47,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from egc_common.errors import UsageError
+from egc_common.executor_thread import ExecutorThread
+from egc_common.footprint import Footprint
 from egc_common.messages import BaseCommand, Odometry
 from egc_common.scan import Scan
 
@@ -78,6 +81,9 @@ _ACK_TIMEOUT_S = 3.5
 _DISCOVERY_GRACE_NS = 3_000_000_000
 # Header stamps within this of our ROS clock at arrival mean the sensor's clock agrees with ours.
 _CLOCKS_AGREE_NS = 1_000_000_000
+# The executor's thread leaves within one wait (0.1 s) plus the callback in progress (a robot
+# cycle, milliseconds); past this, something is stuck in a callback and the node stays.
+_STOP_PATIENCE_S = 10.0
 
 
 def require_rclpy() -> None:
@@ -98,14 +104,15 @@ class Ros2Driver:
         self,
         settings: Ros2Settings,
         node_name: str = NODE_NAME,
-        footprint_half_m: tuple[float, float] | None = None,
+        footprint_half_m: Footprint | tuple[float, float] | None = None,
         camera_topic: str | None = None,
         sources: tuple[SourceSpec, ...] = (),
         locks: tuple[LockSpec, ...] = (),
     ) -> None:
-        """``footprint_half_m``: the profile's half length and width, for ``-inf`` readings;
-        ``camera_topic``: an image topic for ``--camera ros2:TOPIC`` (``newest_image``);
-        ``sources`` and ``locks``: the ``ros2`` ones of DESIGN 14 (``set_input_listeners``)."""
+        """``footprint_half_m``: the profile's footprint (or a centred rectangle's half sizes),
+        for ``-inf`` readings; ``camera_topic``: an image topic for ``--camera ros2:TOPIC``
+        (``newest_image``); ``sources`` and ``locks``: the ``ros2`` ones of DESIGN 14
+        (``set_input_listeners``)."""
         self._footprint_half_m = footprint_half_m
         self._coverage_logged = False
         require_rclpy()
@@ -171,8 +178,8 @@ class Ros2Driver:
         except Exception:
             self._context.try_shutdown()
             raise
-        self._thread = threading.Thread(target=self._spin, name="ros2-executor", daemon=True)
-        self._thread.start()
+        self._spinner = ExecutorThread(self._executor, self._on_executor_error)
+        self._spinner.start()
         log.info(
             "ROS 2 node %s: scans %s, odometry %s, commands %s (%s); laser at %s",
             node.get_fully_qualified_name(),
@@ -185,12 +192,8 @@ class Ros2Driver:
 
     # -- the executor's thread --------------------------------------------------------------------
 
-    def _spin(self) -> None:
-        try:
-            self._executor.spin()
-        except Exception as exc:  # shutdown races end the spin with an exception; nothing to do
-            if not self._closed:
-                log.error("ROS 2 executor stopped: %s", exc)
+    def _on_executor_error(self, exc: Exception) -> None:
+        log.error("ROS 2 executor stopped: %s", exc)
 
     def _on_scan(self, msg: Any) -> None:
         rx_ns = time.monotonic_ns()
@@ -340,8 +343,9 @@ class Ros2Driver:
         self._publisher.publish(msg)
 
     def close(self) -> None:
-        """One last zero twist, acknowledged by the subscribers if they do so within 1 s (a
-        base that keeps its last command must not drive on), then the node goes."""
+        """One last zero twist, acknowledged by the subscribers if they do so within 3.5 s (a
+        base that keeps its last command must not drive on), then the node goes, once the
+        executor's thread is out."""
         from rclpy.duration import Duration
 
         with self._send_lock:
@@ -367,15 +371,20 @@ class Ros2Driver:
             rejected or "none",
             "unknown (the sensor's clock is not ours)" if age is None else f"{age / 1e6:.1f} ms",
         )
-        # The spinning thread must be out of the executor before the node goes: destroying a
-        # node under a running wait crashed the process (a segfault seen in a CI run).
+        # The executor's thread must be out before the node goes: destroying a node under a
+        # running wait crashed the process (issue 31). Still inside: leave it all to the exit.
+        if not self._spinner.stop(_STOP_PATIENCE_S):
+            log.error(
+                "the ROS 2 executor thread did not stop within %.0f s (a callback that does not "
+                "return); the node is left to the process's exit",
+                _STOP_PATIENCE_S,
+            )
+            return
         try:
-            self._executor.shutdown(timeout_sec=1.0)
-            self._thread.join(2.0)
+            self._executor.shutdown()
             self._node.destroy_node()  # type: ignore[no-untyped-call]
         finally:
             self._context.try_shutdown()
-            self._thread.join(2.0)
 
 
 _IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")

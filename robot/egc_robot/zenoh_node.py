@@ -92,11 +92,13 @@ class Recorder(Protocol):
 class CameraSink(Protocol):
     """What the budget needs of a camera streamer (``egc_robot.camera_stream``, DESIGN 12): an
     allotment it keeps to (frames/s and kbit/s; 0 fps: off), settable from any thread, and the
-    bytes it has sent so far (the view plane's count)."""
+    bytes and frames it has sent so far (the view plane's count; the summary's timeline)."""
 
     def set_allotment(self, fps: float, kbps: float) -> None: ...
     @property
     def bytes_sent(self) -> int: ...
+    @property
+    def frames_sent(self) -> int: ...
 
 
 # A telemetry message is due when the cycle is at most this early (cycles jitter by a little;
@@ -211,7 +213,7 @@ class RobotNode:
                     self._poll_driver(now)
                     self._cycle(now)
                     if verdict.latency_ns is not None and self._stats is not None:
-                        self._stats.on_latency(verdict.latency_ns)  # after the base command
+                        self._stats.on_latency(verdict.latency_ns, rx_ns)  # after the base command
             except Exception as exc:
                 self._fail_safe(exc)
 
@@ -410,6 +412,8 @@ class RobotNode:
         while not stop.wait(max(0, deadline - self._clock()) / 1e9):
             now = self._clock()
             with self._lock:
+                if self._stats is not None:  # how late the cycle starts (the lock included)
+                    self._stats.on_loop_start(self._clock() - deadline, period)
                 try:
                     self._poll_driver(now)
                     self._cycle(now)
@@ -516,20 +520,33 @@ class RobotNode:
         if cmd is None:
             return
         if self._stats is not None and cmd.camera_age_ms is not None:
-            self._stats.on_camera_age(cmd.camera_age_ms)
+            self._stats.on_camera_age(cmd.camera_age_ms, rx_ns)
         report = Report(
             view_age_ms=None if cmd.view_age_ms is None else float(cmd.view_age_ms),
             rx_kbps=None if cmd.rx_kbps is None else float(cmd.rx_kbps),
             camera_age_ms=None if cmd.camera_age_ms is None else float(cmd.camera_age_ms),
+            stamp_ns=cmd.stamp_ns if cmd.stamp_ns > 0 else None,
         )
-        self._budget = on_report(
-            self._budget,
+        before = self._budget
+        self._budget = after = on_report(
+            before,
             self._budget_cfg,
             report,
             rx_ns,
-            camera_fps=self._plan.camera_fps,
-            telemetry_hz=self._plan.telemetry_hz,
+            self._plan,
         )
+        if after.cuts > before.cuts and (held := self._events.allow("cut", rx_ns)) is not None:
+            camera = after.camera_queue_ms
+            log.info(
+                "downlink budget cut %.0f -> %.0f kbit/s: a queue of %.0f ms (camera's %s), "
+                "the operator received %s kbit/s%s",
+                before.budget_kbps,
+                after.budget_kbps,
+                after.queue_ms or 0.0,
+                "--" if camera is None else f"{camera:.0f} ms",
+                "--" if report.rx_kbps is None else f"{report.rx_kbps:.0f}",
+                f" (+{held} more cuts since the last line)" if held else "",
+            )
 
     def _replan(self, now: int) -> None:
         """Count the camera's bytes, let the budget probe, and apply its plan."""
@@ -540,7 +557,8 @@ class RobotNode:
             self._camera_bytes = sent
         sent_kbps = self._view_sent.kbps(now)
         if self._stats is not None:
-            self._stats.on_view_rate(now, sent_kbps)
+            frames = None if camera is None else camera.frames_sent
+            self._stats.on_view_rate(now, sent_kbps, self._budget.budget_kbps, frames)
         cfg = self._budget_cfg
         beams_max = self._controller.scan_beams_max
         if beams_max is not None and beams_max != cfg.max_beams:

@@ -354,3 +354,21 @@ def test_an_operator_whose_control_a_supervisor_took_is_told_who():
     assert situation(status_of(bob, taken, None, 1.0, True, episode=episode)).startswith(
         "WATCHING: sup"
     )
+
+
+def test_a_fleet_operator_s_line_names_the_driven_robot_and_the_others() -> None:
+    from egc_operator.status_line import FleetLine
+
+    out = io.StringIO()
+    fleet = [FleetLine("rb", "ra HOLD, rc IDLE")]
+    line = StatusLine(out, tty=False, fleet=lambda: fleet[0])
+    line.show(BASE, 0.0)
+    text = out.getvalue()
+    assert text.startswith("[rb] DRIVING") and text.rstrip().endswith("| fleet: ra HOLD, rc IDLE")
+    line.show(BASE, 0.1)
+    assert out.getvalue() == text  # nothing changed: no new plain line
+    fleet[0] = FleetLine("rc", "ra HOLD, rb HOLD")  # a switch prints at once
+    line.show(BASE, 0.2)
+    assert out.getvalue().count("\n") == 2 and "[rc]" in out.getvalue()
+    line.say("robots (3; * driven):")
+    assert out.getvalue().endswith("robots (3; * driven):\n")
