@@ -786,6 +786,7 @@ class RobotController:
                 filter_name=filter_name,
                 now_ns=now_ns,
                 memory=self._filter_memory,
+                loop_delay_s=tau_s,  # the source's own (cbf's delay-aware margin, DESIGN 13)
             )
             self._filter_memory = result.memory
             v, w, limiter = result.v_cmd_mps, result.w_cmd_radps, result.limiter
