@@ -29,11 +29,10 @@ from typing import Any
 import numpy as np
 from egc_common.cli_args import PROFILE_HELP, profile_arg
 from egc_common.profiles import get_profile
+from egc_experiments.log_replay import replay
 from egc_robot.replay_core import Replayer
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
-
-from egc_app.replay_cmd import replay
 
 RESULTS = Path(__file__).resolve().parent / "results"
 MAPPING1 = Path(__file__).resolve().parents[1] / ".." / "shared" / "bags" / "Mapping1.bag"

@@ -88,6 +88,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--json", metavar="FILE", help="also write the summary as JSON")
     parser.add_argument(
+        "--camera",
+        choices=("sim", "none"),
+        default=None,
+        help="the robot's camera (DESIGN 12): sim, the simulator's forward camera in the view, "
+        "or none (default: sim; none with --ros2, whose simulator publishes no images)",
+    )
+    parser.add_argument(
         "--ros2",
         action="store_true",
         help="ROS 2 in the loop: 'egc-teleop sim --ros2' as the robot's base and lidar, the "
@@ -149,6 +156,23 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"{summary.get('latency_limited_s', 0.0):.1f} s",
         f"  rejected        {summary.get('rejected') or 'none'}",
     ]
+    camera = summary.get("camera")
+    if camera:
+        lines.append(
+            f"  camera          {camera['codec']} {camera['width']}x{camera['height']}, "
+            f"{camera['frames_sent']} frames sent, {camera['fps']:g} frames/s, "
+            f"{camera['kbps']:g} kbit/s"
+        )
+    downlink = summary.get("downlink_kbps") or {}
+    if downlink.get("p50") is not None:  # DESIGN 12: what the view plane cost
+        view = (summary.get("view_age_ms") or {}).get("p50_ms")
+        lines.append(
+            f"  view plane      {downlink['p50']:.0f} kbit/s p50, {downlink['max']:.0f} max; "
+            f"telemetry {summary.get('telemetry_sent', 0)} messages of "
+            f"{summary.get('telemetry_bytes_mean') or 0:.0f} bytes; view age p50 "
+            f"{'n/a' if view is None else f'{view:.0f} ms'}; operator lost "
+            f"{summary.get('operator_lost', 0)} times while driving"
+        )
     return "\n".join(lines)
 
 
@@ -196,6 +220,11 @@ def check_arguments(args: argparse.Namespace) -> None:
         check_writable(args.save, "--save")
     if args.json is not None:  # now, not as a traceback once the whole demo has run
         check_writable(args.json, "--json")
+    if args.camera == "sim" and args.ros2:
+        raise UsageError(
+            "--camera sim needs the simulator in the robot process; with --ros2 the robot runs "
+            "--driver ros2 and the ROS 2 simulator publishes no images (use --camera none)"
+        )
     try:
         profile = get_profile(args.profile)
         load_script(args.script)
@@ -232,6 +261,7 @@ def run(args: argparse.Namespace) -> int:
     robot_cmd += ["--listen", endpoint, "--summary", str(summary_path)]
     if args.no_link_aware:
         robot_cmd.append("--no-link-aware")
+    robot_cmd += ["--camera", args.camera or ("none" if args.ros2 else "sim")]
     operator_cmd = ["operator", "--script", args.script, "--operator-id", "demo-operator"]
     operator_cmd += ["--zenoh-connect", operator_endpoint]
     if args.duration is not None:
@@ -255,6 +285,7 @@ def run(args: argparse.Namespace) -> int:
         base = _start(["sim", "--ros2", "--map", args.world, "--profile", args.profile], ros_env)
     robot = _start(robot_cmd, ros_env)
     relay: subprocess.Popen[bytes] | None = None
+    link_started_s: float | None = None
     operator: subprocess.Popen[bytes] | None = None
     try:
         if linked:
@@ -262,6 +293,7 @@ def run(args: argparse.Namespace) -> int:
             # listens on TCP, for Zenoh's reliable control link, on the same port).
             _wait_ready(robot, "127.0.0.1", int(endpoint.rsplit(":", 1)[1]))
             relay = _start(_link_cmd(args, operator_endpoint, endpoint))
+            link_started_s = time.monotonic()  # a scenario's time 0, on the robot's clock too
             _wait_ready(relay, "127.0.0.1", link_port)
         operator = _start(operator_cmd)
         while not stop.wait(0.1):
@@ -290,6 +322,10 @@ def run(args: argparse.Namespace) -> int:
     except (OSError, ValueError) as exc:
         print(f"demo: no robot summary ({exc})", file=sys.stderr)
         return 1
+    if link_started_s is not None:
+        # the view_timeline's t_s is on the same monotonic clock (DESIGN 12: how the budget
+        # followed a scenario's phases)
+        summary["link_started_s"] = round(link_started_s, 3)
     print(format_summary(summary), flush=True)
     if args.json is not None:
         try:  # checked before the start; the folder may have gone since

@@ -10,7 +10,8 @@ and ``/cmd_vel`` (``egc_robot.ros2_driver``, DESIGN 11).
 Configuration: defaults < ``--config FILE`` (TOML) < ``--set section.key=value`` < explicit
 flags. Tables and keys (units in the names):
 
-    [robot]    rate_hz, telemetry_scan_decimation
+    [robot]    rate_hz, telemetry_scan_decimation, telemetry_hz, downlink_kbps (a number of
+               kbit/s or "auto"; DESIGN 12; flags --telemetry-hz, --downlink-kbps)
     [safety]   max_command_age_s (direct mode), max_command_age_filtered_s, command_timeout_s,
                scan_timeout_s, release_timeout_s, centre_tolerance, require_clock_sync
     [link]     link_aware, resume_window_s, reaction_time_s, blind_time_direct_s,
@@ -20,6 +21,8 @@ flags. Tables and keys (units in the names):
     [sim]      scan_hz, beams, seed
     [ros2]     scan, odom, cmd, cmd_type, namespace, laser_pose ("X,Y,YAW" or [x, y, yaw]),
                laser_upside_down (flags --ros-scan ... --laser-upside-down override them)
+    [camera]   source ("sim", "ros2:TOPIC", "none"), size ("WxH"), fps, codec ("h264", "jpeg")
+               (DESIGN 12; flags --camera, --camera-size, --camera-fps, --camera-codec)
 
 ``pipeline.no_return_is_free`` unset (the default): each scan's sensor says whether a beam with no
 return means free. The simulator's lidar says so, the ROS 2 driver says so for REP 117 scans
@@ -60,6 +63,9 @@ from egc_common.transport import (
     options_from_args,
     serve_static,
 )
+from egc_common.view_budget import BudgetConfig
+from egc_robot.camera_config import CAMERA_KEYS, CameraConfig, camera_config
+from egc_robot.camera_stream import CameraStreamer
 from egc_robot.controller import ControllerConfig, RobotController
 from egc_robot.drivers import Driver, SensorUpdate
 from egc_robot.filters.assist import AssistParams
@@ -74,7 +80,7 @@ from egc_robot.zenoh_node import Recorder, RobotNode
 log = logging.getLogger("egc.robot")
 
 SECTIONS: dict[str, tuple[str, ...]] = {
-    "robot": ("rate_hz", "telemetry_scan_decimation"),
+    "robot": ("rate_hz", "telemetry_scan_decimation", "telemetry_hz", "downlink_kbps"),
     "safety": (
         "max_command_age_s",
         "max_command_age_filtered_s",
@@ -95,6 +101,7 @@ SECTIONS: dict[str, tuple[str, ...]] = {
     "pipeline": ("horizon_s", "gamma_v", "gamma_w", "no_return_is_free"),
     "sim": ("scan_hz", "beams", "seed"),
     "ros2": ROS2_KEYS,
+    "camera": CAMERA_KEYS,
 }
 ROBOT_TABLES = (*SECTIONS, "dwa", "assist")  # [dwa] and [assist] are checked by their params
 
@@ -113,6 +120,19 @@ class SimDriver:
 
     def send(self, command: BaseCommand) -> None:
         self._rt.set_command(command.linear_mps, command.angular_radps)
+
+    def camera_source(self, width_px: int, height_px: int) -> Any:
+        """``--camera sim``: a callable rendering the forward camera from the simulator's pose
+        now (DESIGN 12), stamped with the robot's monotonic clock; for the camera's thread."""
+        from egc_sim.camera import CameraModel, CameraRenderer
+
+        renderer = CameraRenderer(self._rt.sim.world, CameraModel(width_px, height_px))
+
+        def grab() -> tuple[Any, int]:
+            stamp = time.monotonic_ns()
+            return renderer.render(self._rt.sim.pose), stamp
+
+        return grab
 
     def close(self) -> None:
         if self._map_server is not None:
@@ -155,6 +175,21 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="turn link-aware driving off (one max command age, no short-gap resume, no latency "
         "governor), for comparisons; same as --set link.link_aware=false",
     )
+    parser.add_argument(
+        "--telemetry-hz",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="telemetry rate to the operators (DESIGN 12; default: 20; the downlink budget may "
+        "lower it to 5)",
+    )
+    parser.add_argument(
+        "--downlink-kbps",
+        default=None,
+        metavar="N|auto",
+        help="the view plane's budget in kbit/s (telemetry and camera), or auto: estimated from "
+        "what the operator reports (DESIGN 12; default: auto)",
+    )
     parser.add_argument("--start", metavar="X,Y,YAW", help="start pose for --driver sim")
     parser.add_argument("--config", metavar="FILE", help="robot TOML configuration")
     parser.add_argument(
@@ -192,7 +227,72 @@ def configure(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="the laser is mounted upside down (mirrors its sweep)",
     )
+    cam = parser.add_argument_group("camera (DESIGN 12; same keys in the config's [camera] table)")
+    cam.add_argument(
+        "--camera",
+        metavar="SOURCE",
+        help="sim (the simulator renders a forward camera; the default with --driver sim), "
+        "ros2:TOPIC (sensor_msgs/Image or CompressedImage, with --driver ros2) or none "
+        "(the default otherwise)",
+    )
+    cam.add_argument("--camera-size", metavar="WxH", help="largest picture sent (default 320x240)")
+    cam.add_argument(
+        "--camera-fps", type=float, metavar="N", help="most frames a second (default 10)"
+    )
+    cam.add_argument(
+        "--camera-codec", choices=("h264", "jpeg"), default=None, help="(default: h264)"
+    )
     add_zenoh_arguments(parser, default_listen=(DEFAULT_ENDPOINT,))
+
+
+def _camera_config(args: argparse.Namespace, cfg: dict[str, Any]) -> CameraConfig:
+    """``[camera]`` and the --camera flags, checked before anything opens (one line if bad)."""
+    flags = {
+        "source": args.camera,
+        "size": args.camera_size,
+        "fps": args.camera_fps,
+        "codec": args.camera_codec,
+    }
+    try:
+        return camera_config(config_mod.section(cfg, "camera", CAMERA_KEYS), flags, args.driver)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _open_camera(
+    config: CameraConfig, robot: str, session: Any, driver: Driver
+) -> tuple[CameraStreamer, Any] | None:
+    """The camera stream on ``egc/<robot>/camera`` (DESIGN 12), started, and the liveliness
+    subscriber that gives each new operator a keyframe at once; None for ``none``."""
+    from egc_robot.camera_stream import camera_publisher, keyframe_for_new_operators
+
+    if not config.enabled:
+        return None
+    if isinstance(driver, SimDriver):
+        source = driver.camera_source(config.width_px, config.height_px)
+    else:
+        source = driver.newest_image  # type: ignore[attr-defined]  # the Ros2Driver's
+    publisher = camera_publisher(session, keys.camera(robot))
+    streamer = CameraStreamer(source, publisher.put, config)
+    viewers = keyframe_for_new_operators(session, robot, streamer)
+    streamer.start()
+    what = config.source if config.topic is None else f"ros2 topic {config.topic}"
+    log.info(
+        "camera: %s, up to %dx%d at %g frames/s, %s",
+        what,
+        config.width_px,
+        config.height_px,
+        config.max_fps,
+        config.codec,
+    )
+    return streamer, viewers
+
+
+def _close_camera(streamer: CameraStreamer | None, viewers: Any) -> None:
+    if viewers is not None:
+        viewers.undeclare()
+    if streamer is not None:
+        streamer.close()
 
 
 def _number(table: dict[str, Any], key: str, default: float) -> float:
@@ -293,6 +393,35 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
         raise UsageError(str(exc)) from None
 
 
+def build_budget_config(args: argparse.Namespace, cfg: dict[str, Any]) -> BudgetConfig:
+    """DESIGN 12: ``--telemetry-hz`` / ``robot.telemetry_hz`` and ``--downlink-kbps`` /
+    ``robot.downlink_kbps`` (kbit/s or "auto")."""
+    try:
+        robot = config_mod.section(cfg, "robot", SECTIONS["robot"])
+    except config_mod.ConfigError as exc:
+        raise UsageError(str(exc)) from None
+    defaults = BudgetConfig()
+    hz = args.telemetry_hz
+    if hz is None:
+        hz = _number(robot, "telemetry_hz", defaults.telemetry_hz)
+    if not math.isfinite(hz) or not defaults.min_telemetry_hz <= hz <= 1000:
+        raise UsageError(
+            f"--telemetry-hz must be within [{defaults.min_telemetry_hz:g}, 1000], got {hz:g}"
+        )
+    raw = args.downlink_kbps if args.downlink_kbps is not None else robot.get("downlink_kbps")
+    kbps: float | None = None
+    if raw is not None and raw != "auto":
+        try:
+            kbps = float(raw) if not isinstance(raw, bool) else math.nan
+        except (TypeError, ValueError):
+            kbps = math.nan
+        if not (math.isfinite(kbps) and 1.0 <= kbps <= 1e7):
+            raise UsageError(
+                f"--downlink-kbps must be auto or a number of kbit/s in [1, 10000000], got {raw!r}"
+            )
+    return BudgetConfig(downlink_kbps=kbps, telemetry_hz=hz, min_telemetry_hz=min(5.0, hz))
+
+
 def _ros2_settings(
     args: argparse.Namespace, cfg: dict[str, Any], need_rclpy: bool = True
 ) -> Ros2Settings:
@@ -310,11 +439,11 @@ def _ros2_settings(
         "laser_upside_down": args.laser_upside_down,
     }
     try:
-        table = config_mod.section(cfg, "ros2", SECTIONS["ros2"])
-        laser = get_profile(args.profile).laser_pose
-        if laser is not None and "laser_pose" not in table:  # the profile's (DESIGN 14)
-            table = {**table, "laser_pose": list(laser)}
-        settings = ros2_settings(table, flags)
+        settings = ros2_settings(
+            config_mod.section(cfg, "ros2", SECTIONS["ros2"]),
+            flags,
+            default_laser_pose=get_profile(args.profile).laser_pose,
+        )
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     if need_rclpy:
@@ -322,14 +451,16 @@ def _ros2_settings(
     return settings
 
 
-def _open_driver(args: argparse.Namespace, cfg: dict[str, Any], session: Any) -> Driver:
+def _open_driver(
+    args: argparse.Namespace, cfg: dict[str, Any], session: Any, camera_topic: str | None = None
+) -> Driver:
     if args.driver == "ros2":
         from egc_robot.ros2_driver import Ros2Driver
 
         settings = _ros2_settings(args, cfg)
         try:
             footprint = get_profile(args.profile).footprint
-            return Ros2Driver(settings, footprint_half_m=footprint)
+            return Ros2Driver(settings, footprint_half_m=footprint, camera_topic=camera_topic)
         except Exception as exc:  # rclpy's own errors (e.g. ROS_DOMAIN_ID out of range)
             raise UsageError(f"cannot start the ROS 2 node: {exc}") from None
     if args.driver == "zenoh":
@@ -438,9 +569,11 @@ def run(args: argparse.Namespace) -> int:
     except config_mod.ConfigError as exc:
         raise UsageError(str(exc)) from None
     controller_config = build_controller_config(args, cfg)
+    budget_config = build_budget_config(args, cfg)
     # Bad ROS 2 flags are one line whatever the driver (a typo now, not on the day it runs on
     # --driver ros2); without rclpy only --driver ros2 stops.
     _ros2_settings(args, cfg, need_rclpy=args.driver == "ros2")
+    camera = _camera_config(args, cfg)
     if args.driver == "ros2":
         # DESIGN 11: a zero twist in HOLD; a ROS 2 base brakes at its own limits.
         controller_config = dataclasses.replace(controller_config, hold_ramp=False)
@@ -456,13 +589,15 @@ def run(args: argparse.Namespace) -> int:
     recorder = _open_recorder(args)  # a bad path: one line, before any session or driver opens
     session = open_session(options_from_args(args))
     try:
-        driver = _open_driver(args, cfg, session)
+        driver = _open_driver(args, cfg, session, camera.topic)
+        opened = _open_camera(camera, args.robot, session, driver)
     except BaseException:
         # The session's threads would keep the process alive, deaf to SIGTERM: close it.
         session.close()
         if recorder is not None:
             recorder.close()
         raise
+    streamer, viewers = (None, None) if opened is None else opened
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
@@ -476,15 +611,24 @@ def run(args: argparse.Namespace) -> int:
         recorder=recorder,
         stats=stats,
         clock_id=monotonic_clock_id(),
+        budget=budget_config
+        if streamer is None
+        else dataclasses.replace(budget_config, camera=True, camera_max_fps=camera.max_fps),
+        camera=streamer,
     )
     info = InfoServer(session, args.robot, _describer(args, node.controller))
     log.info(
-        "robot %r ready: driver %s, profile %s, filter %s, %.6g Hz",
+        "robot %r ready: driver %s, profile %s, filter %s, %.6g Hz, telemetry %.6g Hz, "
+        "downlink budget %s",
         args.robot,
         args.driver,
         args.profile,
         args.filter,
         rate_hz,
+        budget_config.telemetry_hz,
+        "auto"
+        if budget_config.downlink_kbps is None
+        else f"{budget_config.downlink_kbps:g} kbit/s",
     )
     # What exists now (modules, configuration, the session) lives as long as the process: keep
     # it out of the garbage collector's scans, so a collection in a control cycle stays short.
@@ -499,6 +643,7 @@ def run(args: argparse.Namespace) -> int:
         for what, step in (
             ("stop answering info queries", info.close),
             ("stop the node", node.shutdown),
+            ("stop the camera", lambda: _close_camera(streamer, viewers)),
             ("close the driver", driver.close),
             ("close the Zenoh session", session.close),
         ):
@@ -512,6 +657,8 @@ def run(args: argparse.Namespace) -> int:
         received, missing = node.controller.link_totals
         summary["seq_received"] = received
         summary["seq_missing"] = missing
+        if streamer is not None:
+            summary["camera"] = streamer.summary()  # DESIGN 12, pinned keys
         log.info("stopped: %s", json.dumps(summary))
         if args.summary:
             try:

@@ -23,6 +23,7 @@ import errno
 import os
 import re
 from pathlib import Path
+from typing import Any, NoReturn
 
 from egc_common.errors import UsageError
 from egc_common.profiles import PROFILES, ProfileError, load_profile
@@ -91,6 +92,20 @@ def numbers_are_values(parser: argparse.ArgumentParser) -> argparse.ArgumentPars
     """Make ``parser`` take ``-12.5,8.5,0`` as a value (see the module docstring)."""
     parser._negative_number_matcher = NEGATIVE_NUMBERS  # argparse's hook for this very check
     return parser
+
+
+class CliArgumentParser(argparse.ArgumentParser):
+    """The parser of every ``egc-teleop`` subcommand: bad arguments are one clear line on
+    stderr and exit code 2 (DESIGN 2), and values that start with a minus and a digit are
+    values, not options (``numbers_are_values``). Here, not in the console script, so that a
+    subcommand's parser can be built and checked without it (nothing imports ``egc_app``)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        numbers_are_values(self)
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
 def check_writable(path: str | Path, option: str) -> None:

@@ -92,3 +92,8 @@ def robot_id_from_key(key: str) -> str | None:
         except ValueError:
             return None
     return None
+
+
+def camera(robot: str) -> str:
+    """Robot -> operators, the camera's encoded frames (DESIGN 12, view plane)."""
+    return f"egc/{validate_id(robot)}/camera"

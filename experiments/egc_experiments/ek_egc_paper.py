@@ -3,7 +3,7 @@
 Runs DWA, EGC and EK-EGC on the built-in world ``ek_egc_paper`` (our reconstruction of the
 paper's scene, see ``docs/ek-egc-paper.md``) with the ``goal`` operator (the stick points at the
 goal; it cannot see obstacles) in shared mode, through the robot's own command pipeline
-(``egc_app.episode.run_settings``: the filter of DESIGN 6, the no-dead-lock rule, the profile
+(``egc_experiments.episode.run_settings``: the filter of DESIGN 6, the no-dead-lock rule, the profile
 limits and the footprint sweep). DWA gets the goal as its via point (its heading target); EGC
 and EK-EGC get the same profile, hence the same radii r_min and r_max.
 
@@ -32,7 +32,7 @@ from pathlib import Path
 from egc_common.cli_args import PROFILE_HELP, profile_arg
 from egc_sim.episodes import EpisodeResult
 
-from egc_app.episode import EpisodeSettings, run_settings
+from egc_experiments.episode import EpisodeSettings, run_settings
 
 SCENE = "ek_egc_paper"
 PROFILE = "pioneer3dx"

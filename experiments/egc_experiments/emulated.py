@@ -478,6 +478,7 @@ def run_emulated(point: RunPoint, workdir: Path, use_netns: bool | None = None) 
         "link_aware": point.link_aware,
         "latency_turn_cap": point.latency_turn_cap,
         "outages": [list(o) for o in point.outages],
+        "rate_kbps": point.rate_kbps,
         "dist": point.dist,
         "max_speed_mps": round(figures["max_speed_mps"], 4),
         "latency_limited_s": round(figures["latency_limited_s"], 3),

@@ -6,6 +6,8 @@ keep the stick, it resumes`` or ``SLOWED: link delay 1.3 s -> speed capped at 0.
 the link figures (``link_figures``: clock-sync round trip, the robot's command age p50/p90, the
 largest gap between commands, the loss), then w_SI, rejections, mode with the filter that runs
 (``shared (ek-egc)``, from telemetry ``filter``), the via points, deadman and control.
+The view plane (DESIGN 12, ``view_plane_text``) says what the link carries and what the robot's
+downlink budget cut: ``camera 2 fps, scan 90 beams: the link carries 190 kbit/s``.
 Every telemetry figure may be unknown (None: an older robot, or none measured yet); unknown
 figures are left out.
 
@@ -164,6 +166,8 @@ class Status:
     refused: RecentRejections | None = None
     # What the clock sync says besides the round trip (several repliers, disagreement).
     clock_note: str | None = None
+    # The view plane (DESIGN 12): ``view_plane_text`` of the newest telemetry and rx_kbps.
+    view_plane: str | None = None
 
 
 def _seconds(ms: float) -> str:
@@ -306,6 +310,32 @@ def link_figures(s: Status) -> str:
     return ", ".join(parts)
 
 
+def view_plane_text(t: Telemetry | None, rx_kbps: float | None = None) -> str | None:
+    """What the view plane carries and what the robot's downlink budget cut (DESIGN 12), e.g.
+    ``camera 2 fps, scan 90 beams: the link carries 190 kbit/s`` (after a cut, with the robot's
+    estimate of the link) or ``scan 180 beams: view 175 kbit/s`` (nothing cut: what this
+    operator receives, else what the robot sent). None when nothing is known (an older robot
+    and nothing counted)."""
+    rate = rx_kbps if rx_kbps is not None else (None if t is None else t.view_kbps)
+    if t is None or t.tel_hz is None:
+        return None if rate is None else f"view {rate:.0f} kbit/s"
+    parts = []
+    if t.cam_fps is not None:
+        parts.append("camera off" if t.cam_fps <= 0 else f"camera {t.cam_fps:.0f} fps")
+    if t.scan_n is not None:
+        parts.append(f"scan {t.scan_n} beams")
+    if "rate" in t.cut:
+        parts.append(f"telemetry {t.tel_hz:.0f} Hz")
+    if t.cut and t.link_kbps is not None:
+        carries = f"the link carries {t.link_kbps:.0f} kbit/s"
+    elif rate is not None:
+        carries = f"view {rate:.0f} kbit/s"
+    else:
+        carries = ""
+    head = ", ".join(parts)
+    return f"{head}: {carries}" if head and carries else head or carries or None
+
+
 def format_status(s: Status) -> str:
     w_si = "w_SI  --" if s.w_si is None else f"w_SI {s.w_si:4.2f}"
     rejected = "rejected --" if s.rejected is None else f"rejected {s.rejected}"
@@ -324,8 +354,9 @@ def format_status(s: Status) -> str:
             f" | REFUSED {s.refused.count} robot msgs in {REJECTIONS_SHOWN_S:.0f} s"
             f" ({s.refused.what}; {s.refused.total} in all)"
         )
+    view = "" if s.view_plane is None else f" | {s.view_plane}"
     return (
-        f"{situation(s)} | {link_figures(s)} | {w_si} | {rejected}{refused} | {mode}{via} | "
+        f"{situation(s)} | {link_figures(s)}{view} | {w_si} | {rejected}{refused} | {mode}{via} | "
         f"{deadman}{control}"
     )
 
@@ -430,6 +461,7 @@ def status_of(
     state_age_s: float | None = None,
     rejections: RecentRejections | None = None,
     clock_note: str | None = None,
+    rx_kbps: float | None = None,
 ) -> Status:
     """The status line's inputs from the newest messages (robot gone: none of its state, figures
     or round trip; telemetry older than TELEMETRY_STALE_S, or none since the robot appeared:
@@ -491,6 +523,7 @@ def status_of(
         no_telemetry_yet=no_telemetry_yet,
         refused=rejections,
         clock_note=clock_note,
+        view_plane=view_plane_text(t, rx_kbps) if robot_alive else None,
     )
 
 

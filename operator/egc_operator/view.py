@@ -45,6 +45,7 @@ from egc_common.errors import UsageError
 from egc_common.messages import StateMessage, Telemetry
 
 from egc_operator import view_blueprint as paths
+from egc_operator.camera_view import ShownFrame
 from egc_operator.prediction import (
     CommandHistory,
     Prediction,
@@ -107,6 +108,10 @@ PREDICTION_PERIOD_NS = 50_000_000  # the ghost is redrawn at most this often (ro
 # A recording that failed with less free space than this beside it: "the disk is full".
 FULL_DISK_BYTES = 1024 * 1024
 DOWNLINK_SAMPLES = 20  # telemetry arrivals in the downlink median
+CAMERA_STALE_OPACITY = 0.3  # a camera frame older than camera_view.STALE_AFTER_MS is dimmed
+CAMERA_LABEL_AT = (6.0, 6.0)  # the age line's anchor, in the picture's pixels
+CAMERA_FRESH_INK = (40, 160, 40)
+CAMERA_STALE_INK = (200, 40, 40)
 TEXT_LEVELS = {
     "trace": "TRACE",
     "debug": "DEBUG",
@@ -312,6 +317,8 @@ class OperatorView:
         self._present = True  # the robot's liveliness token (``on_robot_presence``)
         self._stale_drawn: tuple[str, str] | None = None  # the stale texts last drawn
         self._viewer_missing: str | None = None  # why the viewer cannot be reached, if not
+        self._camera_ns: int | None = None  # robot time of the camera's newest row
+        self._camera_stale = False
         self._watch_stop = threading.Event()
         self.save_path: Path | None = None  # the recording file, when the view is saved to one
         if recording is not None:
@@ -450,6 +457,48 @@ class OperatorView:
                 prediction,
             )
             rec.log(paths.LINK_TEXT, rr.TextDocument(text))
+
+    def on_camera(self, frame: ShownFrame, text: str, robot_now_ns: int | None) -> None:
+        """The robot's camera (DESIGN 12): the newest frame and its age line, logged at the
+        robot's time now (when it is shown; its capture time is in the line) and never before
+        the camera's previous row, so that the latest row is always the newest frame."""
+        with self._lock:
+            rec = self._rec
+            if rec is None:
+                return
+            self._set_camera_time(rec, robot_now_ns or frame.stamp_ns)
+            rec.log(
+                paths.CAMERA_IMAGE,
+                rr.EncodedImage(contents=frame.jpeg(), media_type="image/jpeg", opacity=1.0),
+            )
+            self._camera_stale = False
+            self._log_camera_text(rec, text, stale=False)
+
+    def on_camera_text(self, text: str, stale: bool, robot_now_ns: int | None) -> None:
+        """The age line again, as the shown frame grows older; ``stale``: dim the frame."""
+        with self._lock:
+            rec = self._rec
+            now = robot_now_ns or self._robot_now()
+            if rec is None or now is None or self._camera_ns is None:
+                return
+            self._set_camera_time(rec, now)
+            if stale != self._camera_stale:
+                opacity = CAMERA_STALE_OPACITY if stale else 1.0
+                rec.log(paths.CAMERA_IMAGE, rr.EncodedImage.from_fields(opacity=opacity))
+                self._camera_stale = stale
+            self._log_camera_text(rec, text, stale)
+
+    def _set_camera_time(self, rec: rr.RecordingStream, robot_ns: int) -> None:
+        self._camera_ns = max(robot_ns, self._camera_ns or 0)
+        _set_time(rec, self._camera_ns, self._cycle)
+
+    @staticmethod
+    def _log_camera_text(rec: rr.RecordingStream, text: str, stale: bool) -> None:
+        ink = CAMERA_STALE_INK if stale else CAMERA_FRESH_INK
+        rec.log(
+            paths.CAMERA_AGE,
+            rr.Points2D([CAMERA_LABEL_AT], radii=2.0, colors=ink, labels=[text], show_labels=True),
+        )
 
     def on_route(self, points: tuple[tuple[float, float], ...], frame: str) -> None:
         """The operator's via points (in order, in ``frame``); empty: none or cleared."""

@@ -3,7 +3,9 @@
 Layout (paper Fig. 8 as a Rerun blueprint)::
 
     +---------------------------+----------------------+------------------+
-    | robot frame {R}           | world frame          | v: ref vs sent   |
+    |                           | camera, its age      | v: ref vs sent   |
+    | robot frame {R}           +----------------------+                  |
+    |                           | world frame          |                  |
     | scan, footprint, circles, | map, trajectory,     | w: ref vs sent   |
     | command arrows, suggested | goal, via points,    | w_SI             |
     | direction, status         | robot, ghost         |                  |
@@ -58,6 +60,10 @@ PREDICTED_FOOTPRINT = "world/predicted/footprint"
 PREDICTED_HEADING = "world/predicted/heading"
 PREDICTED_PATH = "world/predicted/path"
 LINK_TEXT = "link"  # TextDocument: the link figures in plain numbers
+# The robot's camera (DESIGN 12): the newest frame (JPEG) and its age, in image pixels.
+CAMERA = "camera"
+CAMERA_IMAGE = "camera/image"
+CAMERA_AGE = "camera/age"
 
 PLOTS = "plots"  # + /v/ref, /v/cmd, /w/ref, /w/cmd, /w_si, /latency/...
 LINK_RTT = "plots/latency/link_rtt_ms"
@@ -138,10 +144,13 @@ def operator_blueprint(
                 row_shares=[3, 1],
             ),
             rrb.Vertical(
+                rrb.Spatial2DView(
+                    name="camera (newest frame, age on the robot's clock)", origin=CAMERA
+                ),
                 world_view,
                 rrb.TextDocumentView(name="link (plain numbers)", origin=LINK_TEXT),
                 rrb.TextLogView(name="log: state changes, rejections, link", origin=TEXT_LOG),
-                row_shares=[6, 2, 2],
+                row_shares=[4, 4, 2, 2],
             ),
             plots,
             column_shares=[4, 3, 3],

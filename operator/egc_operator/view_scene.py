@@ -26,7 +26,12 @@ from egc_common.messages import Circle, Telemetry
 from egc_common.profiles import PROFILES, RobotProfile
 
 from egc_operator.prediction import Prediction
-from egc_operator.status_line import TELEMETRY_STALE_S, held_still, latency_cap_text
+from egc_operator.status_line import (
+    TELEMETRY_STALE_S,
+    held_still,
+    latency_cap_text,
+    view_plane_text,
+)
 from egc_operator.via_route import Route, active_index
 
 F32 = npt.NDArray[np.float32]
@@ -543,6 +548,9 @@ def link_text(
     if t is not None and t.limiter == "latency":
         cap = latency_cap_text(t.v_lim_latency, t.w_lim_latency)
         lines.append(f"limit: latency - speed capped{cap}")
+    view_plane = view_plane_text(t)  # DESIGN 12: the same text as the status line's
+    if view_plane is not None:
+        lines.append(f"view plane: {view_plane}")
     if prediction is None:
         lines.append("ghost: no prediction (no pose, unknown profile or clock not synced)")
     else:

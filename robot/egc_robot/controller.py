@@ -57,6 +57,7 @@ from egc_common.messages import (
     decode_goal,
 )
 from egc_common.scan import ObstaclePoints, Scan
+from egc_common.scan_compact import PolarScan, compact
 
 from egc_robot.latency_governor import govern, latency_speed_limit, latency_turn_limit
 from egc_robot.link_stats import LinkStats
@@ -239,6 +240,9 @@ class RobotController:
         self._estop_pending = False
         self._scan: _Scan | None = None
         self._telemetry_xy: npt.NDArray[np.float32] | None = None  # of ``_scan``, when asked for
+        self._telemetry_polar: PolarScan | None = None  # ... its compact beams (DESIGN 12)
+        self._raw_scan: Scan | None = None  # the newest scan as it came, for the compact scan
+        self._telemetry_beams: int | None = None  # the downlink budget's scan beams (None: all)
         self._pose: tuple[float, float, float] | None = None
         self._map_pose: tuple[float, float, float] | None = None
         self._route = NO_ROUTE
@@ -422,7 +426,30 @@ class RobotController:
         if self._unreported is not None:
             self._report()
         self._scan = _Scan(scan.obstacles(), now_ns, scan.no_return_is_free)
+        self._raw_scan = scan
         self._telemetry_xy = None  # decimated for the telemetry when it is built
+        self._telemetry_polar = None
+
+    @property
+    def scan_beams_max(self) -> int | None:
+        """The most beams the telemetry's scan can have (the newest scan's beams over
+        ``telemetry_scan_decimation``), None before the first scan."""
+        raw = self._raw_scan
+        if raw is None:
+            return None
+        return max(1, -(-raw.ranges_m.size // self.config.telemetry_scan_decimation))
+
+    def set_telemetry_beams(self, beams: int | None) -> None:
+        """The most scan beams the telemetry may carry (the downlink budget's plan, DESIGN 12;
+        None: every beam the ``telemetry_scan_decimation`` leaves)."""
+        if beams is not None and beams < 1:
+            raise ValueError("beams must be >= 1")
+        if beams != self._telemetry_beams:
+            if self._unreported is not None:
+                self._report()  # the last cycle's telemetry keeps the scan it had
+            self._telemetry_beams = beams
+            self._telemetry_xy = None
+            self._telemetry_polar = None
 
     def on_odometry(self, odometry: Odometry) -> None:
         if self._unreported is not None:
@@ -635,12 +662,8 @@ class RobotController:
         scan = self._scan
         scan_xy = self._telemetry_xy
         if scan_xy is None:
-            if scan is None:
-                scan_xy = np.zeros((0, 2), np.float32)
-            else:
-                step = self.config.telemetry_scan_decimation
-                scan_xy = np.ascontiguousarray(scan.points.xy[::step], dtype=np.float32)
-                self._telemetry_xy = scan_xy
+            scan_xy, self._telemetry_polar = self._telemetry_scan()
+            self._telemetry_xy = scan_xy
         route = self._route
         # Guide circles for the view only from egc: ek-egc's live in the EK space, not in {R}.
         filtered = result.filtered if result is not None and result.filter_name == "egc" else None
@@ -696,7 +719,29 @@ class RobotController:
             suggested_rad=None
             if result is None or result.family is None
             else result.family.suggested_rad,
+            scan_polar=self._telemetry_polar,
         )
+
+    def _telemetry_scan(self) -> tuple[npt.NDArray[np.float32], PolarScan | None]:
+        """The newest scan for the telemetry: its beams compact (DESIGN 12) when they are evenly
+        spaced, then the points no beam holds; else its points as before. At most
+        ``n / telemetry_scan_decimation`` beams, fewer when the budget says so."""
+        raw, scan = self._raw_scan, self._scan
+        if raw is None or scan is None:
+            return np.zeros((0, 2), np.float32), None
+        beams = self.scan_beams_max or 1
+        if self._telemetry_beams is not None:
+            beams = min(beams, self._telemetry_beams)
+        polar = compact(raw, beams) if raw.ranges_m.size else None
+        if polar is None:
+            points = scan.points.xy
+            step = max(self.config.telemetry_scan_decimation, -(-len(points) // beams))
+            return np.ascontiguousarray(points[::step], dtype=np.float32), None
+        extra = raw.extra_xy_m
+        xy = polar.points()
+        if extra is not None and len(extra):
+            xy = np.concatenate((xy, np.asarray(extra, np.float32).reshape(-1, 2)))
+        return xy, polar
 
     def _reject(
         self, cmd: OperatorCommand | None, rejection: Rejection, now_ns: int

@@ -1,10 +1,11 @@
 """Replay of a recorded robot log through a filter of the family, as pure functions (DESIGN 11).
 
-``egc-teleop replay`` (``egc_app.replay_cmd``) reads the log and hands this module plain values:
-scans (``LogScan``), the commanded velocity (``VelocitySample``, from a Twist topic or derived
-here from odometry poses with ``velocities_from_poses``) and gets back, per scan, what the
-robot's own pipeline (``egc_robot.pipeline``) would have sent (``ScanVerdict``), and for the
-whole log the summary (``ReplaySummary``). No files, no clocks, no Rerun here.
+``egc-teleop replay`` (its engine ``egc_experiments.log_replay``) reads the log and hands this
+module plain values: scans (``LogScan``), the commanded velocity (``VelocitySample``, from a
+Twist topic or derived here from odometry poses with ``velocities_from_poses``) and gets back,
+per scan, what the robot's own pipeline (``egc_robot.pipeline``) would have sent
+(``ScanVerdict``), and for the whole log the summary (``ReplaySummary``). No files, no clocks,
+no Rerun here.
 
 Times. A log has two clocks: the recorder's receive time (``log_ns``, one clock for every
 topic) and each message's header stamp (``stamp_ns``, the sensor's or the driver's clock).

@@ -36,6 +36,8 @@ from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
 from egc_common.errors import UsageError
 from egc_common.footprint import Footprint
 from egc_common.messages import BaseCommand, Odometry
@@ -51,6 +53,7 @@ from egc_robot.ros2_core import (
     scan_from_laser,
     unseen_directions,
 )
+from egc_robot.ros2_image import rgb_from_compressed, rgb_from_image
 
 log = logging.getLogger("egc.robot.ros2")
 
@@ -89,8 +92,11 @@ class Ros2Driver:
         settings: Ros2Settings,
         node_name: str = NODE_NAME,
         footprint_half_m: Footprint | tuple[float, float] | None = None,
+        camera_topic: str | None = None,
     ) -> None:
-        """``footprint_half_m``: the profile's footprint (or a centred rectangle's half sizes), for ``-inf`` readings."""
+        """``footprint_half_m``: the profile's footprint (or a centred rectangle's half sizes),
+        for ``-inf`` readings; ``camera_topic``: an image topic for ``--camera ros2:TOPIC``
+        (``newest_image``)."""
         self._footprint_half_m = footprint_half_m
         self._coverage_logged = False
         require_rclpy()
@@ -118,6 +124,7 @@ class Ros2Driver:
         self._scan_listener: Callable[[], None] | None = None
         self._cmd_warning: str | None = None
         self._started_ns = time.monotonic_ns()
+        self._camera: _Ros2Camera | None = None
 
         # Our own context: rclpy installs no signal handlers (the robot process owns SIGINT and
         # SIGTERM, to send the last zero twist) and nothing global is touched.
@@ -143,6 +150,8 @@ class Ros2Driver:
             node.create_subscription(
                 OdometryMsg, settings.odom_topic, self._on_odometry, qos_profile_sensor_data
             )
+            if camera_topic is not None:
+                self._camera = _Ros2Camera(node, camera_topic)
             self._cmd_topic = node.resolve_topic_name(settings.cmd_topic)
             node.create_timer(1.0, self._check_cmd_subscribers)
             self._executor = SingleThreadedExecutor(context=self._context)
@@ -279,6 +288,11 @@ class Ros2Driver:
             age = self._header_age_ns
         return None if age is None else age / 1e6
 
+    def newest_image(self) -> tuple[npt.NDArray[np.uint8], int] | None:
+        """``--camera ros2:TOPIC``: the newest image as RGB and its arrival time (the robot's
+        monotonic clock), or None (no camera topic, nothing yet, or it did not convert)."""
+        return None if self._camera is None else self._camera.newest()
+
     def poll(self, now_ns: int) -> SensorUpdate:
         with self._lock:
             scan, rx_ns, odometry = self._scan, self._scan_rx_ns, self._odometry
@@ -340,3 +354,90 @@ class Ros2Driver:
         finally:
             self._context.try_shutdown()
             self._thread.join(2.0)
+
+
+_IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+
+
+class _Ros2Camera:
+    """``--camera ros2:TOPIC`` (DESIGN 12): the topic's type (``sensor_msgs/Image`` or
+    ``CompressedImage``) is taken from the ROS graph, looked up every 0.5 s until a publisher
+    appears, then subscribed with sensor-data QoS. The executor's thread only keeps the newest
+    message; it is converted (``egc_robot.ros2_image``) when the camera's thread asks for it,
+    so a large image never holds back a scan. Bad images are counted by reason and logged."""
+
+    def __init__(self, node: Any, topic: str) -> None:
+        from rclpy.qos import qos_profile_sensor_data
+        from sensor_msgs.msg import CompressedImage, Image
+
+        self._node = node
+        self._topic = node.resolve_topic_name(topic)
+        self._qos = qos_profile_sensor_data
+        self._classes = {_IMAGE_TYPES[0]: Image, _IMAGE_TYPES[1]: CompressedImage}
+        self._lock = threading.Lock()
+        self._latest: tuple[Any, int] | None = None
+        self._converted: tuple[Any, tuple[npt.NDArray[np.uint8], int] | None] | None = None
+        self._subscription: Any = None
+        self._wrong_type_said = False
+        self.received = 0
+        self.rejected: Counter[str] = Counter()
+        self._timer = node.create_timer(0.5, self._discover)
+        self._discover()
+
+    def _discover(self) -> None:
+        try:
+            if self._subscription is not None:
+                return
+            for name, types in self._node.get_topic_names_and_types():
+                if name != self._topic:
+                    continue
+                found = [t for t in types if t in self._classes]
+                if found:
+                    cls = self._classes[found[0]]
+                    self._subscription = self._node.create_subscription(
+                        cls, self._topic, self._on_image, self._qos
+                    )
+                    self._timer.cancel()
+                    log.info("camera: %s (%s)", self._topic, found[0])
+                elif not self._wrong_type_said:
+                    self._wrong_type_said = True
+                    log.warning(
+                        "camera topic %s is %s, not sensor_msgs/Image or CompressedImage",
+                        self._topic,
+                        ", ".join(types),
+                    )
+        except Exception as exc:  # never out of a callback
+            log.debug("camera topic lookup failed: %s", exc)
+
+    def _on_image(self, msg: Any) -> None:
+        rx_ns = time.monotonic_ns()
+        with self._lock:
+            self._latest = (msg, rx_ns)
+            self.received += 1
+
+    def newest(self) -> tuple[npt.NDArray[np.uint8], int] | None:
+        with self._lock:
+            latest = self._latest
+        if latest is None:
+            return None
+        if self._converted is not None and self._converted[0] is latest:
+            return self._converted[1]
+        msg, rx_ns = latest
+        if hasattr(msg, "format"):  # CompressedImage
+            result = rgb_from_compressed(str(msg.format), msg.data)
+        else:
+            result = rgb_from_image(
+                str(msg.encoding), msg.width, msg.height, msg.step, msg.is_bigendian, msg.data
+            )
+        out = None
+        if isinstance(result, Rejected):
+            self.rejected[result.reason] += 1
+            n = self.rejected[result.reason]
+            if n == 1 or n % 100 == 0:
+                log.warning(
+                    "dropped camera image (%s, %d so far): %s", result.reason, n, result.detail
+                )
+        else:
+            out = (result, rx_ns)
+        self._converted = (latest, out)
+        return out

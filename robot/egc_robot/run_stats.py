@@ -10,7 +10,16 @@
 - loop delay tau and the operator's view age while driving (percentiles, DESIGN 9);
 - time by state and limiter, from the telemetry stamps (cycles are not evenly spaced: an accepted
   command also runs one): ``hold_s`` and ``hold_events`` (entries into HOLD), ``latency_limited_s``
-  (the latency governor capped the speed, DESIGN 9), ``first_drive_ns``/``last_stamp_ns``.
+  (the latency governor capped the speed, DESIGN 9), ``first_drive_ns``/``last_stamp_ns``;
+- the view plane (DESIGN 12, pinned keys): ``downlink_kbps`` ``{"p50", "max"}`` of what the robot
+  sent per second (telemetry and camera; the first second of the run left out, the sum of a
+  sliding one-second window sampled once a second), ``camera_age_ms`` like ``view_age_ms`` from
+  the operators' reports (``{"n", "p50_ms", ...}``; n 0 without a camera), ``telemetry_sent``
+  and ``telemetry_bytes_mean`` (bytes a message), ``operator_lost`` (liveliness of the operator
+  in control lost: the session was lost, DESIGN 8); ``view_timeline``: per second of the robot's
+  monotonic clock (``t_s``, the same clock as every process's on this machine), the largest
+  ``view_age_ms`` reported while driving and the view plane's kbit/s (at most an hour of it):
+  how the budget followed a link that changed (DESIGN 12).
 """
 
 from __future__ import annotations
@@ -25,6 +34,7 @@ from egc_common.messages import Odometry, Telemetry
 from egc_robot.pipeline import INTERVENING_NAMES
 
 _MAX_LATENCIES = 1_000_000
+_MAX_TIMELINE_S = 3600
 
 
 class RunStats:
@@ -45,6 +55,13 @@ class RunStats:
         self._previous: Telemetry | None = None
         self._loop_delay_ms: list[float] = []
         self._view_age_ms: list[float] = []
+        self._camera_age_ms: list[float] = []
+        self._downlink_kbps: list[float] = []
+        self._rate_second: int | None = None
+        self.telemetry_sent = 0
+        self.telemetry_bytes = 0
+        self.operator_lost = 0
+        self._timeline: dict[int, dict[str, float]] = {}
 
     def on_cycle(self, telemetry: Telemetry) -> None:
         self.cycles += 1
@@ -65,6 +82,10 @@ class RunStats:
                 self._loop_delay_ms.append(telemetry.loop_delay_ms)
             if telemetry.view_age_ms is not None:
                 self._view_age_ms.append(telemetry.view_age_ms)
+                entry = self._second(telemetry.stamp_ns)
+                if entry is not None:
+                    age = max(entry.get("view_age_ms", 0.0), telemetry.view_age_ms)
+                    entry["view_age_ms"] = age
         limiting = telemetry.limiter in INTERVENING_NAMES
         if limiting:
             self.interventions += 1
@@ -81,6 +102,38 @@ class RunStats:
         if odometry.collided and not self._collided:
             self.collisions += 1
         self._collided = odometry.collided
+
+    def on_camera_age(self, age_ms: float) -> None:
+        """An accepted command's ``camera_age_ms`` (DESIGN 12)."""
+        if len(self._camera_age_ms) < _MAX_LATENCIES:
+            self._camera_age_ms.append(float(age_ms))
+
+    def on_view_rate(self, now_ns: int, kbps: float) -> None:
+        """The view plane's kbit/s over the last second, sampled once a second (the first second,
+        a partial window, is left out)."""
+        second = now_ns // 1_000_000_000
+        if self._rate_second is None:
+            self._rate_second = second + 1
+        elif second > self._rate_second and len(self._downlink_kbps) < _MAX_LATENCIES:
+            self._rate_second = second
+            self._downlink_kbps.append(kbps)
+            entry = self._second(now_ns)
+            if entry is not None:
+                entry["kbps"] = round(kbps, 1)
+
+    def _second(self, now_ns: int) -> dict[str, float] | None:
+        second = now_ns // 1_000_000_000
+        entry = self._timeline.get(second)
+        if entry is None and len(self._timeline) < _MAX_TIMELINE_S:
+            entry = self._timeline[second] = {}
+        return entry
+
+    def on_telemetry_sent(self, nbytes: int) -> None:
+        self.telemetry_sent += 1
+        self.telemetry_bytes += nbytes
+
+    def on_operator_lost(self) -> None:
+        self.operator_lost += 1
 
     def on_latency(self, latency_ns: int) -> None:
         if len(self._latencies_ms) < _MAX_LATENCIES:
@@ -102,7 +155,23 @@ class RunStats:
             "command_latency": latency,
             "loop_delay_ms": _percentiles(self._loop_delay_ms),
             "view_age_ms": _percentiles(self._view_age_ms),
+            "camera_age_ms": _percentiles(self._camera_age_ms),
+            "downlink_kbps": _rate_summary(self._downlink_kbps),
+            "telemetry_sent": self.telemetry_sent,
+            "telemetry_bytes_mean": round(self.telemetry_bytes / self.telemetry_sent, 1)
+            if self.telemetry_sent
+            else None,
+            "operator_lost": self.operator_lost,
+            "view_timeline": [{"t_s": t, **v} for t, v in sorted(self._timeline.items())],
         }
+
+
+def _rate_summary(values: list[float]) -> dict[str, float | None]:
+    """DESIGN 12's ``downlink_kbps``: ``{"p50", "max"}`` kbit/s (None before a whole second)."""
+    if not values:
+        return {"p50": None, "max": None}
+    arr = np.asarray(values, dtype=np.float64)
+    return {"p50": round(float(np.percentile(arr, 50)), 1), "max": round(float(arr.max()), 1)}
 
 
 def _percentiles(values: list[float]) -> dict[str, float | int | None]:

@@ -11,7 +11,14 @@ command, or the loop thread at each deadline. So there are
   hand-off (bench/bench_link.py measures publish-to-base latency),
 - and one whenever a driver that announces its scans (``set_scan_listener``: the ROS 2 driver)
   has a new one, in the driver's thread (bench/bench_ros2.py measures scan-to-``/cmd_vel``),
-- telemetry on every cycle (congestion DROP), state on change and at 1 Hz,
+- telemetry at ``telemetry_hz`` (DESIGN 12; default 20), from whichever cycle is due, never one
+  per accepted command (the immediate cycle on a command still runs; only its telemetry goes),
+  on the view plane (DATA, DROP); state on change and at 1 Hz on the control plane,
+- the downlink budget (DESIGN 12, ``egc_common.view_budget``): every accepted command's reports
+  (``view_age_ms``, ``rx_kbps``, ``camera_age_ms``) and the view plane's own byte count
+  (telemetry plus the camera's ``bytes_sent``) update it; each cycle its plan sets the telemetry
+  rate, the scan's beams and the camera's allotment (``CameraSink.set_allotment``), and the
+  telemetry carries the plan and the estimate, so the operator can say what the link carries,
 - the clock queryable ``egc/<robot>/clock`` answered straight from the callback,
 - the liveliness token ``egc/<robot>/alive/robot`` and a liveliness subscriber (with history)
   on ``egc/<robot>/alive/operator/*``,
@@ -29,6 +36,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Protocol
 
 import zenoh
@@ -36,11 +44,28 @@ from egc_common import keys
 from egc_common.event_log import EventLog
 from egc_common.messages import BaseCommand, StateMessage, encode_clock_reply
 from egc_common.scan import Scan
-from egc_common.transport import data_publisher, payload_bytes
+from egc_common.transport import (
+    CONTROL_REPLY,
+    control_publisher,
+    payload_bytes,
+    view_publisher,
+)
+from egc_common.view_budget import (
+    BudgetConfig,
+    BudgetState,
+    Plan,
+    RateMeter,
+    Report,
+    initial_state,
+    on_cycle,
+    on_report,
+    plan,
+)
 
-from egc_robot.controller import CommandVerdict, RobotController
+from egc_robot.controller import CommandVerdict, CycleOutput, RobotController
 from egc_robot.drivers import Driver
 from egc_robot.run_stats import RunStats
+from egc_robot.state_machine import LINK_REASONS, State
 
 log = logging.getLogger("egc.robot")
 
@@ -57,6 +82,23 @@ class Recorder(Protocol):
     def on_scan(self, scan: Scan, now_ns: int) -> None: ...
     def on_state(self, state: StateMessage) -> None: ...
     def close(self) -> None: ...
+
+
+class CameraSink(Protocol):
+    """What the budget needs of a camera streamer (``egc_robot.camera_stream``, DESIGN 12): an
+    allotment it keeps to (frames/s and kbit/s; 0 fps: off), settable from any thread, and the
+    bytes it has sent so far (the view plane's count)."""
+
+    def set_allotment(self, fps: float, kbps: float) -> None: ...
+    @property
+    def bytes_sent(self) -> int: ...
+
+
+# A telemetry message is due when the cycle is at most this early (cycles jitter by a little;
+# the next one may be a whole period later).
+_TELEMETRY_SLACK_NS = 5_000_000
+# Telemetry overhead (every key but the scan's beams) the plan assumes before it measured one.
+_TELEMETRY_OVERHEAD_BYTES = 700.0
 
 
 class RejectionLog:
@@ -95,6 +137,8 @@ class RobotNode:
         stats: RunStats | None = None,
         clock: Callable[[], int] = time.monotonic_ns,
         clock_id: str | None = None,
+        budget: BudgetConfig | None = None,
+        camera: CameraSink | None = None,
     ) -> None:
         self._controller = controller
         self._driver = driver
@@ -109,8 +153,20 @@ class RobotNode:
         self._shut_down = False  # set under the lock: the zero command sent last stays last
         self._rejections = RejectionLog()
         self._events = EventLog()
-        self._telemetry = data_publisher(session, keys.telemetry(robot_id))
-        self._state = data_publisher(session, keys.state(robot_id))
+        self._budget_cfg = budget if budget is not None else BudgetConfig()
+        if camera is not None and not self._budget_cfg.camera:
+            self._budget_cfg = replace(self._budget_cfg, camera=True)
+        self._budget: BudgetState = initial_state(self._budget_cfg)
+        self._camera = camera
+        self._camera_bytes = 0 if camera is None else camera.bytes_sent
+        self._view_sent = RateMeter()  # the view plane's bytes, for the budget and telemetry
+        self._overhead_bytes = _TELEMETRY_OVERHEAD_BYTES
+        self._plan: Plan = plan(self._budget, self._budget_cfg, self._overhead_bytes)
+        self._allotment: tuple[float, float] | None = None
+        self._next_telemetry_ns: int | None = None
+        self.telemetry_sent = 0
+        self._telemetry = view_publisher(session, keys.telemetry(robot_id))
+        self._state = control_publisher(session, keys.state(robot_id))
         liveliness = session.liveliness()
         self._token = liveliness.declare_token(keys.alive_robot(robot_id))
         self._entities = [
@@ -144,6 +200,7 @@ class RobotNode:
             try:
                 verdict = self._handle_command(payload, rx_ns)
                 if verdict.accepted:
+                    self._on_report(verdict, rx_ns)
                     now = self._clock()
                     self._poll_driver(now)
                     self._cycle(now)
@@ -204,7 +261,14 @@ class RobotNode:
         alive = sample.kind == zenoh.SampleKind.PUT
         with self._lock:
             in_control = self._controller.operator
+            # Lost while it drove (or held on the link alone): not an operator that released
+            # the deadman and closed, as a finished script does.
+            driving = self._controller.state is State.DRIVING or self._controller.reason in (
+                LINK_REASONS
+            )
             self._controller.on_operator_alive(operator_id, alive)
+            if not alive and operator_id == in_control and driving and self._stats is not None:
+                self._stats.on_operator_lost()
         # The operator in control always gets its line; others at most one a second.
         held = 0 if operator_id == in_control else self._events.allow("alive", self._clock())
         if held is not None:
@@ -243,7 +307,8 @@ class RobotNode:
 
     def _on_clock_query(self, query: zenoh.Query) -> None:
         try:
-            query.reply(query.key_expr, encode_clock_reply(self._clock(), self._clock_id))
+            reply = encode_clock_reply(self._clock(), self._clock_id)
+            query.reply(query.key_expr, reply, **CONTROL_REPLY)  # control plane (DESIGN 12)
         except Exception as exc:  # a querier that went away must not kill the callback
             log.debug("clock reply failed: %s", exc)
 
@@ -344,10 +409,89 @@ class RobotNode:
             if self._stats is not None:
                 self._stats.on_odometry(update.odometry)
 
+    @property
+    def plan(self) -> Plan:
+        """The downlink budget's current plan (DESIGN 12)."""
+        return self._plan
+
+    def _on_report(self, verdict: CommandVerdict, rx_ns: int) -> None:
+        """An accepted command's reports go to the downlink budget (DESIGN 12)."""
+        cmd = verdict.command
+        if cmd is None:
+            return
+        if self._stats is not None and cmd.camera_age_ms is not None:
+            self._stats.on_camera_age(cmd.camera_age_ms)
+        report = Report(
+            view_age_ms=None if cmd.view_age_ms is None else float(cmd.view_age_ms),
+            rx_kbps=None if cmd.rx_kbps is None else float(cmd.rx_kbps),
+            camera_age_ms=None if cmd.camera_age_ms is None else float(cmd.camera_age_ms),
+        )
+        self._budget = on_report(
+            self._budget,
+            self._budget_cfg,
+            report,
+            rx_ns,
+            camera_fps=self._plan.camera_fps,
+            telemetry_hz=self._plan.telemetry_hz,
+        )
+
+    def _replan(self, now: int) -> None:
+        """Count the camera's bytes, let the budget probe, and apply its plan."""
+        camera = self._camera
+        if camera is not None:
+            sent = camera.bytes_sent
+            self._view_sent.add(now, sent - self._camera_bytes)
+            self._camera_bytes = sent
+        sent_kbps = self._view_sent.kbps(now)
+        if self._stats is not None:
+            self._stats.on_view_rate(now, sent_kbps)
+        cfg = self._budget_cfg
+        beams_max = self._controller.scan_beams_max
+        if beams_max is not None and beams_max != cfg.max_beams:
+            cfg = self._budget_cfg = replace(cfg, max_beams=beams_max)
+        self._budget = on_cycle(self._budget, cfg, now, sent_kbps)
+        self._plan = plan(self._budget, cfg, self._overhead_bytes)
+        self._controller.set_telemetry_beams(self._plan.scan_beams)
+        allotment = (self._plan.camera_fps, self._plan.camera_kbps)
+        if camera is not None and allotment != self._allotment:
+            camera.set_allotment(*allotment)
+            self._allotment = allotment
+
+    def _publish_telemetry(self, out: CycleOutput, now: int) -> None:
+        """The cycle's telemetry, if one is due (``telemetry_hz`` as the plan says)."""
+        due = self._next_telemetry_ns
+        if due is not None and now < due - _TELEMETRY_SLACK_NS:
+            return
+        p = self._plan
+        state = self._budget
+        t = replace(
+            out.telemetry,
+            view_kbps=round(self._view_sent.kbps(now), 1),
+            budget_kbps=round(p.budget_kbps, 1),
+            link_kbps=None if state.link_kbps is None else round(state.link_kbps, 1),
+            tel_hz=round(p.telemetry_hz, 2),
+            scan_n=p.scan_beams,
+            cam_fps=round(p.camera_fps, 2) if self._camera is not None else None,
+            cam_kbps=round(p.camera_kbps, 1) if self._camera is not None else None,
+            cut=p.cut,
+        )
+        payload = t.encode()
+        self._telemetry.put(payload)
+        self.telemetry_sent += 1
+        if self._stats is not None:
+            self._stats.on_telemetry_sent(len(payload))
+        self._view_sent.add(now, len(payload))
+        polar = t.scan_polar
+        scan_bytes = 2 * polar.beams if polar is not None else 8 * len(t.scan_xy)
+        self._overhead_bytes += 0.1 * (len(payload) - scan_bytes - self._overhead_bytes)
+        period = round(1e9 / p.telemetry_hz)
+        self._next_telemetry_ns = max((now if due is None else due) + period, now + period // 2)
+
     def _cycle(self, now: int) -> None:
         out = self._controller.step(now)
         self._driver.send(out.base)
-        self._telemetry.put(out.telemetry.encode())
+        self._replan(now)
+        self._publish_telemetry(out, now)
         if self._recorder is not None:
             self._recorder.on_base_command(out.base)
         if self._stats is not None:

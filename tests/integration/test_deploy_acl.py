@@ -12,6 +12,7 @@ reading; ``test_deploy_tls.py`` checks the same rules on a running router.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -23,22 +24,22 @@ ACL_FILE = ROOT / "deploy" / "router-tls-acl.json5"
 IN, OUT = "ingress", "egress"
 
 
-def load_acl() -> dict[str, Any]:
-    acl: dict[str, Any] = json.loads(
-        zenoh.Config.from_file(str(ACL_FILE)).get_json("access_control")
-    )
+def load_acl(path: Path = ACL_FILE) -> dict[str, Any]:
+    acl: dict[str, Any] = json.loads(zenoh.Config.from_file(str(path)).get_json("access_control"))
     return acl
 
 
 ACL = load_acl()
 
 
-def allowed(cn: str, message: str, flow: str, key: str) -> bool:
-    subjects = {s["id"] for s in ACL["subjects"] if cn in (s.get("cert_common_names") or [])}
-    rule_ids = {r for p in ACL["policies"] if subjects & set(p["subjects"]) for r in p["rules"]}
-    verdict = ACL["default_permission"] == "allow"
+def allowed(cn: str, message: str, flow: str, key: str, acl: dict[str, Any] | None = None) -> bool:
+    """Whether ``acl`` (default: router-tls-acl.json5's) lets common name ``cn`` do it."""
+    acl = ACL if acl is None else acl
+    subjects = {s["id"] for s in acl["subjects"] if cn in (s.get("cert_common_names") or [])}
+    rule_ids = {r for p in acl["policies"] if subjects & set(p["subjects"]) for r in p["rules"]}
+    verdict = acl["default_permission"] == "allow"
     wanted = zenoh.KeyExpr(key)
-    for rule in ACL["rules"]:
+    for rule in acl["rules"]:
         if rule["id"] not in rule_ids:
             continue
         if message not in rule["messages"] or flow not in rule["flows"]:
@@ -103,6 +104,13 @@ CASES = [
     ("robot-1", "reply", IN, f"{R1}/clock", True),
     ("robot-1", "reply", IN, "egc/sim/clock", False),
     ("operator-1", "reply", IN, f"{R1}/clock", False),
+    # the info (egc-teleop robots, DESIGN 15): likewise
+    ("operator-2", "query", IN, f"{R1}/info", True),
+    ("robot-1", "query", OUT, f"{R1}/info", True),
+    ("robot-1", "reply", IN, f"{R1}/info", True),
+    ("operator-2", "reply", OUT, f"{R1}/info", True),
+    ("robot-1", "reply", IN, "egc/sim/info", False),
+    ("operator-1", "reply", IN, f"{R1}/info", False),
     # a certificate of the project CA whose common name is in no subject: nothing
     ("intruder", "put", IN, f"{R1}/cmd", False),
     ("intruder", "put", OUT, f"{R1}/telemetry", False),

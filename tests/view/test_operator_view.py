@@ -83,7 +83,8 @@ def test_the_file_carries_the_default_layout(recording_path) -> None:  # type: i
             origin = batch.column("ViewBlueprint:space_origin").to_pylist()[0][0]
             views.setdefault(kind, set()).add(origin)
     assert views == {
-        "2D": {"/"},  # robot frame and world frame (each selects its subtree)
+        # robot frame and world frame (each selects its subtree), the camera (DESIGN 12)
+        "2D": {"/", paths.CAMERA},
         "StateTimeline": {paths.LANES},
         "TextLog": {paths.TEXT_LOG},
         "TextDocument": {paths.LINK_TEXT},  # the link figures in plain numbers
