@@ -126,3 +126,25 @@ def test_the_profiles_laser_pose_is_the_ros2_default():
     flags = {"laser_pose": "0.3,0,0"}
     assert ros2_settings(table, flags, default_laser_pose=mounted).laser.x_m == 0.3
     assert ros2_settings({}, {}).laser.x_m == 0.0
+
+
+def test_a_recorded_episode_draws_the_files_shape(tmp_path):
+    """episode --record with a profile file: the view in that process knows the file's
+    profile by the name telemetry carries, and draws its outline (the pentagon's nose)."""
+    from tests.view.rrd import read_recording
+
+    rrd = tmp_path / "pentagon.rrd"
+    argv = ["episode", "--map", "hallway", "--profile", str(PENTAGON_FILE), "--max-time", "2"]
+    assert main([*argv, "--record", str(rrd)]) == 0
+    strips = read_recording(rrd)["/robot/footprint"].column("LineStrips2D:strips")
+    outline = [p for p in strips[0][0]]
+    assert len(outline) == 6 and max(x for x, _ in outline) == pytest.approx(0.35)
+
+
+def test_profile_named_knows_loaded_files():
+    from egc_common.profiles import PIONEER3DX, load_profile, profile_named
+
+    assert profile_named("pioneer3dx") is PIONEER3DX
+    loaded = load_profile(str(L_SHAPE_FILE))
+    assert profile_named("l-shape") is loaded
+    assert profile_named("no-such-robot") is None
