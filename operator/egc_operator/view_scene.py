@@ -24,7 +24,8 @@ import numpy as np
 import numpy.typing as npt
 from egc_common.footprint import mitred_outline
 from egc_common.messages import Circle, Telemetry
-from egc_common.profiles import PROFILES, RobotProfile
+from egc_common.profiles import RobotProfile
+from egc_common.profiles import profile_named as known_profile
 
 from egc_operator.prediction import Prediction
 from egc_operator.status_line import (
@@ -104,8 +105,9 @@ FALLBACK_HORIZON_S = 1.0
 
 
 def profile_named(name: str) -> RobotProfile | None:
-    """The pinned profile of that name, or None when the telemetry names none we know."""
-    return PROFILES.get(name)
+    """The profile of that name (a built-in, or one this process loaded from a file, DESIGN
+    14), or None when the telemetry names none we know."""
+    return known_profile(name)
 
 
 def drawable_circle(circle: Circle | None) -> Circle | None:
