@@ -98,7 +98,7 @@ class LockSpec:
 
 @dataclass(frozen=True, slots=True)
 class MuxConfig:
-    """The robot's sources (kept highest priority first) and locks."""
+    """The robot's sources (kept highest priority first) and locks (likewise, then by name)."""
 
     sources: tuple[SourceSpec, ...]
     locks: tuple[LockSpec, ...] = ()
@@ -124,6 +124,10 @@ class MuxConfig:
             raise ValueError("at most one source of kind operator (it stands for all operators)")
         ordered = tuple(sorted(self.sources, key=lambda s: -s.priority))
         object.__setattr__(self, "sources", ordered)
+        # Locks may share a priority: of two active ones the verdict names the first by name,
+        # whatever the order of the file.
+        locks = tuple(sorted(self.locks, key=lambda k: (-k.priority, k.name)))
+        object.__setattr__(self, "locks", locks)
 
     def source(self, name: str | None) -> SourceSpec | None:
         return next((s for s in self.sources if s.name == name), None)

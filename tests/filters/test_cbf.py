@@ -17,6 +17,8 @@ from egc_common.footprint import Footprint, signed_distance
 from egc_common.profiles import JACKAL, PIONEER3DX, TURTLEBOT4, RobotProfile
 from egc_common.scan import obstacle_points
 from egc_robot.filters.cbf import (
+    CREEP_BELOW,
+    CREEP_PER_S,
     PATH_POWER,
     CbfCase,
     CbfParams,
@@ -81,9 +83,12 @@ def barrier_rows(
         room = sd - params.margin_m
         u_now = max(approach(v_now, w_now), 0.0)
         m_state = omega(v_now, w_now) * k_now * u_now
-        rows.append((-nx, b, -params.alpha_per_s * max(room - m_state, 0.0)))  # (S)
+        reach_u = abs(nx) * profile.v_max_mps + abs(b) * profile.w_max_radps
+        creep = CREEP_PER_S * max(1.0 - reach_u / (CREEP_BELOW * profile.v_max_mps), 0.0)
+        creep *= max(sd, 0.0)
+        rows.append((-nx, b, -max(params.alpha_per_s * (room - m_state), creep)))  # (S)
         gain = 1.0 + params.alpha_per_s * k_cmd * omega(v_ref, w_ref)
-        rows.append((-gain * nx, gain * b, -params.alpha_per_s * max(room, 0.0)))  # (C)
+        rows.append((-gain * nx, gain * b, -max(params.alpha_per_s * room, creep)))  # (C)
     return rows
 
 

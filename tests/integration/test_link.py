@@ -97,12 +97,21 @@ def test_outside_code_drives_a_robot_started_alone(port, procs, observer, tmp_pa
         observer.put_cmd(observer.command(seq, time.monotonic_ns() + offset, x=x, y=0.0))
         time.sleep(0.02)
     wait_full_speed(observer, timeout_s=10)
+    # Telemetry goes out at telemetry_hz, not per command (DESIGN 12): the newest command is the
+    # one in use in the first telemetry after it arrived, whether or not the robot still drives.
+    observer.wait_for(
+        "telemetry of command 80",
+        lambda: any(t.seq == 80 for t in observer.telemetry()),
+        10,
+    )
     raw = [m for _, t, m in observer.rec.telemetry if t.state == "DRIVING"]
     assert raw, "no DRIVING telemetry"
     for key, kind in PINNED_TELEMETRY.items():
         assert all(isinstance(m[key], kind) for m in raw), key
+    assert max(m["seq"] for m in raw) > 70  # drove on the commands of the end of the stream
+    assert [m["seq"] for m in raw] == sorted(m["seq"] for m in raw)
     last = raw[-1]
-    assert last["v"] == 1 and last["mode"] == "shared" and last["seq"] == 80
+    assert last["v"] == 1 and last["mode"] == "shared"
     assert last["v_ref"] == pytest.approx(V_MAX) and last["v_cmd"] == pytest.approx(V_MAX)
     assert last["w_si"] == 1.0 and last["operator"] == "outside"
     assert last["rejected"] == 0
@@ -180,15 +189,16 @@ def test_operator_clock_an_hour_off_still_drives(port, procs, observer, tmp_path
     assert ages and ages[len(ages) // 2] < 30, ages  # the stamps are right despite the hour
     assert driving[-1].rejected == 0
     # A steady stick is still published at 50 Hz: the robot applies a new seq with every
-    # command (telemetry carries the seq of the command each cycle used; one cycle per
-    # command). One second on the robot's clock: at most 55 seqs (not faster than 50 Hz), and
-    # at least 25 applied (a busy machine skips late cycles of the operator's loop and drops
-    # telemetry; an operator that sent only changes would send none).
+    # command, and telemetry (at telemetry_hz, 20 by default: DESIGN 12) carries the seq of the
+    # command its cycle used. One second on the robot's clock: the seqs span at most 55 (not
+    # faster than 50 Hz) and at least 25 (a busy machine skips late cycles of the operator's
+    # loop; an operator that sent only changes would send none), seen in at least 10 telemetry
+    # messages.
     since = time.monotonic_ns()
     until = since + 1_000_000_000
     observer.wait_for("a second of telemetry", lambda: observer.telemetry(until), 10)
     seqs = sorted({t.seq for t in observer.telemetry(since) if since <= t.stamp_ns <= until})
-    assert len(seqs) >= 25 and seqs[-1] - seqs[0] <= 55, seqs
+    assert len(seqs) >= 10 and 25 <= seqs[-1] - seqs[0] <= 55, seqs
     # Without clock sync the same hour makes every command stale: rejected, counted, logged.
     before = observer.last_telemetry().rejected
     for seq in range(1, 11):

@@ -23,6 +23,7 @@ the TCP half on the same port numbers, without loss).
 from __future__ import annotations
 
 import json
+import math
 import threading
 import time
 from pathlib import Path
@@ -100,10 +101,15 @@ def test_udp_through_a_lossy_relay(port, procs, observer, tmp_path):
     assert procs.stop("op") == 0, procs.log("op")
     assert procs.stop("link") == 0, procs.log("link")
     report = json.loads(stats.read_text())
+    # Uplink: 50 commands/s; downlink: telemetry at 20 Hz (DESIGN 12) and the session's own
+    # traffic. Each direction drops its datagrams at 5 %: within 4 standard deviations of the
+    # binomial count (a bound that does not depend on how many the test happened to send).
     for direction in ("up", "down"):
         d = report[direction]
-        assert d["forwarded"] > 200 and d["dropped"] > 0, report
-        assert 2.0 < d["loss_pct"] < 10.0, report
+        n = d["forwarded"] + d["dropped"]
+        assert n >= 100, report
+        assert abs(d["dropped"] - 0.05 * n) <= 4.0 * math.sqrt(0.05 * 0.95 * n) + 1.0, report
+    assert report["up"]["dropped"] + report["down"]["dropped"] > 0, report
     finish(procs, observer)
 
 

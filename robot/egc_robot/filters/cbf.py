@@ -34,20 +34,31 @@ beyond which nothing is known to be free):
   0.2 m (the careful drives of DESIGN 13) whatever alpha; with the 4th power it passes at the
   default alpha and margin.
 - Condition, per point: dh_i/dt >= -alpha h_i with the margin held for the cycle, i.e.
-  u_i(v, w) <= alpha max(h_i, 0). Inside the margin (h_i <= 0) this asks for no further approach
-  instead of the recovery a textbook barrier demands: a filter that drove the robot away from a
-  wall on its own, with the operator's stick centred, would break DESIGN 1 (nothing from the
-  operator's side can make the robot move more than asked; here: the filter never adds motion
-  the QP's closeness does not justify). So the zero command is always feasible: the filter can
-  always stop, and any motion that approaches no point (moving away) is never refused.
+  u_i(v, w) <= max(alpha h_i, kappa_i sd_i^+). Inside the margin (h_i <= 0) this asks for no
+  further approach (kappa_i = 0, below) instead of the recovery a textbook barrier demands: a
+  filter that drove the robot away from a wall on its own, with the operator's stick centred,
+  would break DESIGN 1 (nothing from the operator's side can make the robot move more than
+  asked; here: the filter never adds motion the QP's closeness does not justify). So the zero
+  command is always feasible: the filter can always stop, and any motion that approaches no
+  point (moving away) is never refused.
+- kappa_i, the creep: "no further approach" is a row a v + b w >= 0 through the origin, and
+  for a point beside the middle of the footprint's flank its normal (a, b) = (-n_x, b_i)
+  shrinks to zero and flips as the point passes: the allowed turn jumped between none and
+  full (the continuity property test found it). So rows that no command in the box can make
+  approach faster than ``CREEP_BELOW`` x v_max (U_i = |n_x| v_max + |b_i| w_max small) get a
+  creep kappa_i = ``CREEP_PER_S`` x (1 - U_i / (``CREEP_BELOW`` v_max))^+: their turn limit
+  kappa_i sd_i / |b_i| then grows without bound as b_i goes to zero and follows the point
+  continuously. Such a point is approached at a few mm/s at most, and its distance decays
+  at most exponentially (never to contact); every other row keeps kappa_i = 0, so a wall
+  ahead or beside is still kept at the margin.
 
 The margin's speed is taken twice, which makes two half-planes per point:
 
 - (S) at the robot's current velocity (the spec's "braking distance at the current speed"):
-  u_i(v, w) <= alpha max(sd_i - margin - omega_i K u_i(v_now, w_now)^+, 0). A robot that is fast
-  now needs room to stop from this speed, whatever it is asked next.
-- (C) at the commanded velocity: u_i (1 + alpha omega_i K) <= alpha max(sd_i - margin, 0),
-  linear because u_i is. Without it the filter chases its own output: a slower command shrinks
+  u_i(v, w) <= max(alpha (sd_i - margin - omega_i K u_i(v_now, w_now)^+), kappa_i sd_i^+). A
+  robot that is fast now needs room to stop from this speed, whatever it is asked next.
+- (C) at the commanded velocity:
+  u_i (1 + alpha omega_i K) <= max(alpha (sd_i - margin), kappa_i sd_i^+), linear because u_i is. Without it the filter chases its own output: a slower command shrinks
   next cycle's margin, which allows a faster one (loop gain alpha K > 1 for every useful alpha:
   the command chatters). With both, the command settles on their common fixed point.
   K here uses the larger of the current and the commanded speeds (an upper bound of the braking
@@ -102,6 +113,11 @@ IntArray = npt.NDArray[np.intp]
 # omega_i = cos^PATH_POWER: how much of the stopping distance a point off the path is owed
 # (module docstring: with 4 a Jackal at 0.8 m/s passes a wall 0.2 m away).
 PATH_POWER = 4
+# The creep of rows no command can make approach faster than CREEP_BELOW x v_max (module
+# docstring): kappa up to 1/s, so the turn limit beside a flank's middle is continuous on the
+# scale of millimetres, while an approach at 5 % of v_max or more is never let into a margin.
+CREEP_PER_S = 1.0
+CREEP_BELOW = 0.05
 _MAX_ROUNDS = 16  # cutting-plane rounds before the stop-and-turn fallback (a handful is usual)
 _TOL = 1e-9  # a constraint is met when short of it by no more than this (m/s)
 _SAME = 1e-12
@@ -477,7 +493,10 @@ class _Scene:
         u_ref = nx * v0 - b * w0
         omega_cmd = _omega(u_ref, v0, w0, qx, qy)
         room = sd - p.margin_m
-        c_cmd = -alpha * np.maximum(room, 0.0)
+        reach_u = np.abs(nx) * self.profile.v_max_mps + np.abs(b) * self.profile.w_max_radps
+        flank = np.maximum(1.0 - reach_u / (CREEP_BELOW * self.profile.v_max_mps), 0.0)
+        creep = (CREEP_PER_S * flank) * np.maximum(sd, 0.0)
+        c_cmd = -np.maximum(alpha * room, creep)
         m_extra: FloatArray | None = None
         c_state = c_cmd
         if v_now or w_now:
@@ -487,8 +506,8 @@ class _Scene:
                 u_now = nx * v_now - b * w_now
                 omega_now = _omega(u_now, v_now, w_now, qx, qy)
             m_extra = (omega_now * self.k_now) * np.maximum(u_now, 0.0)
-            c_state = -alpha * np.maximum(room - m_extra, 0.0)
-        gain = 1.0 + (alpha * self.k_cmd) * omega_cmd  # (C): u gain <= alpha max(room, 0)
+            c_state = -np.maximum(alpha * (room - m_extra), creep)
+        gain = 1.0 + (alpha * self.k_cmd) * omega_cmd  # (C): u gain <= max(alpha room, creep)
         # The command meets row i when u_ref <= -c (S), gain u_ref <= -c (C).
         worst = max(float((c_state + u_ref).max()), float((c_cmd + gain * u_ref).max()))
         m_extra_cmd = (omega_cmd * self.k_cmd) * np.maximum(u_ref, 0.0)
