@@ -45,6 +45,7 @@ MAX_SPEED_MPS: Final = 100.0  # v_ref, v_cmd, v_lim_latency (the latter >= 0)
 MAX_TURN_RADPS: Final = 100.0  # w_ref, w_cmd, w_lim_latency (the latter >= 0)
 MAX_POSE_COORD_M: Final = 1e7  # the odometry pose's x and y (as a map's origin)
 MAX_LOCAL_COORD_M: Final = 1e6  # circles in {R} (x, y and radius >= 0), r_rc >= 0
+MAX_CBF_POINTS: Final = 64  # points shown as constraining the command (cbf, DESIGN 13)
 MAX_ANGLE_RAD: Final = 1e6  # pose theta (odometry may not wrap it), suggested_rad
 # Link figures: delays (tau, the accepted commands' age p50/p90, the largest command gap) are
 # >= 0 and at most a day (the robot's own are bounded by its timeouts, view_age_ms by
@@ -60,7 +61,7 @@ MAX_RACE_MS: Final = 1000.0
 
 MODES: Final = ("direct", "shared")
 # The filter family of DESIGN 6, pinned names ("none" is direct mode).
-FILTER_NAMES: Final = ("none", "egc", "ek-egc", "assist", "dwa")
+FILTER_NAMES: Final = ("none", "egc", "ek-egc", "assist", "dwa", "cbf")
 GOAL_FRAMES: Final = ("odom", "map")
 MAX_GOAL_POINTS: Final = 64
 MAX_GOAL_COORD_M: Final = 1e6
@@ -568,6 +569,18 @@ class Telemetry:
     cam_fps: float | None = None
     cam_kbps: float | None = None
     cut: tuple[str, ...] = ()
+    # Command sources (DESIGN 14; absent without [[source]] tables): the source that drives and
+    # the highest active lock (None: none), and the age on the robot's clock of the newest
+    # command of the source that drives, since it arrived.
+    source: str | None = None
+    lock: str | None = None
+    source_age_ms: float | None = None
+    # cbf (DESIGN 13), for the view: the points whose barriers changed the command (float32
+    # (K, 2) in {R}, at most MAX_CBF_POINTS), the margin kept from everything and the margin
+    # straight ahead at the current speed (m); the margins are absent unless cbf ran.
+    cbf_xy: npt.NDArray[np.float32] = field(default_factory=lambda: np.zeros((0, 2), np.float32))
+    cbf_margin_m: float | None = None
+    cbf_ahead_m: float | None = None
 
     def encode(self) -> bytes:
         d = _shallow_fields(self)
@@ -581,6 +594,8 @@ class Telemetry:
                 d["scan_origin"] = [float(v) for v in polar.origin_xy_m]
             xy = xy[polar.shown :]  # the beams' points travel as scan_mm
         d["scan_xy"] = xy.tobytes()
+        cbf_xy = np.ascontiguousarray(self.cbf_xy, dtype="<f4")
+        d["cbf_xy"] = cbf_xy.tobytes() if len(cbf_xy) else None
         for key in ("igc", "agc", "egc", "pose", "goal"):
             if d[key] is not None:
                 d[key] = [float(v) for v in d[key]]
@@ -593,6 +608,9 @@ class Telemetry:
 
 # Optional telemetry keys left out when None (DESIGN 12: bytes count on a thin link).
 _TELEMETRY_OPTIONAL: Final = (
+    "cbf_xy",
+    "cbf_margin_m",
+    "cbf_ahead_m",
     "view_kbps",
     "budget_kbps",
     "link_kbps",
@@ -601,6 +619,9 @@ _TELEMETRY_OPTIONAL: Final = (
     "cam_fps",
     "cam_kbps",
     "cut",
+    "source",
+    "lock",
+    "source_age_ms",
 )
 
 
@@ -748,6 +769,14 @@ def _build_telemetry(m: Mapping[Any, Any]) -> Telemetry:
         "cam_fps": _opt_range(m, "cam_fps", 0.0, MAX_CAMERA_FPS),
         "cam_kbps": _opt_range(m, "cam_kbps", 0.0, MAX_KBPS),
         "cut": _cuts(m),
+        "source": _opt_str(m, "source"),
+        "lock": _opt_str(m, "lock"),
+        "source_age_ms": _opt_range(m, "source_age_ms", -MAX_RACE_MS, MAX_CLOCK_MS),
+        "cbf_xy": _f32_array(m, "cbf_xy", 2, MAX_CBF_POINTS)
+        if "cbf_xy" in m
+        else np.zeros((0, 2), np.float32),
+        "cbf_margin_m": _opt_range(m, "cbf_margin_m", 0.0, MAX_LOCAL_COORD_M),
+        "cbf_ahead_m": _opt_range(m, "cbf_ahead_m", 0.0, MAX_LOCAL_COORD_M),
     }
     for key, value in values.items():
         object.__setattr__(t, key, value)
@@ -837,18 +866,37 @@ class StateMessage:
     reason: str
     operator: str | None = None
     rejected: int = 0
+    # DESIGN 14, as in the telemetry; left out when None (a robot without [[source]] tables).
+    source: str | None = None
+    lock: str | None = None
+    # The robot's pose in the map frame when its driver localises (x, y, theta): an optional
+    # key (DESIGN 7 additions) for the fleet's map (DESIGN 15), at the state's 1 Hz, so an
+    # operator sees where every robot is without taking every robot's telemetry.
+    map_pose: tuple[float, float, float] | None = None
 
     def encode(self) -> bytes:
-        return _pack({"v": SCHEMA_VERSION, **_shallow_fields(self)})
+        d = _shallow_fields(self)
+        for key in ("source", "lock"):
+            if d[key] is None:
+                del d[key]
+        if self.map_pose is None:
+            del d["map_pose"]
+        else:
+            d["map_pose"] = [float(v) for v in self.map_pose]
+        return _pack({"v": SCHEMA_VERSION, **d})
 
 
 def _build_state(m: Mapping[Any, Any]) -> StateMessage:
+    map_pose = _opt_tuple(m, "map_pose", 3, _POSE)
     return StateMessage(
         stamp_ns=_int(m, "stamp_ns"),
         state=_str(m, "state", STATES),
         reason=_str(m, "reason", max_chars=256),
         operator=_opt_str(m, "operator"),
         rejected=_int(m, "rejected") if "rejected" in m else 0,
+        source=_opt_str(m, "source"),
+        lock=_opt_str(m, "lock"),
+        map_pose=None if map_pose is None else (map_pose[0], map_pose[1], map_pose[2]),
     )
 
 

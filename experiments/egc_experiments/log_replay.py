@@ -572,7 +572,9 @@ def _replay(
         "command_messages_unread": command_pass.unread,
         "read_error": scan_pass.error or command_pass.error,
     }
-    summary = summarize(verdicts, replayer.config.filter, replayer.config.profile.name, extra)
+    profile = replayer.config.profile
+    limits = (profile.v_max_mps, profile.w_max_radps)
+    summary = summarize(verdicts, replayer.config.filter, profile.name, extra, limits)
     out = summary.as_dict()
     if out["closest_m"] is not None and not math.isfinite(out["closest_m"]):
         out["closest_m"] = None

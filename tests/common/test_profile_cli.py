@@ -74,7 +74,7 @@ def test_filter_takes_names_and_files(profile):
         input=json.dumps(line) + "\n",
         capture_output=True,
         text=True,
-        timeout=60,
+        timeout=120,
     )
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout)
