@@ -313,9 +313,11 @@ def swept_min_distance(
     step_rad: float,
 ) -> float:
     """The smallest signed distance from ``points`` ((N, 2), start frame) to the footprint at
-    the poses ``arc_samples`` gives: the footprint swept along the arc. Between two samples no
-    footprint point moves more than 2 ``step_m``, so the true minimum over the whole arc is at
-    most ``step_m`` below this (the pipeline's margin covers that)."""
+    the poses ``arc_samples`` gives: the footprint swept along the arc (the start pose not
+    included). Between two poses no footprint point moves more than 2 ``step_m``, so the true
+    minimum over the whole arc is at most ``step_m`` below the smaller of this and the start
+    pose's own distance (the pipeline's sweep knows that one: the clearance now; its margin
+    covers the step)."""
     if len(points) == 0 or (v_mps == 0.0 and w_radps == 0.0):
         return math.inf
     x, y, theta = arc_samples(v_mps, w_radps, t_s, step_m, step_rad, fp.reach_m)

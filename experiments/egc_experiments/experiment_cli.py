@@ -57,7 +57,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from egc_common.errors import UsageError
-from egc_common.profiles import ProfileError, load_profile
+from egc_common.profiles import PROFILES, ProfileError, is_profile_path, load_profile
 from egc_robot.pipeline import FILTERS
 from egc_sim.operators import make_operator
 from egc_sim.simulator import Simulator
@@ -95,6 +95,9 @@ def check_point(point: RunPoint) -> None:
     map), operator."""
     if point.filter not in FILTERS:
         raise GridError(f"unknown filter {point.filter!r} (known: {', '.join(FILTERS)})")
+    if point.profile not in PROFILES and not is_profile_path(point.profile):
+        known = ", ".join(sorted(PROFILES))
+        raise GridError(f"unknown profile {point.profile!r} (known: {known}; or a FILE.toml)")
     try:
         profile = load_profile(point.profile)  # a built-in name or a FILE.toml (DESIGN 14)
     except ProfileError as exc:

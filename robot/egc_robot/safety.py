@@ -85,8 +85,9 @@ def sweep_min_clearance(
     params: SweepParams,
 ) -> float:
     """Smallest signed footprint clearance over the poses swept in (0, t_s]
-    (``egc_common.footprint.swept_min_distance``: between samples no point of the footprint
-    moves more than 2 ``step_m``, so at most ``step_m`` closer than sampled, within the margin)."""
+    (``egc_common.footprint.swept_min_distance``: between samples, the start included, no point
+    of the footprint moves more than 2 ``step_m``, so with the clearance now at most ``step_m``
+    closer than sampled, within the margin)."""
     return swept_min_distance(
         profile.footprint, points, v_mps, w_radps, t_s, params.step_m, params.step_rad
     )

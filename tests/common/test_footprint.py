@@ -224,8 +224,9 @@ def test_segments_cross_boxes_matches_sampling(seed):
     st.integers(0, 2**31 - 1),
 )
 def test_the_swept_footprint_is_sampled_within_two_steps(fp, v, w, t_s, seed):
-    """No footprint point moves more than 2 step_m between samples, so the sampled minimum
-    distance is at most step_m above the true one (checked against a 50x finer sampling)."""
+    """No footprint point moves more than 2 step_m between samples (the start pose included),
+    so the sampled minimum distance, with the start's, is at most step_m above the true one
+    (checked against a 50x finer sampling)."""
     step_m, step_rad = 0.02, 0.05
     x, y, th = arc_samples(v, w, t_s, step_m, step_rad, fp.reach_m)
     poses = np.column_stack([np.concatenate([[0.0], x]), np.concatenate([[0.0], y])])
@@ -236,7 +237,9 @@ def test_the_swept_footprint_is_sampled_within_two_steps(fp, v, w, t_s, seed):
         assert np.hypot(*(after - before).T).max() <= 2 * step_m + 1e-9
     rng = np.random.default_rng(seed)
     pts = rng.uniform(-3.0, 3.0, (60, 2))
-    sampled = swept_min_distance(fp, pts, v, w, t_s, step_m, step_rad)
-    fine = swept_min_distance(fp, pts, v, w, t_s, step_m / 50, step_rad / 50)
-    # fine is within step_m / 50 above the true minimum, which is within step_m below sampled.
+    # With the start pose's own distance (which the sweep knows: the clearance now), the true
+    # minimum is at most step_m below the sampled one; fine is within step_m / 50 of the true.
+    now = float(signed_distance(fp, pts[:, 0], pts[:, 1]).min())
+    sampled = min(now, swept_min_distance(fp, pts, v, w, t_s, step_m, step_rad))
+    fine = min(now, swept_min_distance(fp, pts, v, w, t_s, step_m / 50, step_rad / 50))
     assert fine - step_m / 50 - 1e-9 <= sampled <= fine + step_m + 1e-9

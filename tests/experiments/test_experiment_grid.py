@@ -234,3 +234,24 @@ def test_rate_kbps_axis_reaches_the_link_spec(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="rate_kbps"):
         load_grid(bad)
     assert RunPoint("w", "forward").rate_kbps == 0.0
+
+
+def test_a_grid_takes_profile_files(tmp_path):
+    """DESIGN 14: a grid's profile is a built-in name or a FILE.toml; a bad file is the grid's
+    one line naming the key."""
+    pentagon = Path(__file__).resolve().parents[2] / "docs" / "profiles" / "pentagon.toml"
+    g = grid(
+        f"""
+        world = "hallway"
+        operator = "sighted"
+        filter = "egc"
+        [[sweep]]
+        profile = ["turtlebot4", "{pentagon}"]
+        """,
+        check=True,
+    )
+    assert {p.profile for p in g.points} == {"turtlebot4", str(pentagon)}
+    bad = tmp_path / "bad.toml"
+    bad.write_text(pentagon.read_text().replace("v_max = 0.8", "v_max = -0.8"))
+    with pytest.raises(GridError, match=r"bad.toml: v_max: must be positive"):
+        grid(f'world = "hallway"\noperator = "sighted"\n[[sweep]]\nprofile = "{bad}"\n', check=True)
