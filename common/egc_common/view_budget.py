@@ -54,7 +54,8 @@ behind, camera frames waiting in the robot's lowest-priority queue.
   measured while a queue stands is what the link delivers (C); but it is a second's worth,
   and just after the link narrowed most of that second was the wider link. A queue that grows
   by r ms a millisecond (the short-window minimum over the last 0.1 s, in the reports'
-  time) is fed at the view plane's rate S and drained at S (1 - r), which is known at once:
+  time; from 0.3 on: a link that narrowed, not a probe's overshoot) is fed at the view plane's
+  rate S and drained at S (1 - r), which is known at once:
   C is the smaller of the two (S: the view plane's rate at the first cut in a while, which
   built the queue the next reports still show). The queue the reports show is a round trip old; growing so, it is S / C - 1 times
   that round trip (twice the base age) longer in the link already. The budget goes to
@@ -98,11 +99,11 @@ behind, camera frames waiting in the robot's lowest-priority queue.
 A fixed ``downlink_kbps`` (``--downlink-kbps N``) skips all that: the budget is N.
 
 **Plan**: what gives way first (DESIGN 12): camera quality and rate, down to a working camera
-(``camera_keep_kbps``: 6 frames/s of 1 kB H.264 frames); then scan resolution (down to
+(``camera_keep_kbps``: 7 frames/s of 1 kB H.264 frames); then scan resolution (down to
 ``min_beams``); then telemetry rate, down to ``mid_telemetry_hz`` (10 Hz); then the camera below
 its working rate (down to ``camera_min_kbps``, one JPEG frame a second); then telemetry down to
 ``min_telemetry_hz`` (5 Hz); then the camera goes off. So a thin link (a 192 kbit/s cellular
-uplink) keeps a camera at 6 frames/s beside a coarser, slower scan; only a thinner one costs the
+uplink) keeps a camera at 7 frames/s beside a coarser, slower scan; only a thinner one costs the
 camera its rate. Control never: it is not in the budget. The camera's rate follows its kbit/s
 (``camera_fps``), in whole frames a second so the encoder is not reopened at every step.
 """
@@ -129,8 +130,8 @@ class BudgetConfig:
     camera: bool = False  # is there a camera to feed
     camera_max_fps: float = 10.0
     camera_max_kbps: float = 250.0
-    camera_keep_kbps: float = 48.0  # a working camera: 6 frames/s of ~1 kB
-    camera_keep_fps: float = 6.0
+    camera_keep_kbps: float = 56.0  # a working camera: 7 frames/s of ~1 kB
+    camera_keep_fps: float = 7.0
     camera_min_kbps: float = 12.0  # 1 frame/s (a small JPEG)
     start_kbps: float = 128.0
     max_kbps: float = 1400.0
@@ -376,7 +377,7 @@ def on_report(
     # cuts right after it still see the queue that rate built.
     settled = since_cut is None or since_cut > 2 * cfg.hold_s * NS_PER_S
     fed = sent_kbps if settled else state.fed_kbps
-    if fed and fed > 0 and growth is not None and growth > 0.1:
+    if fed and fed > 0 and growth is not None and growth > _FAST_GROWTH:
         # A queue growing by r ms a ms (in the reports' time) is fed at S and drained at
         # S (1 - r): what the link delivers now, before rx_kbps (a second's worth) shows it.
         r = min(growth, 0.9)
@@ -472,6 +473,9 @@ def on_cycle(
     return replace(state, budget_kbps=min(cfg.max_kbps, budget + rate * dt_s), beyond_ns=beyond)
 
 
+# A queue growing faster than this (ms a ms) is a link that narrowed, not a probe's overshoot
+# (10-20 %) nor the slope's noise over 0.1 s (+-0.2): a link at half the rate gives 0.5.
+_FAST_GROWTH = 0.3
 _RX_WINDOW_NS = NS_PER_S  # rx_kbps: the operator's last second (DESIGN 12)
 _TREND_NS = 200_000_000  # the queue's growth: over the last 0.1 s, from entries this old
 _CAMERA_SIGNAL_FPS = 2.0  # the camera's latencies count as a queue signal from this rate up

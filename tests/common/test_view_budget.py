@@ -43,7 +43,7 @@ def test_plan_gives_way_in_design_order() -> None:
     assert camera_cut.cut == ("camera",)
     assert camera_cut.camera_fps == cfg.camera_max_fps  # fewer bits a frame first
     assert camera_cut.camera_kbps < cfg.camera_max_kbps and camera_cut.scan_beams == 180
-    slower = at(full_tel + 30 + cfg.camera_keep_kbps)
+    slower = at(full_tel + 10 + cfg.camera_keep_kbps)
     assert slower.cut == ("camera",) and 5 <= slower.camera_fps < cfg.camera_max_fps
     scan_cut = at(telemetry_kbps(20, 90, OVERHEAD) + cfg.camera_keep_kbps + 1)
     assert scan_cut.cut == ("camera", "scan")
