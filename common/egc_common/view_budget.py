@@ -78,6 +78,11 @@ behind, camera frames waiting in the robot's lowest-priority queue.
   (``ai_kbps`` plus ``ai_fraction`` of the budget per second at most): a link that did not
   widen sees a probe of a few kbit/s too many for one report round trip, a queue of tens of
   milliseconds; one that widened is found within seconds (from 140 kbit/s: 5 s to 600 kbit/s);
+- *a deficit* cuts too, with or without ages: when the operator's ``rx_kbps`` stays below
+  three quarters of what the view plane sent for two seconds, the link carries less, and the
+  budget goes to 0.8 of ``rx_kbps``. A link narrower than ``start_kbps`` (64 kbit/s) has a
+  queue before the first report: the operator's clock replies wait behind it, so no ages come
+  for seconds, and those that come have the queue in their base (it reads as none);
 - *a cut taken back* when its queue vanishes faster than a link can drain one: bytes in a queue
   leave at the link's rate, one millisecond of queue per millisecond at best, and until the
   cut's effect comes back through the queue the robot still sends at the rate that built it
@@ -259,6 +264,7 @@ class BudgetState:
     undo: _Undo | None = None  # how to take the last cut back (module docstring, "Control")
     fed_kbps: float | None = None  # what the view plane sent before the first cut of a series
     queue_since_ns: int | None = None  # since when a queue (above margin_ms / 2) stands
+    deficit_since_ns: int | None = None  # since when, with no ages, rx_kbps is short of sent
     cuts: int = 0
     undone: int = 0
 
@@ -361,6 +367,8 @@ def on_report(
             state = replace(state, link_kbps=rx, cut_rx_kbps=rx)
     elif queue is not None:
         state = replace(state, queue_since_ns=None)
+    if not cfg.fixed:
+        state = _deficit(state, cfg, rx, sent_kbps, now_ns)
     if cfg.fixed or queue is None or queue <= cfg.margin_ms:
         return state
     if state.budget_kbps <= cfg.floor_kbps:
@@ -414,6 +422,39 @@ def on_report(
         beyond_ns=None,
         undo=undo,
         fed_kbps=fed,
+        cuts=state.cuts + 1,
+    )
+
+
+_DEFICIT = 0.75  # with no ages: rx_kbps below this share of what was sent ...
+_DEFICIT_NS = 2 * NS_PER_S  # ... for this long is a link that carries less
+
+
+def _deficit(
+    state: BudgetState,
+    cfg: BudgetConfig,
+    rx: float | None,
+    sent_kbps: float | None,
+    now_ns: int,
+) -> BudgetState:
+    """When the operator receives well below what the view plane sends, for two seconds
+    (longer than its rx_kbps window and the delay), the link carries less: the budget goes
+    below what it delivers (module docstring, "Control"). No clock needed: it works before the
+    operator's clock is synchronised, and when the ages' base holds a queue already."""
+    if rx is None or not sent_kbps or rx >= _DEFICIT * sent_kbps:
+        return replace(state, deficit_since_ns=None) if state.deficit_since_ns else state
+    since = state.deficit_since_ns if state.deficit_since_ns is not None else now_ns
+    held = state.last_cut_ns is not None and now_ns - state.last_cut_ns < cfg.hold_s * NS_PER_S
+    if now_ns - since < _DEFICIT_NS or held or state.budget_kbps <= cfg.floor_kbps:
+        return replace(state, deficit_since_ns=since)
+    return replace(
+        state,
+        budget_kbps=max(cfg.floor_kbps, min(state.budget_kbps, cfg.max_beta * rx)),
+        link_kbps=rx,
+        cut_rx_kbps=rx,
+        last_cut_ns=now_ns,
+        beyond_ns=None,
+        deficit_since_ns=None,
         cuts=state.cuts + 1,
     )
 

@@ -210,6 +210,29 @@ def test_a_fast_growing_queue_says_what_the_link_delivers_before_rx_does() -> No
     assert state.link_kbps == 128.0 and state.cut_rx_kbps == 128.0
 
 
+def test_with_no_ages_a_link_that_delivers_less_than_is_sent_cuts() -> None:
+    """A link narrower than start_kbps: the operator's clock replies wait behind the view data,
+    so it never synchronises and reports no ages; its rx_kbps (no clock needed) says the link
+    carries 60 kbit/s of the 120 sent. After two seconds of that the budget goes below it."""
+    cfg = BudgetConfig()
+    state = initial_state(cfg)
+    t = 0
+    for i in range(150):  # 3 s of reports without view_age
+        t += 20 * MS
+        rx = min(60.0, 3.0 * i)  # the operator's first second fills its window
+        state = on_report(state, cfg, Report(None, rx), t, sent_kbps=120.0)
+        if t < 2 * NS:
+            assert state.cuts == 0
+    assert state.cuts == 1 and state.budget_kbps == pytest.approx(0.8 * 60.0)
+    assert state.link_kbps == 60.0
+    # A link that carries what is sent never cuts, ages or not.
+    state = initial_state(cfg)
+    for _ in range(300):
+        t += 20 * MS
+        state = on_report(state, cfg, Report(None, 115.0), t, sent_kbps=120.0)
+    assert state.cuts == 0 and state.budget_kbps == cfg.start_kbps
+
+
 def test_at_the_floor_a_standing_queue_does_not_restart_the_hold() -> None:
     cfg = BudgetConfig()
     state = replace(BudgetState(budget_kbps=cfg.floor_kbps), last_cut_ns=0, cuts=3)
