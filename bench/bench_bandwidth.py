@@ -18,7 +18,8 @@
    ``--repeat`` > 1 the table gives the median and the spread.
 3. **A link that changes** (``--scenario FILE``, e.g. experiments/scenarios/downlink-2m-128k-
    2m.toml): per change of the downlink's rate, the seconds until the view age's median over a
-   second is back under D + 200 ms, and the camera's frames/s over the last phase's second half.
+   second is back under D + 200 ms, the median of those medians over the rest of the phase
+   (the budget's probes), and the camera's frames/s over the last phase from 5 s on.
 
     python bench/bench_bandwidth.py [--duration S] [--delay-ms D] [--rates 192,128]
                                     [--repeat N] [--scenario FILE] [--skip-demo] [--out F]
@@ -28,9 +29,9 @@ core and <= 150 MB RSS with the camera, <= 10 % and <= 100 MB without; through e
 >= 80 % of the loopback distance, HOLD < 10 %, no collision, no operator lost, view age p50 <=
 D + 200 ms, command age p99 <= D + 30 ms; through rates of 192 kbit/s and more the camera on:
 >= 5 frames/s, its age p50 <= D + 300 ms; the scenario: back under D + 200 ms within 3 s of
-each change, the camera back up (>= 5 frames/s) in the last phase. Each check of part 2 is
-met when the median of the repeats meets it. Exits non-zero when one is missed (on a busy
-machine the timing ones can be: the table says which, with the numbers).
+each change and at the median after, the camera back up (>= 5 frames/s) in the last phase.
+Each check of part 2 is met when the median of the repeats meets it. Exits non-zero when one
+is missed (on a busy machine the timing ones can be: the table says which, with the numbers).
 """
 
 from __future__ import annotations
@@ -199,8 +200,9 @@ def demo(duration_s: float, link: list[str]) -> dict[str, Any]:
 
 def recovery(run: dict[str, Any], changes_s: list[float], limit_ms: float) -> list[float | None]:
     """Part 3: per change of the link (seconds after its start), how long until the view age's
-    median over a second (the timeline's ``view_age_p50_ms``) is back under ``limit_ms`` and
-    stays there until the next change; None: never."""
+    median over a second (the timeline's ``view_age_p50_ms``, per second of the robot's clock)
+    is back under ``limit_ms``: 0 when it never went over, None when it never came back
+    before the next change. The seconds are the robot's, so within one second of the truth."""
     t0 = run.get("link_started_s")
     if t0 is None:
         return [None for _ in changes_s]
@@ -213,15 +215,28 @@ def recovery(run: dict[str, Any], changes_s: list[float], limit_ms: float) -> li
     for i, change in enumerate(changes_s):
         end = changes_s[i + 1] if i + 1 < len(changes_s) else float("inf")
         phase = [(t, age) for t, age in seconds if change <= t + 1.0 and t < end]
-        late = [t for t, age in phase if age > limit_ms]
-        if not phase:
-            out.append(None)
-        elif not late:
-            out.append(0.0)
-        else:
-            back = [t for t, _ in phase if t > max(late)]
-            out.append(round(back[0] - change, 1) if back else None)
+        back: float | None = None
+        late = False
+        for t, age in phase:
+            if age > limit_ms:
+                late = True
+            elif late:
+                back = round(max(0.0, t - change), 1)
+                break
+        out.append(back if late else (0.0 if phase else None))
     return out
+
+
+def phase_median(run: dict[str, Any], start_s: float, end_s: float) -> float | None:
+    """The median of the per-second view age medians between ``start_s`` and ``end_s`` after
+    the link's start."""
+    t0 = run.get("link_started_s") or 0.0
+    ages = [
+        e["view_age_p50_ms"]
+        for e in run["view_timeline"]
+        if "view_age_p50_ms" in e and start_s <= e["t_s"] - t0 < end_s
+    ]
+    return statistics.median(ages) if ages else None
 
 
 def scenario_changes(path: str) -> tuple[list[float], list[float]]:
@@ -365,6 +380,10 @@ def main() -> int:
                 missed.append("scenario: no summary")
             else:
                 back = recovery(scen, changes, d + VIEW_MARGIN_MS)
+                after = [
+                    phase_median(scen, c + RECOVERY_S, [*changes, c + 10.0][i + 1])
+                    for i, c in enumerate(changes)
+                ]
                 t0 = scen["link_started_s"] or 0.0
                 last = [
                     e["cam_frames"]
@@ -377,20 +396,25 @@ def main() -> int:
                     "changes_s": changes,
                     "rates_kbps": rates_kbps,
                     "back_under_s": back,
+                    "view_age_p50_after_ms": after,
                     "camera_fps_last_phase": last_fps,
                     "view_timeline": scen["view_timeline"],
                     "link_started_s": scen["link_started_s"],
                 }
                 print(f"scenario {args.scenario} ({seconds:g} s):")
-                for change, after in zip(changes, back, strict=True):
+                for change, b, rest in zip(changes, back, after, strict=True):
                     print(
-                        f"  change at {change:g} s: view age (median per second) back under "
+                        f"  change at {change:g} s ({rates_kbps[changes.index(change) + 1]:g} "
+                        f"kbit/s): view age (median per second) back under "
                         f"{d + VIEW_MARGIN_MS:g} ms after "
-                        + ("never" if after is None else f"{after:g} s")
+                        + ("never" if b is None else f"{b:g} s")
+                        + f"; median of the rest of the phase {rest} ms"
                     )
                 print(f"  camera in the last phase (from 5 s on): {last_fps:g} frames/s")
                 if any(b is None or b > RECOVERY_S for b in back):
                     missed.append("scenario: view age recovery")
+                if any(r is None or r > d + VIEW_MARGIN_MS for r in after):
+                    missed.append("scenario: view age after the recovery")
                 if last_fps < CAMERA_FPS_MIN:
                     missed.append("scenario: camera back up")
     result["load_after"] = os.getloadavg()

@@ -5,6 +5,9 @@
     python docs/screenshot_web_viewer.py                 # a synthetic corridor run (no Zenoh)
     python docs/screenshot_web_viewer.py --predictive    # predictive display, 300 ms each way
                                                          #   -> docs/predictive_display.png
+    python docs/screenshot_web_viewer.py --camera 25     # the demo with its camera, through a
+                                                         #   192 kbit/s downlink
+                                                         #   -> docs/web_viewer_camera.png
 
 Steps: serve the .rrd through the web viewer bundled with rerun-sdk (``python -m rerun
 --serve-web``), start ``chromium --headless`` with a DevTools port, open the viewer URL over the
@@ -12,7 +15,12 @@ DevTools protocol, give the wasm viewer time to load (25 s by default, then unti
 3 s apart agree) and save ``Page.captureScreenshot`` as a PNG.
 
 ``--demo S`` records ``egc-teleop demo --duration S --save FILE.rrd`` first (the simulated robot
-and a scripted operator as separate processes over Zenoh). With neither option the recording is
+and a scripted operator as separate processes over Zenoh). ``--camera S`` does the same through
+a thin downlink (``--down`` ``CAMERA_LINK``, 80 ms each way at 192 kbit/s, DESIGN 12): the
+camera panel shows the simulator's forward camera as it reached the operator (H.264, at the
+rate the downlink budget allots it, its age on the robot's clock), beside the scan and the
+status that says what the link carries; the script counts the camera frames the recording
+holds and refuses to write a PNG without any. With neither option the recording is
 made here from synthetic telemetry through the operator view's own API (what the test uses): a Pioneer 3-DX drives forward down a corridor with two boxes in it, the command pipeline
 (EGC + footprint sweep) filters the constant forward command, and the resulting telemetry (with
 720-beam scans) is fed to ``egc_operator.view.record_episode``. This script may import the robot
@@ -67,6 +75,8 @@ if TYPE_CHECKING:
 DOCS = Path(__file__).resolve().parent
 DEFAULT_PNG = DOCS / "web_viewer.png"
 DEFAULT_PREDICTIVE_PNG = DOCS / "predictive_display.png"
+DEFAULT_CAMERA_PNG = DOCS / "web_viewer_camera.png"
+CAMERA_LINK = ("--up", "delay=80", "--down", "delay=80,rate=192")
 CHROMIUM_FLAGS = (
     "--headless",
     "--no-sandbox",
@@ -501,11 +511,25 @@ def screenshot(
     return settled
 
 
-def record_demo(path: Path, seconds: float) -> Path:
-    """Run ``egc-teleop demo --duration S --save path`` (headless) and return ``path``."""
-    cmd = [sys.executable, "-m", "egc_app.cli", "demo", "--duration", f"{seconds:g}"]
+def record_demo(path: Path, seconds: float, link: tuple[str, ...] = ()) -> Path:
+    """Run ``egc-teleop demo --duration S --save path [link flags]`` (headless; the simulated
+    camera is on by default) and return ``path``."""
+    cmd = [sys.executable, "-m", "egc_app.cli", "demo", "--duration", f"{seconds:g}", *link]
     subprocess.run([*cmd, "--save", str(path)], check=True, timeout=seconds + 120)
     return path
+
+
+def camera_frames(rrd: Path) -> int:
+    """How many camera frames a recording holds (rows at the view's camera image)."""
+    from egc_operator.view_blueprint import CAMERA_IMAGE
+    from rerun.chunk import RrdReader
+
+    wanted = "/" + CAMERA_IMAGE
+    return sum(
+        chunk.num_rows
+        for chunk in RrdReader(rrd).stream().to_chunks()
+        if chunk.entity_path == wanted and not chunk.is_static
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -513,6 +537,13 @@ def main(argv: list[str] | None = None) -> int:
     source = parser.add_mutually_exclusive_group()
     source.add_argument("--rrd", type=Path, help="recording to show (default: a synthetic run)")
     source.add_argument("--demo", type=float, metavar="S", help="record S seconds of the demo")
+    source.add_argument(
+        "--camera",
+        type=float,
+        metavar="S",
+        help="record S seconds of the demo with its camera through a 192 kbit/s downlink "
+        "(default PNG: docs/web_viewer_camera.png)",
+    )
     source.add_argument(
         "--predictive",
         action="store_true",
@@ -527,7 +558,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, default=14.0, help="length of the synthetic run")
     args = parser.parse_args(argv)
     if args.out is None:
-        args.out = DEFAULT_PREDICTIVE_PNG if args.predictive else DEFAULT_PNG
+        args.out = (
+            DEFAULT_PREDICTIVE_PNG
+            if args.predictive
+            else DEFAULT_CAMERA_PNG
+            if args.camera
+            else DEFAULT_PNG
+        )
     chromium = find_chromium()
     if chromium is None:
         print(
@@ -541,6 +578,13 @@ def main(argv: list[str] | None = None) -> int:
             rrd = args.rrd
         elif args.demo:
             rrd = record_demo(workdir / "demo.rrd", args.demo)
+        elif args.camera:
+            rrd = record_demo(workdir / "camera.rrd", args.camera, CAMERA_LINK)
+            frames = camera_frames(rrd)
+            if frames == 0:
+                print("screenshot_web_viewer: the demo recorded no camera frame", file=sys.stderr)
+                return 1
+            print(f"the recording holds {frames} camera frames")
         elif args.predictive:
             rrd, run = record_predictive_run(workdir / "predictive.rrd", delay_ms=args.delay_ms)
             print(f"operator status line at the end: {run.status}")
@@ -551,6 +595,8 @@ def main(argv: list[str] | None = None) -> int:
     what = args.rrd or (f"{args.demo:g} s of egc-teleop demo" if args.demo else "a synthetic run")
     if args.predictive:
         what = f"the predictive display, {args.delay_ms:g} ms each way (simulated closed loop)"
+    if args.camera:
+        what = f"{args.camera:g} s of egc-teleop demo with its camera, {' '.join(CAMERA_LINK)}"
     print(f"wrote {args.out} ({args.out.stat().st_size} bytes) showing {what}")
     if not settled:
         print("warning: the page was still changing at the last capture", file=sys.stderr)

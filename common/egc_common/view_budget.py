@@ -28,8 +28,9 @@ Each age holds the message's own time on the link (its bytes over the link's rat
 a 900-byte telemetry message at 192 kbit/s, 4 ms at 2 Mbit/s), which changes with the link
 rather than with any queue: after the link narrows it would read as a queue that never drains
 for as long as the base remembers the wide link (the budget stayed at its floor for seconds).
-So a cut that finds the link slower than the base's (``rx_kbps`` below ``link_kbps``) raises
-the base by the difference in a message's time on the link (at most ``margin_ms``). A base
+So a cut that finds the link slower than the base's (its rate below ``link_kbps``), or a
+second's standing queue that does, raises the base by the difference in a message's time on
+the link (at most ``margin_ms``). A base
 raised too far comes back down by itself: it is a minimum, and the first ages with no queue
 are lower. A link that widens needs nothing: its ages are lower.
 
@@ -53,7 +54,8 @@ behind, camera frames waiting in the robot's lowest-priority queue.
   measured while a queue stands is what the link delivers (C); but it is a second's worth,
   and just after the link narrowed most of that second was the wider link. A queue that grows
   by r ms a millisecond (the short-window minimum over the last 0.1 s, in the reports'
-  time) is fed at the view plane's rate S and drained at S (1 - r), which is known at once:
+  time; from 0.3 on: a link that narrowed, not a probe's overshoot) is fed at the view plane's
+  rate S and drained at S (1 - r), which is known at once:
   C is the smaller of the two (S: the view plane's rate at the first cut in a while, which
   built the queue the next reports still show). The queue the reports show is a round trip old; growing so, it is S / C - 1 times
   that round trip (twice the base age) longer in the link already. The budget goes to
@@ -76,6 +78,11 @@ behind, camera frames waiting in the robot's lowest-priority queue.
   (``ai_kbps`` plus ``ai_fraction`` of the budget per second at most): a link that did not
   widen sees a probe of a few kbit/s too many for one report round trip, a queue of tens of
   milliseconds; one that widened is found within seconds (from 140 kbit/s: 5 s to 600 kbit/s);
+- *a deficit* cuts too, with or without ages: when the operator's ``rx_kbps`` stays below
+  three quarters of what the view plane sent for two seconds, the link carries less, and the
+  budget goes to 0.8 of ``rx_kbps``. A link narrower than ``start_kbps`` (64 kbit/s) has a
+  queue before the first report: the operator's clock replies wait behind it, so no ages come
+  for seconds, and those that come have the queue in their base (it reads as none);
 - *a cut taken back* when its queue vanishes faster than a link can drain one: bytes in a queue
   leave at the link's rate, one millisecond of queue per millisecond at best, and until the
   cut's effect comes back through the queue the robot still sends at the rate that built it
@@ -86,17 +93,22 @@ behind, camera frames waiting in the robot's lowest-priority queue.
   window it had at the cut (a slower telemetry rate widens it to older, lower ages), only for
   cuts it made, and only for a cut two holds after the one before (whose lower rate may
   already be draining the queue, faster than a millisecond a millisecond);
-- the link estimate ``link_kbps`` is the ``rx_kbps`` at the last cut, raised by any higher
+- the link estimate ``link_kbps`` is the rate at the last cut, raised by any higher
   ``rx_kbps`` received with no queue (the link widened); None until a queue was first seen.
+  Once a queue has stood for a whole second (all of ``rx_kbps``'s window, and twice the base
+  age more: the bytes on their way when the link narrowed came at the old rate), the link was
+  busy all that second whatever the robot sent, so ``rx_kbps`` is its rate: it becomes the link
+  estimate and the rate cruise returns to (after the link narrowed, the cuts' rates were a
+  mix of the wide link's last second and of the drain's).
 
 A fixed ``downlink_kbps`` (``--downlink-kbps N``) skips all that: the budget is N.
 
 **Plan**: what gives way first (DESIGN 12): camera quality and rate, down to a working camera
-(``camera_keep_kbps``: 6 frames/s of 1 kB H.264 frames); then scan resolution (down to
+(``camera_keep_kbps``: 7 frames/s of 1 kB H.264 frames); then scan resolution (down to
 ``min_beams``); then telemetry rate, down to ``mid_telemetry_hz`` (10 Hz); then the camera below
 its working rate (down to ``camera_min_kbps``, one JPEG frame a second); then telemetry down to
 ``min_telemetry_hz`` (5 Hz); then the camera goes off. So a thin link (a 192 kbit/s cellular
-uplink) keeps a camera at 6 frames/s beside a coarser, slower scan; only a thinner one costs the
+uplink) keeps a camera at 7 frames/s beside a coarser, slower scan; only a thinner one costs the
 camera its rate. Control never: it is not in the budget. The camera's rate follows its kbit/s
 (``camera_fps``), in whole frames a second so the encoder is not reopened at every step.
 """
@@ -123,8 +135,8 @@ class BudgetConfig:
     camera: bool = False  # is there a camera to feed
     camera_max_fps: float = 10.0
     camera_max_kbps: float = 250.0
-    camera_keep_kbps: float = 48.0  # a working camera: 6 frames/s of ~1 kB
-    camera_keep_fps: float = 6.0
+    camera_keep_kbps: float = 56.0  # a working camera: 7 frames/s of ~1 kB
+    camera_keep_fps: float = 7.0
     camera_min_kbps: float = 12.0  # 1 frame/s (a small JPEG)
     start_kbps: float = 128.0
     max_kbps: float = 1400.0
@@ -251,6 +263,8 @@ class BudgetState:
     beyond_ns: int | None = None  # since when the probe is past 1.1 times the last cut's rate
     undo: _Undo | None = None  # how to take the last cut back (module docstring, "Control")
     fed_kbps: float | None = None  # what the view plane sent before the first cut of a series
+    queue_since_ns: int | None = None  # since when a queue (above margin_ms / 2) stands
+    deficit_since_ns: int | None = None  # since when, with no ages, rx_kbps is short of sent
     cuts: int = 0
     undone: int = 0
 
@@ -341,6 +355,20 @@ def on_report(
     no_queue = queue is not None and queue < cfg.margin_ms / 2
     if link is not None and rx is not None and rx > link and no_queue:
         state = replace(state, link_kbps=rx)  # the link carries more than we thought
+    if queue is not None and not no_queue:
+        since = state.queue_since_ns if state.queue_since_ns is not None else now_ns
+        state = replace(state, queue_since_ns=since)
+        # rx_kbps's second, and the bytes that were on their way (the delay: the base age)
+        # when the queue began, some sent at the rate before
+        whole_ns = _RX_WINDOW_NS + int(2e6 * (view.base_ms() or 0.0))
+        if rx is not None and rx > 0 and now_ns - since >= whole_ns:
+            # a queue has stood for all of rx_kbps's second: the link was busy, rx is its rate
+            state, _, _ = _on_slower_link(state, cfg, in_force, link, rx)
+            state = replace(state, link_kbps=rx, cut_rx_kbps=rx)
+    elif queue is not None:
+        state = replace(state, queue_since_ns=None)
+    if not cfg.fixed:
+        state = _deficit(state, cfg, rx, sent_kbps, now_ns)
     if cfg.fixed or queue is None or queue <= cfg.margin_ms:
         return state
     if state.budget_kbps <= cfg.floor_kbps:
@@ -349,14 +377,15 @@ def on_report(
     growing = queue > 2.0 * state.queue_at_cut_ms + cfg.margin_ms
     if since_cut is not None and since_cut < cfg.hold_s * NS_PER_S and not growing:
         return state  # the last cut has not reached the reports yet
-    rate = rx if rx is not None and rx > 0 else None  # what the link delivers, measured
+    measured = rx if rx is not None and rx > 0 else None  # what the link delivered, measured
+    rate = measured  # and what it delivers now, as well as can be told
     growth = view.growth()
     ahead_ms = queue  # the queue in the link now: the reports show it a round trip late
     # The first cut in a while: the view plane sent at the rate S that built this queue; the
     # cuts right after it still see the queue that rate built.
     settled = since_cut is None or since_cut > 2 * cfg.hold_s * NS_PER_S
     fed = sent_kbps if settled else state.fed_kbps
-    if fed and fed > 0 and growth is not None and growth > 0.1:
+    if fed and fed > 0 and growth is not None and growth > _FAST_GROWTH:
         # A queue growing by r ms a ms (in the reports' time) is fed at S and drained at
         # S (1 - r): what the link delivers now, before rx_kbps (a second's worth) shows it.
         r = min(growth, 0.9)
@@ -366,15 +395,11 @@ def on_report(
         ahead_ms += r / (1.0 - r) * 2.0 * (view.base_ms() or 0.0)
     beta = min(cfg.max_beta, max(cfg.min_beta, 1.0 - ahead_ms / (cfg.drain_s * 1000.0)))
     delivered = state.budget_kbps if rate is None else min(rate, state.budget_kbps)
+    # The link's estimate moves on measurements only (the growth's rate is a few reports'
+    # slope: good for how deep to cut, too noisy for a base or for where cruise returns to).
     view_raise = camera_raise = 0.0
-    if rate is not None and in_force is not None and (link is None or rate < link):
-        tel_bytes = in_force.telemetry_bytes
-        frame_bytes = in_force.camera_kbps * 125.0 / camera_fps if camera_fps > 0 else 0.0
-        view_raise = _slower_link_ms(tel_bytes, link, rate, cfg.margin_ms)
-        camera_raise = _slower_link_ms(frame_bytes, link, rate, cfg.margin_ms)
-        state = replace(
-            state, view=state.view.raised(view_raise), camera=state.camera.raised(camera_raise)
-        )
+    if measured is not None:
+        state, view_raise, camera_raise = _on_slower_link(state, cfg, in_force, link, measured)
     undo = None
     if settled and report.stamp_ns is not None and view_queue and view_queue > cfg.margin_ms:
         undo = _Undo(  # a cut the telemetry's age made (the camera's has no undo)
@@ -390,13 +415,46 @@ def on_report(
     return replace(
         state,
         budget_kbps=max(cfg.floor_kbps, beta * delivered),
-        link_kbps=link if rate is None else rate,
-        cut_rx_kbps=state.cut_rx_kbps if rate is None else rate,
+        link_kbps=link if measured is None else measured,
+        cut_rx_kbps=state.cut_rx_kbps if measured is None else measured,
         last_cut_ns=now_ns,
         queue_at_cut_ms=queue,
         beyond_ns=None,
         undo=undo,
         fed_kbps=fed,
+        cuts=state.cuts + 1,
+    )
+
+
+_DEFICIT = 0.75  # with no ages: rx_kbps below this share of what was sent ...
+_DEFICIT_NS = 2 * NS_PER_S  # ... for this long is a link that carries less
+
+
+def _deficit(
+    state: BudgetState,
+    cfg: BudgetConfig,
+    rx: float | None,
+    sent_kbps: float | None,
+    now_ns: int,
+) -> BudgetState:
+    """When the operator receives well below what the view plane sends, for two seconds
+    (longer than its rx_kbps window and the delay), the link carries less: the budget goes
+    below what it delivers (module docstring, "Control"). No clock needed: it works before the
+    operator's clock is synchronised, and when the ages' base holds a queue already."""
+    if rx is None or not sent_kbps or rx >= _DEFICIT * sent_kbps:
+        return replace(state, deficit_since_ns=None) if state.deficit_since_ns else state
+    since = state.deficit_since_ns if state.deficit_since_ns is not None else now_ns
+    held = state.last_cut_ns is not None and now_ns - state.last_cut_ns < cfg.hold_s * NS_PER_S
+    if now_ns - since < _DEFICIT_NS or held or state.budget_kbps <= cfg.floor_kbps:
+        return replace(state, deficit_since_ns=since)
+    return replace(
+        state,
+        budget_kbps=max(cfg.floor_kbps, min(state.budget_kbps, cfg.max_beta * rx)),
+        link_kbps=rx,
+        cut_rx_kbps=rx,
+        last_cut_ns=now_ns,
+        beyond_ns=None,
+        deficit_since_ns=None,
         cuts=state.cuts + 1,
     )
 
@@ -456,9 +514,34 @@ def on_cycle(
     return replace(state, budget_kbps=min(cfg.max_kbps, budget + rate * dt_s), beyond_ns=beyond)
 
 
+# A queue growing faster than this (ms a ms) is a link that narrowed, not a probe's overshoot
+# (10-20 %) nor the slope's noise over 0.1 s (+-0.2): a link at half the rate gives 0.5.
+_FAST_GROWTH = 0.3
+_RX_WINDOW_NS = NS_PER_S  # rx_kbps: the operator's last second (DESIGN 12)
 _TREND_NS = 200_000_000  # the queue's growth: over the last 0.1 s, from entries this old
 _CAMERA_SIGNAL_FPS = 2.0  # the camera's latencies count as a queue signal from this rate up
 _COVER = 0.6  # the reports in the view's short window must span this much of it
+
+
+def _on_slower_link(
+    state: BudgetState,
+    cfg: BudgetConfig,
+    in_force: Plan | None,
+    old_kbps: float | None,
+    new_kbps: float,
+) -> tuple[BudgetState, float, float]:
+    """The bases raised for a link found slower (module docstring, "Signal"), and by how much
+    (the telemetry's, the camera's)."""
+    if in_force is None or (old_kbps is not None and new_kbps >= old_kbps):
+        return state, 0.0, 0.0
+    fps = in_force.camera_fps
+    frame_bytes = in_force.camera_kbps * 125.0 / fps if fps > 0 else 0.0
+    view_raise = _slower_link_ms(in_force.telemetry_bytes, old_kbps, new_kbps, cfg.margin_ms)
+    camera_raise = _slower_link_ms(frame_bytes, old_kbps, new_kbps, cfg.margin_ms)
+    raised = replace(
+        state, view=state.view.raised(view_raise), camera=state.camera.raised(camera_raise)
+    )
+    return raised, view_raise, camera_raise
 
 
 def _slower_link_ms(nbytes: float, old_kbps: float | None, new_kbps: float, cap_ms: float) -> float:

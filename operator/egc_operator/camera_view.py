@@ -25,7 +25,9 @@ the view, ``shown_stamp_ns`` (the newest shown frame's capture stamp, for the op
 command: read without a lock, since the commands must never wait for the decoder),
 ``camera_age_ms`` and ``stats`` (frames a second shown and kbit/s received, for the status
 line). The view gets JPEG: JPEG frames as they came, H.264 frames re-encoded (Pillow, ~1 ms at
-320 x 240), only when a view records them (``ShownFrame.jpeg``).
+320 x 240), only when a view records them (``ShownFrame.jpeg``); always at the largest size
+shown so far (a smaller frame, sent so on a thin link, scaled up: the Rerun viewer refuses an
+image stream whose size changes), its line giving the size sent.
 """
 
 from __future__ import annotations
@@ -334,6 +336,7 @@ class CameraFeed:
         self._closed = False
         self._text_drawn: tuple[str, bool] | None = None
         self._shown_ns: int | None = None  # written by the decoder thread, read lock-free
+        self._view_size: tuple[int, int] | None = None  # the view's picture (decoder thread)
         self._thread = threading.Thread(target=self._decode_loop, name="camera", daemon=True)
         self._thread.start()
         self._subscriber = session.declare_subscriber(keys.camera(robot_id), self._on_sample)
@@ -387,8 +390,27 @@ class CameraFeed:
         if result is None or self._view is None:
             return
         text = camera_text(stats, result.codec, (result.width, result.height))
-        self._view.on_camera(result, text, None if clock is None else clock.now_ns)
+        shown_frame = self._at_view_size(result)
+        self._view.on_camera(shown_frame, text, None if clock is None else clock.now_ns)
         self._text_drawn = (text, False)
+
+    def _at_view_size(self, frame: ShownFrame) -> ShownFrame:
+        """``frame`` at the largest size shown so far: a frame the budget sent smaller (a thin
+        link halves the picture) is scaled up, so that the view's image keeps one size (the
+        Rerun viewer refuses an image stream whose size changes); its line says the size sent."""
+        size = self._view_size
+        if size is None or frame.width * frame.height > size[0] * size[1]:
+            self._view_size = (frame.width, frame.height)
+            return frame
+        if (frame.width, frame.height) == size:
+            return frame
+        image = (
+            Image.fromarray(frame.rgb, "RGB")
+            if frame.rgb is not None
+            else Image.open(io.BytesIO(frame.jpeg())).convert("RGB")
+        )
+        rgb: RGB = np.asarray(image.resize(size, Image.Resampling.BILINEAR))
+        return ShownFrame(frame.seq, frame.stamp_ns, frame.codec, *size, frame.key, rgb=rgb)
 
     def shown_stamp_ns(self) -> int | None:
         """The newest shown frame's capture stamp (robot clock), None when none is shown; no

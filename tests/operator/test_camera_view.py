@@ -327,3 +327,41 @@ def test_the_feed_over_a_real_zenoh_session(renderer):
     finally:
         camera.close()
         session.close()
+
+
+def test_the_view_keeps_one_picture_size_when_the_budget_halves_it(renderer):
+    """A thin link halves the picture (160x120, JPEG at 1 frame/s); the Rerun viewer refuses an
+    image stream whose size changes, so the view gets every frame at the largest size shown,
+    its line saying the size sent."""
+    big = stream(renderer, 3)
+    encoder = CameraEncoder()
+    encoder.set_plan(StreamPlan("jpeg", 160, 120, 1.0, 10.0))
+    small = []
+    for k in range(3, 6):
+        stamp = T0 + k * S
+        out = encoder.encode(renderer.render((0.9, 1.4, 0.0)), stamp)
+        assert out is not None and (out.width_px, out.height_px) == (160, 120)
+        small.append(CameraFrame(k, stamp, "jpeg", 160, 120, True, out.data))
+    offset = T0 - time.monotonic_ns()
+    session = open_session(ZenohOptions())
+    view = RecordingView()
+    camera = CameraFeed(session, "cam", lambda local_ns: RobotClock(local_ns + offset, MS), view)
+    try:
+        publisher = session.declare_publisher("egc/cam/camera")
+        for f in (*big, *small):
+            now = time.monotonic_ns() + offset
+            publisher.put(
+                CameraFrame(f.seq, now, f.codec, f.width, f.height, f.key, f.data).encode()
+            )
+            time.sleep(0.01)
+        end = time.monotonic() + 30.0
+        while len(view.frames) < 6 and time.monotonic() < end:
+            time.sleep(0.02)
+        assert [f.seq for f, _ in view.frames] == list(range(6))
+        assert {(f.width, f.height) for f, _ in view.frames} == {(320, 240)}
+        assert all(f.rgb is not None and f.rgb.shape == (240, 320, 3) for f, _ in view.frames[3:])
+        assert all("jpeg 160x120" in text for _, text in view.frames[3:])
+        assert view.frames[3][0].jpeg()[:2] == b"\xff\xd8"
+    finally:
+        camera.close()
+        session.close()
