@@ -24,7 +24,6 @@ cbf row <= 2x EGC's median at 720 points, same run.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import platform
 import statistics
@@ -34,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 from egc_common.profiles import JACKAL, PIONEER3DX, TURTLEBOT4, RobotProfile, load_profile
+from egc_experiments.bench_results import write_result
 from egc_robot.filters.cbf import CbfParams, cbf_filter
 from egc_robot.filters.dwa import DwaParams, dwa_filter
 from egc_robot.filters.egc import EgcCase, EgcParams, egc_filter
@@ -194,7 +194,7 @@ def family_rows(cases: dict, egc_by_points: dict, repeats: int) -> list[dict]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=2000)
-    ap.add_argument("--out", default="bench/results/bench_filter.json")
+    ap.add_argument("--out", help="JSON file (default bench/results/filter.json)")
     args = ap.parse_args(argv)
 
     cases = {f"scan {n}": room_scan(n) for n in (360, 720, 1440)}
@@ -260,13 +260,8 @@ def main(argv: list[str] | None = None) -> int:
         targets[f"{name} <= 2x egc at 720 points"] = ratio <= 2.0
     for k, ok in targets.items():
         print(f"target {k}: {'met' if ok else 'MISSED'}")
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(
-        json.dumps(
-            {"rows": rows, "family": family, "targets": targets, "python": sys.version}, indent=2
-        )
-    )
+    result = {"rows": rows, "family": family, "targets": targets, "python": sys.version}
+    out = write_result("filter", result, args.out)
     print(f"wrote {out}")
     return 0 if all(targets.values()) else 1
 

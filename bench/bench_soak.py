@@ -22,6 +22,8 @@ serving one operator costs. Exits 1 when a target is missed; the table says whic
 
     python bench/bench_soak.py [--minutes 10] [--camera sim|none] [--window-minutes W]
                                [--sample-s 5] [--out FILE.json]
+
+Writes bench/results/soak.json (soak-none.json with ``--camera none``) unless ``--out``.
 """
 
 from __future__ import annotations
@@ -29,7 +31,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -38,7 +39,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-RESULTS = Path(__file__).resolve().parent / "results"
+from egc_experiments.bench_results import write_result
+
 CLI = [sys.executable, "-m", "egc_app.cli"]
 ROBOT_ID = "soak"
 DRIFT_MAX = 0.05
@@ -149,12 +151,6 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "minutes": args.minutes,
         "camera": args.camera,
         "window_s": window_s,
-        "machine": {
-            "python": platform.python_version(),
-            "cpus": os.cpu_count(),
-            "load_avg_end": os.getloadavg(),
-        },
-        "date": time.strftime("%Y-%m-%d %H:%M:%S"),
         "samples": len(samples),
         "work_dir": str(work),
     }
@@ -203,16 +199,17 @@ def main() -> int:
     parser.add_argument("--window-minutes", type=float, default=None)
     parser.add_argument("--sample-s", type=float, default=5.0)
     parser.add_argument("--warmup-s", type=float, default=20.0)
-    parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument(
+        "--out", type=Path, default=None, help="default bench/results/soak.json, soak-none.json"
+    )
     args = parser.parse_args()
     if not 0.5 <= args.minutes <= 24 * 60:
         parser.error("--minutes must be within [0.5, 1440]")
     if not 0.5 <= args.sample_s <= 60:
         parser.error("--sample-s must be within [0.5, 60]")
     out = run(args)
-    path = args.out or RESULTS / f"soak_{args.camera}.json"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(out, indent=2) + "\n")
+    name = "soak" if args.camera == "sim" else f"soak-{args.camera}"
+    path = write_result(name, out, args.out)  # the machine, date and commit with it
     print(f"soak {args.minutes:g} min, camera {args.camera}, windows of {out['window_s']:.0f} s")
     print(f"{'':10} {'CPU % first':>12} {'last':>8} {'RSS MB first':>13} {'last':>8}")
     for name in ("robot", "operator"):

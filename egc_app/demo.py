@@ -293,8 +293,11 @@ def run(args: argparse.Namespace) -> int:
             # listens on TCP, for Zenoh's reliable control link, on the same port).
             _wait_ready(robot, "127.0.0.1", int(endpoint.rsplit(":", 1)[1]))
             relay = _start(_link_cmd(args, operator_endpoint, endpoint))
-            link_started_s = time.monotonic()  # a scenario's time 0, on the robot's clock too
             _wait_ready(relay, "127.0.0.1", link_port)
+            # A scenario's time 0 (on the robot's clock too): the relay takes it just before it
+            # listens, so within one poll (50 ms) before this; the relay's first line says it
+            # exactly. Not when it was started: Python takes seconds to start on a busy machine.
+            link_started_s = time.monotonic()
         operator = _start(operator_cmd)
         while not stop.wait(0.1):
             if operator.poll() is not None or robot.poll() is not None:

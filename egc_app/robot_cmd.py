@@ -26,6 +26,13 @@ flags. Tables and keys (units in the names):
     [camera]   source ("sim", "ros2:TOPIC", "none"), size ("WxH"), fps, codec ("h264", "jpeg")
                (DESIGN 12; flags --camera, --camera-size, --camera-fps, --camera-codec)
 
+Command sources and locks (DESIGN 14; ``egc_robot.source_config`` documents the keys):
+``[[source]]`` tables (``name``, ``kind`` operator | zenoh | ros2, ``priority``, ``timeout_s``;
+``topic`` and ``cmd_type`` for ros2), ``[[lock]]`` tables (``name``, ``priority``,
+``timeout_s``; ``kind = "ros2"`` and ``topic`` for a ``std_msgs/Bool`` topic) and ``[[operator]]``
+tables (``id``, ``priority``). Without ``[[source]]`` tables the robot is as before: one operator
+source. ``ros2`` sources and locks need ``--driver ros2`` (docs/ros2-sources.md).
+
 ``pipeline.no_return_is_free`` unset (the default): each scan's sensor says whether a beam with no
 return means free. The simulator's lidar says so, the ROS 2 driver says so for REP 117 scans
 (``+inf`` means nothing within range_max; a scan without any information is never delivered,
@@ -78,6 +85,8 @@ from egc_robot.pipeline import FILTERS, PipelineConfig
 from egc_robot.ros2_core import CMD_TYPES, ROS2_KEYS, Ros2Settings, ros2_settings
 from egc_robot.run_stats import RunStats
 from egc_robot.safety import MAX_CONTROL_PERIOD_S, SweepParams
+from egc_robot.source_config import mux_config, operator_priorities
+from egc_robot.source_mux import MuxConfig
 from egc_robot.zenoh_node import Recorder, RobotNode
 
 log = logging.getLogger("egc.robot")
@@ -106,16 +115,18 @@ SECTIONS: dict[str, tuple[str, ...]] = {
     "ros2": ROS2_KEYS,
     "camera": CAMERA_KEYS,
 }
-# [dwa], [assist] and [cbf] are checked by their params
-ROBOT_TABLES = (*SECTIONS, "dwa", "assist", "cbf")
+# [dwa], [assist] and [cbf] are checked by their params; [[source]], [[lock]], [[operator]]
+# (DESIGN 14) by egc_robot.source_config.
+ROBOT_TABLES = (*SECTIONS, "dwa", "assist", "cbf", "source", "lock", "operator")
 
 
 class SimDriver:
     """sim_robot in this process, stepped in real time on every poll."""
 
-    def __init__(self, rt: Any, map_server: Any = None) -> None:
+    def __init__(self, rt: Any, map_server: Any = None, map_id: str | None = None) -> None:
         self._rt = rt
         self._map_server = map_server  # the queryable egc/<robot>/map, for the operator view
+        self.map_id = map_id  # the map frame's id in egc/<robot>/info (DESIGN 15)
 
     def poll(self, now_ns: int) -> SensorUpdate:
         self._rt.advance(now_ns)
@@ -397,9 +408,39 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
                 _number(robot, "telemetry_scan_decimation", defaults.telemetry_scan_decimation)
             ),
             nominal_period_s=1.0 / rate_hz,
+            sources=build_sources(args, cfg),
+            operator_priorities=operator_priorities(cfg.get("operator")),
         )
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+
+
+def build_sources(args: argparse.Namespace, cfg: dict[str, Any]) -> MuxConfig | None:
+    """DESIGN 14: the ``[[source]]`` and ``[[lock]]`` tables (None without ``[[source]]``),
+    checked against the driver: ``ros2`` ones need ``--driver ros2`` and may not listen on the
+    topic this robot publishes its commands to (a loop)."""
+    mux = mux_config(cfg.get("source"), cfg.get("lock"))
+    if mux is None:
+        return None
+    topics = [(f"source {s.name}", s.topic) for s in mux.sources if s.topic is not None]
+    topics += [(f"lock {lk.name}", lk.topic) for lk in mux.locks if lk.topic is not None]
+    if topics and args.driver != "ros2":
+        what = topics[0][0]
+        raise ValueError(f"{what} is fed by the ROS 2 topic {topics[0][1]}: it needs --driver ros2")
+    if topics:
+        ros = _ros2_settings(args, cfg, need_rclpy=False)
+
+        def resolved(topic: str) -> str:  # as the node in its namespace resolves it
+            return topic if topic.startswith("/") else f"{ros.namespace.rstrip('/')}/{topic}"
+
+        for what, topic in topics:
+            if resolved(topic) == resolved(ros.cmd_topic):
+                raise ValueError(
+                    f"{what} listens on {topic}, where this robot publishes its own commands "
+                    "(--ros-cmd): a loop; give the navigation stack's output another topic, "
+                    "e.g. /cmd_vel_nav"
+                )
+    return mux
 
 
 def build_budget_config(args: argparse.Namespace, cfg: dict[str, Any]) -> BudgetConfig:
@@ -448,11 +489,11 @@ def _ros2_settings(
         "laser_upside_down": args.laser_upside_down,
     }
     try:
-        table = config_mod.section(cfg, "ros2", SECTIONS["ros2"])
-        laser = get_profile(args.profile).laser_pose
-        if laser is not None and "laser_pose" not in table:  # the profile's (DESIGN 14)
-            table = {**table, "laser_pose": list(laser)}
-        settings = ros2_settings(table, flags)
+        settings = ros2_settings(
+            config_mod.section(cfg, "ros2", SECTIONS["ros2"]),
+            flags,
+            default_laser_pose=get_profile(args.profile).laser_pose,
+        )
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     if need_rclpy:
@@ -467,9 +508,18 @@ def _open_driver(
         from egc_robot.ros2_driver import Ros2Driver
 
         settings = _ros2_settings(args, cfg)
+        mux = build_sources(args, cfg)
+        sources = () if mux is None else tuple(s for s in mux.sources if s.kind == "ros2")
+        locks = () if mux is None else tuple(lk for lk in mux.locks if lk.topic is not None)
         try:
             footprint = get_profile(args.profile).footprint
-            return Ros2Driver(settings, footprint_half_m=footprint, camera_topic=camera_topic)
+            return Ros2Driver(
+                settings,
+                footprint_half_m=footprint,
+                camera_topic=camera_topic,
+                sources=sources,
+                locks=locks,
+            )
         except Exception as exc:  # rclpy's own errors (e.g. ROS_DOMAIN_ID out of range)
             raise UsageError(f"cannot start the ROS 2 node: {exc}") from None
     if args.driver == "zenoh":
@@ -477,7 +527,7 @@ def _open_driver(
 
         return ZenohDriver(session, args.robot, get_profile(args.profile).footprint)
     from egc_sim.bridge import RealTimeSim, open_simulator, parse_pose
-    from egc_sim.grid_world import map_message
+    from egc_sim.grid_world import map_message, world_id
 
     try:
         sim_cfg = config_mod.section(cfg, "sim", SECTIONS["sim"])
@@ -496,6 +546,7 @@ def _open_driver(
     return SimDriver(
         RealTimeSim(sim, time.monotonic_ns(), 1.0 / scan_hz),
         serve_static(session, keys.world_map(args.robot), world_map),
+        map_id=world_id(sim.world),
     )
 
 
@@ -537,10 +588,13 @@ def resume_window_caveat(config: ControllerConfig, lease_ms: int | None) -> str 
     )
 
 
-def _describer(args: argparse.Namespace, controller: RobotController) -> Any:
+def _describer(
+    args: argparse.Namespace, controller: RobotController, map_id: str | None = None
+) -> Any:
     """What ``egc/<robot>/info`` answers (DESIGN 15): fixed facts, plus the controller's state
     and operator read at the time of the query (two attribute reads: a snapshot may be one
-    cycle old, never inconsistent enough to matter for a listing)."""
+    cycle old, never inconsistent enough to matter for a listing). ``map_id``: the map frame
+    the driver's map poses are in, when it gives them (the simulator: its world's id)."""
     profile = get_profile(args.profile)
     footprint = tuple(profile.footprint.outline()[:-1])  # as given (DESIGN 14), open
     try:
@@ -560,6 +614,7 @@ def _describer(args: argparse.Namespace, controller: RobotController) -> Any:
             version=version,
             footprint_m=footprint,
             operator=controller.operator,
+            map=map_id,
         )
 
     return describe
@@ -625,7 +680,15 @@ def run(args: argparse.Namespace) -> int:
         else dataclasses.replace(budget_config, camera=True, camera_max_fps=camera.max_fps),
         camera=streamer,
     )
-    info = InfoServer(session, args.robot, _describer(args, node.controller))
+    map_id = getattr(driver, "map_id", None)
+    info = InfoServer(session, args.robot, _describer(args, node.controller, map_id))
+    mux = controller_config.sources
+    if mux is not None:
+        log.info(
+            "command sources (DESIGN 14): %s; locks: %s",
+            ", ".join(f"{s.name} ({s.kind}, priority {s.priority})" for s in mux.sources),
+            ", ".join(f"{lk.name} (priority {lk.priority})" for lk in mux.locks) or "none",
+        )
     log.info(
         "robot %r ready: driver %s, profile %s, filter %s, %.6g Hz, telemetry %.6g Hz, "
         "downlink budget %s",

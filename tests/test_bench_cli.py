@@ -31,6 +31,7 @@ def test_options_after_a_name_go_to_that_script(tmp_path: Path) -> None:
     assert f"wrote {out}" in proc.stdout, proc.stderr
     assert "== bench" not in proc.stdout  # one benchmark: no header
     result = json.loads(out.read_text())  # written where --out said, not bench/results/
+    assert "benchmarks.md" not in proc.stdout  # nothing in bench/results/: the page is left alone
     assert {row["repeats"] for row in result["rows"]} == {3}  # --repeats reached it too
     # The script's verdict comes back as the exit status. Whether a speed target is met
     # depends on how busy the machine is (issue 32): the status must agree with the

@@ -569,6 +569,12 @@ class Telemetry:
     cam_fps: float | None = None
     cam_kbps: float | None = None
     cut: tuple[str, ...] = ()
+    # Command sources (DESIGN 14; absent without [[source]] tables): the source that drives and
+    # the highest active lock (None: none), and the age on the robot's clock of the newest
+    # command of the source that drives, since it arrived.
+    source: str | None = None
+    lock: str | None = None
+    source_age_ms: float | None = None
     # cbf (DESIGN 13), for the view: the points whose barriers changed the command (float32
     # (K, 2) in {R}, at most MAX_CBF_POINTS), the margin kept from everything and the margin
     # straight ahead at the current speed (m); the margins are absent unless cbf ran.
@@ -613,6 +619,9 @@ _TELEMETRY_OPTIONAL: Final = (
     "cam_fps",
     "cam_kbps",
     "cut",
+    "source",
+    "lock",
+    "source_age_ms",
 )
 
 
@@ -760,6 +769,9 @@ def _build_telemetry(m: Mapping[Any, Any]) -> Telemetry:
         "cam_fps": _opt_range(m, "cam_fps", 0.0, MAX_CAMERA_FPS),
         "cam_kbps": _opt_range(m, "cam_kbps", 0.0, MAX_KBPS),
         "cut": _cuts(m),
+        "source": _opt_str(m, "source"),
+        "lock": _opt_str(m, "lock"),
+        "source_age_ms": _opt_range(m, "source_age_ms", -MAX_RACE_MS, MAX_CLOCK_MS),
         "cbf_xy": _f32_array(m, "cbf_xy", 2, MAX_CBF_POINTS)
         if "cbf_xy" in m
         else np.zeros((0, 2), np.float32),
@@ -854,18 +866,37 @@ class StateMessage:
     reason: str
     operator: str | None = None
     rejected: int = 0
+    # DESIGN 14, as in the telemetry; left out when None (a robot without [[source]] tables).
+    source: str | None = None
+    lock: str | None = None
+    # The robot's pose in the map frame when its driver localises (x, y, theta): an optional
+    # key (DESIGN 7 additions) for the fleet's map (DESIGN 15), at the state's 1 Hz, so an
+    # operator sees where every robot is without taking every robot's telemetry.
+    map_pose: tuple[float, float, float] | None = None
 
     def encode(self) -> bytes:
-        return _pack({"v": SCHEMA_VERSION, **_shallow_fields(self)})
+        d = _shallow_fields(self)
+        for key in ("source", "lock"):
+            if d[key] is None:
+                del d[key]
+        if self.map_pose is None:
+            del d["map_pose"]
+        else:
+            d["map_pose"] = [float(v) for v in self.map_pose]
+        return _pack({"v": SCHEMA_VERSION, **d})
 
 
 def _build_state(m: Mapping[Any, Any]) -> StateMessage:
+    map_pose = _opt_tuple(m, "map_pose", 3, _POSE)
     return StateMessage(
         stamp_ns=_int(m, "stamp_ns"),
         state=_str(m, "state", STATES),
         reason=_str(m, "reason", max_chars=256),
         operator=_opt_str(m, "operator"),
         rejected=_int(m, "rejected") if "rejected" in m else 0,
+        source=_opt_str(m, "source"),
+        lock=_opt_str(m, "lock"),
+        map_pose=None if map_pose is None else (map_pose[0], map_pose[1], map_pose[2]),
     )
 
 

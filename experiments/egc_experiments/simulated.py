@@ -214,7 +214,7 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
         seed=point.seed,
         world=world,
         start=start,
-        half_width_m=0.5 * profile.width_m,
+        half_width_m=profile.half_size_m[1],
     )
     operator = OperatorSide(model, point.mode, start)
     spec = parse_spec(point.link_spec())

@@ -21,8 +21,9 @@ the view keeps the last good frame, its age growing, instead of showing garbage.
 
 ``CameraFeed`` is the thin adapter: a Zenoh subscriber whose callback only queues the payload
 (bounded; an overflow is a gap), a thread that decodes in order and hands each shown frame to
-the view, ``camera_age_ms`` (the newest shown frame's age on the robot's clock, for the
-operator's command) and ``stats`` (frames a second shown and kbit/s received, for the status
+the view, ``shown_stamp_ns`` (the newest shown frame's capture stamp, for the operator's
+command: read without a lock, since the commands must never wait for the decoder),
+``camera_age_ms`` and ``stats`` (frames a second shown and kbit/s received, for the status
 line). The view gets JPEG: JPEG frames as they came, H.264 frames re-encoded (Pillow, ~1 ms at
 320 x 240), only when a view records them (``ShownFrame.jpeg``).
 """
@@ -332,6 +333,7 @@ class CameraFeed:
         self._wake = threading.Condition()
         self._closed = False
         self._text_drawn: tuple[str, bool] | None = None
+        self._shown_ns: int | None = None  # written by the decoder thread, read lock-free
         self._thread = threading.Thread(target=self._decode_loop, name="camera", daemon=True)
         self._thread.start()
         self._subscriber = session.declare_subscriber(keys.camera(robot_id), self._on_sample)
@@ -373,6 +375,8 @@ class CameraFeed:
                 self.receiver.gap()
             result = self.receiver.receive(payload, now, clock)
             stats = self.receiver.stats(now, clock)
+            shown = self.receiver.shown
+            self._shown_ns = None if shown is None else shown.stamp_ns
         if isinstance(result, Rejection):
             if self._on_reject is not None:
                 self._on_reject("camera", result)
@@ -385,6 +389,11 @@ class CameraFeed:
         text = camera_text(stats, result.codec, (result.width, result.height))
         self._view.on_camera(result, text, None if clock is None else clock.now_ns)
         self._text_drawn = (text, False)
+
+    def shown_stamp_ns(self) -> int | None:
+        """The newest shown frame's capture stamp (robot clock), None when none is shown; no
+        lock (a single attribute read)."""
+        return self._shown_ns
 
     def camera_age_ms(self) -> int | None:
         """The newest shown frame's age on the robot's clock (ms), None when unknown."""
@@ -421,6 +430,7 @@ class CameraFeed:
         """A new robot: forget the old one's frames (see ``CameraReceiver.reset``)."""
         with self._lock:
             self.receiver.reset()
+            self._shown_ns = None
 
     def close(self) -> None:
         try:

@@ -19,14 +19,16 @@
 - Sends ``view_age_ms`` with every command (DESIGN 7, 9): the age, on the robot's clock, of the
   newest telemetry received (and handed to the view), once the clock is synchronised.
 - Subscribes to the robot's camera (DESIGN 12, ``egc_operator.camera_view.CameraFeed``): frames
-  decoded in their own thread and shown in the view with their age; ``camera.camera_age_ms()``
-  is the newest shown frame's age on the robot's clock (``robot_clock``: the clock sync's
-  estimate and its error, which also bounds how far ahead a frame's stamp may be).
+  decoded in their own thread and shown in the view with their age (``robot_clock``: the clock
+  sync's estimate and its error, which also bounds how far ahead a frame's stamp may be);
+  ``camera.shown_stamp_ns()`` is the newest shown frame's capture stamp, read without a lock.
 - Sends ``rx_kbps`` with every command once view data came (DESIGN 12): the view plane's payload
   bytes received over the last second (telemetry, and camera samples counted through
   ``count_view_bytes``), in kbit/s, the robot's downlink budget's measure of what the link
   delivers; and ``camera_age_ms`` when there is a camera view (``CameraAge``), like
-  ``view_age_ms`` for the newest frame shown. The status line says what the link carries.
+  ``view_age_ms`` for the newest frame shown, on the same reading of the robot's clock as the
+  command's stamp (the robot tells the frame shown from the two). The status line says what
+  the link carries.
 - Keeps a bounded history of the commands it sent (robot-clock stamps) and hands it to the view
   after every command, for the predictive display (DESIGN 9, ``egc_operator.prediction``).
 - Sends ``filter`` with every command (DESIGN 6): the source's pick (a gamepad button, a file's
@@ -115,10 +117,12 @@ def goal_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
 
 
 class CameraAge(Protocol):
-    """The camera decoder's report (``egc_operator.camera_view``, DESIGN 12): the age on the
-    robot's clock of the newest frame shown, in ms, None when none is shown."""
+    """The camera decoder's report (``egc_operator.camera_view``, DESIGN 12): the capture
+    stamp (robot clock) of the newest frame shown, None when none is shown. Read on every
+    command, so it must not wait for the decoder (no lock: a decoder thread preempted on a busy
+    machine while holding one delayed commands by hundreds of ms)."""
 
-    def camera_age_ms(self) -> int | None: ...
+    def shown_stamp_ns(self) -> int | None: ...
 
 
 class View(Protocol):
@@ -159,17 +163,14 @@ def view_age_ms(
     return max(0, min(MAX_VIEW_AGE_MS, age_ms))
 
 
-def _camera_age(camera: CameraAge) -> int | None:
-    """The camera view's ``camera_age_ms`` for a command: an int in [0, MAX_VIEW_AGE_MS], None
-    when unknown or when the decoder fails (it must not stop the commands)."""
+def _camera_stamp(camera: CameraAge) -> int | None:
+    """The capture stamp of the newest camera frame shown, None when unknown or when the
+    decoder fails (it must not stop the commands)."""
     try:
-        age = camera.camera_age_ms()
+        return camera.shown_stamp_ns()
     except Exception as exc:
         log.debug("camera age unknown: %s", exc)
         return None
-    if age is None:
-        return None
-    return max(0, min(MAX_VIEW_AGE_MS, int(age)))
 
 
 def _replier_of(reply: zenoh.Reply) -> str:
@@ -229,6 +230,7 @@ class OperatorNode:
         # each, and a clock reply to a query sent before one is not this robot's.
         self._robot_epoch = 0
         self._map_wake = threading.Event()
+        self._sync_wake = threading.Event()  # the clock sync's thread: ask the robot's clock now
         self.published = 0
         self._filter_default = filter_default
         self._planner = RoutePlanner(route)
@@ -243,7 +245,7 @@ class OperatorNode:
         self._last_route: Route | None = None
         self.goals_published = 0
         # The robot's camera (DESIGN 12): decoded in its own thread, shown in the view, its
-        # newest frame's age for the command (camera_age_ms()), refusals counted with the
+        # newest frame's age for the command (shown_stamp_ns()), refusals counted with the
         # rest. Made before the robot's liveliness subscriber, whose callback resets it.
         self.camera = CameraFeed(
             session,
@@ -373,6 +375,8 @@ class OperatorNode:
                 self._robot_epoch += 1
         if changed:
             self.camera.reset()  # the old robot's frames are not this one's
+        if changed:
+            self._sync_wake.set()
         if alive:
             self._map_wake.set()  # its map, again (a restarted robot may serve another one)
         text = "robot present" if alive else "robot gone (its liveliness token was withdrawn)"
@@ -433,9 +437,14 @@ class OperatorNode:
                 log.debug("clock query failed: %s", exc)
             with self._lock:
                 confirmed = self._sync.confirmed
+                raced = epoch != self._robot_epoch
+            if raced:  # the robot (re)appeared during the query, its reply was dropped: ask now
+                continue
             # 10 Hz until the robot's telemetry confirms the clock in use (a second replier
-            # that comes later is then seen within 0.1 s), then 1 Hz
-            stop.wait(1.0 if confirmed else 0.1)
+            # that comes later is then seen within 0.1 s), then 1 Hz; at once when the robot
+            # (re)appears (its clock was forgotten: a new operator session waits for it)
+            self._sync_wake.wait(1.0 if confirmed else 0.1)
+            self._sync_wake.clear()
 
     def _say_repliers(self) -> None:
         """More than one peer answers the clock query: name them in the log (at once when the
@@ -574,16 +583,18 @@ class OperatorNode:
                     self._goal_wake.set()
                 pressed[action] = held
             seq += 1
+            frame_ns = None if self._camera is None else _camera_stamp(self._camera)
             with self._lock:
                 stamp = self._sync.robot_now(now)
                 shown = self._telemetry
-                age = view_age_ms(
-                    stamp, self._sync.synchronised, None if shown is None else shown.stamp_ns
-                )
+                synchronised = self._sync.synchronised
+                age = view_age_ms(stamp, synchronised, None if shown is None else shown.stamp_ns)
                 rx = round(self._rx.kbps(now)) if self._rx.total_bytes else None
+            # The camera's age on the same reading of the robot's clock as the stamp: the robot
+            # finds the frame shown from the two (egc_common.view_budget).
             camera_age = None
-            if self._camera is not None and age is not None:  # synchronised, like view_age_ms
-                camera_age = _camera_age(self._camera)
+            if frame_ns is not None and age is not None:
+                camera_age = view_age_ms(stamp, synchronised, frame_ns)
             command = OperatorCommand(
                 seq=seq,
                 stamp_ns=stamp,
@@ -622,6 +633,7 @@ class OperatorNode:
             self._release_on_exit(last)
         stop.set()
         self._goal_wake.set()
+        self._sync_wake.set()
         sync_thread.join(timeout=2 * _CLOCK_TIMEOUT_S)
         goal_thread.join(timeout=2 * _CLOCK_TIMEOUT_S)
 

@@ -18,6 +18,12 @@ The operator process also hands over its via points (``on_route``): the world fr
 them with the robot's echo of the active one (telemetry ``goal``, ``goals_left``), and the
 robot frame the direction the filter suggests (``suggested_rad``), see ``view_scene.via_scene``.
 
+An operator driving a fleet (DESIGN 15) opens one view with the fleet layout (``fleet=True``)
+and gives each driven robot its own ``for_robot`` view on that recording (a robot's telemetry,
+clock and trajectory are its own; closing it leaves the recording open); ``on_fleet`` draws
+the fleet panel (``view_blueprint.FLEET_TABLE``) and the robots that share the driven robot's
+map frame at their map poses (``FLEET_POSES``).
+
 Every method is thread-safe (Zenoh delivers on its own threads) and never raises on a message:
 a view must not take the operator process down.
 """
@@ -46,6 +52,8 @@ from egc_common.messages import StateMessage, Telemetry
 
 from egc_operator import view_blueprint as paths
 from egc_operator.camera_view import ShownFrame
+from egc_operator.fleet_table import FleetRow, fleet_markdown, on_shared_map
+from egc_operator.fleet_thumbnails import THUMB_WIDTH_PX, Thumbnail
 from egc_operator.prediction import (
     CommandHistory,
     Prediction,
@@ -123,6 +131,27 @@ TEXT_LEVELS = {
     "critical": "CRITICAL",
 }
 STATE_LEVELS = {"IDLE": "INFO", "DRIVING": "INFO", "HOLD": "WARN", "ESTOP": "ERROR"}
+# The fleet's robots on the map, by state (DESIGN 15).
+FLEET_STATE_COLOURS = {
+    "IDLE": (120, 120, 120),
+    "DRIVING": (30, 150, 60),
+    "HOLD": (220, 150, 0),
+    "ESTOP": (210, 30, 30),
+}
+FLEET_MARK_RADIUS_M = 0.25
+# What a fleet's driven robot draws, cleared when the operator switches to another one.
+_DRIVEN_PATHS = (
+    paths.SCAN,
+    paths.STATUS,
+    paths.CIRCLES,
+    paths.TRAJECTORY,
+    paths.ROBOT_POSE,
+    paths.PREDICTED,
+    paths.VIA,
+    paths.CAMERA_IMAGE,
+    paths.CAMERA_AGE,
+    paths.LINK_TEXT,
+)
 # (series path under plots/, legend name, colour): the paper's Fig. 11 has the operator's
 # reference in blue and the modified command in red.
 SERIES_STYLE = (
@@ -187,8 +216,10 @@ def open_view(
     *,
     application_id: str = "egc-teleop",
     recording_name: str | None = None,
+    fleet: bool = False,
 ) -> OperatorView:
-    """The operator view at the target chosen by ``add_view_arguments``' options.
+    """The operator view at the target chosen by ``add_view_arguments``' options (``fleet``:
+    the layout of an operator driving a fleet, DESIGN 15).
 
     Prints one line on stderr saying where the view is. Raises ``UsageError`` for a bad
     combination of options, a malformed URL, a file that cannot be written or a web port in use
@@ -207,7 +238,7 @@ def open_view(
         stamp=stamp,
     )
     check_target(target)
-    view = _open(target, robot_id, application_id, recording_name)
+    view = _open(target, robot_id, application_id, recording_name, fleet=fleet)
     address = viewer_address(target)
     if target.kind == "spawn" and address is not None:
         why = reachable(address)
@@ -218,7 +249,7 @@ def open_view(
                 "save", path=default_save_path(robot_id, stamp), viewer_failed=True
             )
             check_target(fallback)
-            view = _open(fallback, robot_id, application_id, recording_name)
+            view = _open(fallback, robot_id, application_id, recording_name, fleet=fleet)
             assert fallback.path is not None
             view.flush()
             if fallback.path.exists():
@@ -265,13 +296,15 @@ def _open(
     application_id: str,
     recording_name: str | None,
     world_bounds_m: tuple[float, float, float, float] | None = None,
+    fleet: bool = False,
 ) -> OperatorView:
     if target.kind == "none":
         return OperatorView(None, robot_id, where="operator view disabled (--no-view)")
     batcher = FILE_BATCHER if target.kind == "save" else None
     rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4(), batcher_config=batcher)
+    blueprint = operator_blueprint(robot_id, world_bounds_m=world_bounds_m, fleet=fleet)
     try:
-        where = attach(rec, target, operator_blueprint(robot_id, world_bounds_m=world_bounds_m))
+        where = attach(rec, target, blueprint)
     except (RuntimeError, OSError) as exc:  # e.g. the file or port was taken since the check
         option = {"save": "--save", "serve_web": "--serve-web", "connect": "--connect"}
         raise UsageError(f"{option.get(target.kind, 'view')}: {exc}") from None
@@ -289,16 +322,24 @@ class OperatorView:
     """
 
     def __init__(
-        self, recording: rr.RecordingStream | None, robot_id: str, where: str = ""
+        self,
+        recording: rr.RecordingStream | None,
+        robot_id: str,
+        where: str = "",
+        owns_recording: bool = True,
     ) -> None:
         self.robot_id = robot_id
         self.where = where
         self._rec = recording
+        self._owns_recording = owns_recording  # False: a ``for_robot`` view of a fleet
+        # A ``for_robot`` view the operator switched away from: ``close`` clears its drawings.
+        self.clear_on_close = False
+        self._fleet_drawn = False
         self._lock = threading.Lock()
         self._last: Telemetry | None = None
         self._world_profile: str | None = None
         self._trajectory_end: tuple[float, float] | None = None
-        self._state_key: tuple[str, str, str | None] | None = None
+        self._state_key: tuple[str, str, str | None, str | None, str | None] | None = None
         self._rejected_seen = 0
         self._offset_ns: int | None = None
         self._robot_ns: int | None = None  # the latest robot stamp seen
@@ -326,6 +367,68 @@ class OperatorView:
             self._log_static(recording)
 
     # -- public API ------------------------------------------------------------------------------
+
+    def for_robot(self, robot_id: str) -> OperatorView:
+        """A view of one driven robot on this view's recording (DESIGN 15): its telemetry,
+        clock, trajectory and camera are its own; ``close`` leaves the recording open (this
+        view's ``close`` closes it) and, with ``clear_on_close`` (switched away from), clears
+        what it drew at its last time."""
+        with self._lock:
+            rec = self._rec
+        view = OperatorView(rec, robot_id, where=self.where, owns_recording=False)
+        view.clock = self.clock
+        return view
+
+    def latest_telemetry(self) -> Telemetry | None:
+        """The newest telemetry drawn (None: none yet, or no view)."""
+        with self._lock:
+            return self._last
+
+    def on_thumbnail(self, thumb: Thumbnail, index: int, robot_now_ns: int | None) -> None:
+        """Another robot's camera snapshot in the fleet's row of snapshots (DESIGN 15), the
+        ``index``-th from the left, at the driven robot's time now."""
+        with self._lock:
+            rec = self._rec
+            if rec is None or robot_now_ns is None or robot_now_ns <= 0:
+                return
+            _set_time(rec, robot_now_ns, self._cycle)
+            base = f"{paths.FLEET_CAMERAS}/{thumb.robot}"
+            rec.log(base, rr.Transform3D(translation=(index * (THUMB_WIDTH_PX + 8), 0.0, 0.0)))
+            rec.log(f"{base}/image", rr.EncodedImage(contents=thumb.jpeg, media_type="image/jpeg"))
+            rec.log(
+                f"{base}/label",
+                rr.Points2D([(4.0, 6.0)], radii=2.0, labels=[thumb.robot], show_labels=True),
+            )
+
+    def on_fleet(self, rows: list[FleetRow], me: str, robot_now_ns: int | None) -> None:
+        """The fleet panel and the robots sharing the driven robot's map (DESIGN 15), at the
+        driven robot's time now (``robot_now_ns``; None: its clock is not known yet, the
+        panel waits)."""
+        with self._lock:
+            rec = self._rec
+            if rec is None or robot_now_ns is None or robot_now_ns <= 0:
+                return
+            _set_time(rec, robot_now_ns, self._cycle)
+            rec.log(
+                paths.FLEET_TABLE,
+                rr.TextDocument(fleet_markdown(rows, me), media_type="text/markdown"),
+            )
+            shown = [row for row in on_shared_map(rows) if not row.driven]
+            if not shown and not self._fleet_drawn:
+                return
+            poses = [row.map_pose for row in shown if row.map_pose is not None]
+            rec.log(
+                paths.FLEET_POSES,
+                rr.Points2D(
+                    [(p[0], p[1]) for p in poses],
+                    radii=FLEET_MARK_RADIUS_M,
+                    colors=[FLEET_STATE_COLOURS.get(row.state or "", STALE_GREY) for row in shown],
+                    labels=[f"{row.robot} {row.state or '?'}" for row in shown],
+                    show_labels=True,
+                    draw_order=20.0,
+                ),
+            )
+            self._fleet_drawn = bool(shown)
 
     def on_telemetry(self, t: Telemetry, received_ns: int | None = None) -> None:
         """One control cycle: robot-frame view, time series, status lanes, world frame (pose).
@@ -364,9 +467,13 @@ class OperatorView:
             self._robot_ns = s.stamp_ns
             self._log_pending_text(rec)
             _set_time(rec, s.stamp_ns, self._cycle)
-            key = (s.state, s.reason, s.operator)
+            key = (s.state, s.reason, s.operator, s.source, s.lock)
             if key != self._state_key:
                 who = f" (operator {s.operator})" if s.operator else ""
+                if s.source is not None:
+                    who += f" (source {s.source})"
+                if s.lock is not None:
+                    who += f" (lock {s.lock})"
                 text = f"robot state {s.state}: {s.reason}{who}"
                 rec.log(paths.TEXT_LOG, rr.TextLog(text, level=STATE_LEVELS.get(s.state, "INFO")))
                 self._state_key = key
@@ -555,6 +662,18 @@ class OperatorView:
             rec, self._rec = self._rec, None
             if rec is not None:
                 self._log_pending_text(rec, at_ns=self._robot_now() or 0)
+        if rec is not None and not self._owns_recording:
+            if not self.clear_on_close:
+                return
+            # A fleet's robot no longer driven: its drawings go at its last time, so the next
+            # robot's are not shown mixed with them.
+            with self._lock:
+                now = self._robot_now()
+                if now is not None:
+                    _set_time(rec, now, self._cycle)
+                    for path in _DRIVEN_PATHS:
+                        rec.log(path, rr.Clear(recursive=True))
+            return
         if rec is None:
             return
         # A viewer that went away must not end the run with a traceback: the driving is done.

@@ -24,7 +24,8 @@ import numpy as np
 import numpy.typing as npt
 from egc_common.footprint import mitred_outline
 from egc_common.messages import Circle, Telemetry
-from egc_common.profiles import PROFILES, RobotProfile
+from egc_common.profiles import RobotProfile
+from egc_common.profiles import profile_named as known_profile
 
 from egc_operator.prediction import Prediction
 from egc_operator.status_line import (
@@ -104,8 +105,9 @@ FALLBACK_HORIZON_S = 1.0
 
 
 def profile_named(name: str) -> RobotProfile | None:
-    """The pinned profile of that name, or None when the telemetry names none we know."""
-    return PROFILES.get(name)
+    """The profile of that name (a built-in, or one this process loaded from a file, DESIGN
+    14), or None when the telemetry names none we know."""
+    return known_profile(name)
 
 
 def drawable_circle(circle: Circle | None) -> Circle | None:
@@ -150,6 +152,8 @@ def status_text(t: Telemetry) -> str:
     A robot that is not driving says why (``HOLD (command timeout) · ...``); the latency limiter
     says its cap (``limit: latency <= 0.10 m/s``). The filter that runs follows the mode
     (``shared (ek-egc)``), and the active via point comes last (``via 2.0,1.0 +1 more``).
+    A robot with command sources (DESIGN 14) says which drives and which lock holds
+    (``source nav · lock pause``).
     """
     limiter = LIMITER_TEXT.get(t.limiter, t.limiter)
     if t.limiter == "latency" and t.v_lim_latency is not None:
@@ -164,6 +168,10 @@ def status_text(t: Telemetry) -> str:
     if t.goal is not None:
         more = f" +{t.goals_left} more" if t.goals_left else ""
         text += f" · via {t.goal[0]:.1f},{t.goal[1]:.1f}{more}"
+    if t.source is not None:
+        text += f" · source {t.source}"
+    if t.lock is not None:
+        text += f" · lock {t.lock}"
     return text
 
 

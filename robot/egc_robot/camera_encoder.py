@@ -6,8 +6,14 @@ viewer that joins decodes from the next one), no B-frames and x264's ``zerolaten
 frame in, its packet out: nothing waits for later frames), the ``ultrafast`` preset (a few ms a
 frame at 320 x 240), a keyframe at least every second (``keyint`` = the frame rate, no scene
 cuts, and one forced whenever a second has passed since the last on the capture clock, or when
-asked: a new viewer, a reconfiguration), and average-bitrate rate control capped by a VBV of
-that same rate over half a second, so no frame bursts far above the link's share.
+asked: a new viewer, a reconfiguration), and average-bitrate rate control under a VBV of one
+frame (``maxrate`` ``VBV_PEAK`` times the target, ``bufsize`` one frame period of it): no frame,
+a keyframe included, is larger than 1.25 times the average frame at the target. On a thin link
+that is what keeps the view fresh: a frame of B bits holds everything behind it in the link's
+queue for B / rate, and with half a second of VBV (x264's usual streaming setting) a keyframe was
+5 times the average frame, 250 ms on a 192 kbit/s link every second (the downlink budget then
+saw a queue and cut). The price: x264 spends about 85 % of the target (measured by
+``bench/bench_camera.py``), and keyframes are a little softer than the frames between them.
 
 Changing the target at run time: a lower or higher ``kbps`` is applied to the open encoder at
 once (libavcodec's libx264 wrapper calls ``x264_encoder_reconfig`` when ``bit_rate`` changes);
@@ -32,7 +38,6 @@ from dataclasses import dataclass, replace
 from fractions import Fraction
 from typing import Any, Final
 
-import av
 import numpy as np
 import numpy.typing as npt
 from PIL import Image
@@ -42,7 +47,7 @@ RGB = npt.NDArray[np.uint8]
 CODECS: Final = ("h264", "jpeg")
 NS_PER_S: Final = 1_000_000_000
 KEYFRAME_PERIOD_NS: Final = NS_PER_S  # DESIGN 12: a viewer that joins sees a picture within 1 s
-VBV_SECONDS: Final = 0.5
+VBV_PEAK: Final = 1.25  # the VBV's rate and one frame's size, over the target's
 MIN_SIDE_PX: Final = 64  # the picture is not halved below this (height)
 # Below these bits per pixel a frame is mush (H.264) or cannot be made that small at all
 # (JPEG at quality 10 is ~0.27 bit/pixel at 320x240): halve the picture instead.
@@ -121,12 +126,12 @@ def next_jpeg_quality(quality: int, frame_bytes: int, target_bytes: float) -> in
 def x264_options(plan: StreamPlan) -> dict[str, str]:
     """libx264's options for ``plan`` (module docstring)."""
     keyint = max(1, math.ceil(plan.fps))
-    bits = int(plan.kbps * 1000)
+    peak = plan.kbps * 1000 * VBV_PEAK
     return {
         "preset": "ultrafast",
         "tune": "zerolatency",
-        "maxrate": str(bits),
-        "bufsize": str(max(1000, int(bits * VBV_SECONDS))),
+        "maxrate": str(int(peak)),
+        "bufsize": str(max(1000, int(peak / plan.fps))),
         "x264-params": f"keyint={keyint}:min-keyint={keyint}:scenecut=0:bframes=0:"
         "repeat-headers=1:threads=1",
     }
@@ -144,9 +149,13 @@ class Encoded:
 
 
 class _H264:
-    """One open libx264 context for one plan (PyAV as IO: the codec)."""
+    """One open libx264 context for one plan (PyAV as IO: the codec). PyAV is imported here,
+    not with the module: a robot without a camera does not load it (~17 MB of RSS)."""
 
     def __init__(self, plan: StreamPlan) -> None:
+        import av
+
+        self._av = av
         self.plan = plan
         self.vbv_kbps = plan.kbps  # the VBV cap it opened with; fixed while it is open
         ctx: Any = av.CodecContext.create("libx264", "w")
@@ -166,6 +175,7 @@ class _H264:
         self.plan = replace(self.plan, kbps=kbps)
 
     def encode(self, rgb: RGB, key: bool) -> Encoded | None:
+        av = self._av
         frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")
         frame = frame.reformat(
             width=self.plan.width_px, height=self.plan.height_px, format="yuv420p"

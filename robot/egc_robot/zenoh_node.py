@@ -23,7 +23,12 @@ command, or the loop thread at each deadline. So there are
 - the liveliness token ``egc/<robot>/alive/robot`` and a liveliness subscriber (with history)
   on ``egc/<robot>/alive/operator/*``,
 - every rejected command counted by reason (in the controller) and logged, rate-limited per
-  reason so a flood cannot flood the log.
+  reason so a flood cannot flood the log,
+- with command sources (DESIGN 14, ``ControllerConfig.sources``): a subscriber per ``zenoh``
+  source (``egc/<robot>/source/<name>``) and per Zenoh-fed lock (``egc/<robot>/lock/<name>``),
+  and the driver's ROS 2 sources and locks (``set_input_listeners``); each goes to the
+  controller under the lock, and a cycle runs at once when it may change what drives (a lock
+  that engages stops the base within one pipeline run).
 
 Nothing received from the network can raise out of a callback or the loop: the decoders are
 non-raising, and the callbacks guard the little they do. Should a cycle fail anyway (a bug),
@@ -62,7 +67,7 @@ from egc_common.view_budget import (
     plan,
 )
 
-from egc_robot.controller import CommandVerdict, CycleOutput, RobotController
+from egc_robot.controller import CommandVerdict, CycleOutput, InputVerdict, RobotController
 from egc_robot.drivers import Driver
 from egc_robot.run_stats import RunStats
 from egc_robot.state_machine import LINK_REASONS, State
@@ -87,11 +92,13 @@ class Recorder(Protocol):
 class CameraSink(Protocol):
     """What the budget needs of a camera streamer (``egc_robot.camera_stream``, DESIGN 12): an
     allotment it keeps to (frames/s and kbit/s; 0 fps: off), settable from any thread, and the
-    bytes it has sent so far (the view plane's count)."""
+    bytes and frames it has sent so far (the view plane's count; the summary's timeline)."""
 
     def set_allotment(self, fps: float, kbps: float) -> None: ...
     @property
     def bytes_sent(self) -> int: ...
+    @property
+    def frames_sent(self) -> int: ...
 
 
 # A telemetry message is due when the cycle is at most this early (cycles jitter by a little;
@@ -184,6 +191,7 @@ class RobotNode:
         attach = getattr(driver, "set_scan_listener", None)
         if callable(attach):
             attach(self._on_fresh_scan)
+        self._entities += self._declare_source_inputs(session, robot_id, driver)
 
     @property
     def controller(self) -> RobotController:
@@ -205,7 +213,7 @@ class RobotNode:
                     self._poll_driver(now)
                     self._cycle(now)
                     if verdict.latency_ns is not None and self._stats is not None:
-                        self._stats.on_latency(verdict.latency_ns)  # after the base command
+                        self._stats.on_latency(verdict.latency_ns, rx_ns)  # after the base command
             except Exception as exc:
                 self._fail_safe(exc)
 
@@ -312,6 +320,90 @@ class RobotNode:
         except Exception as exc:  # a querier that went away must not kill the callback
             log.debug("clock reply failed: %s", exc)
 
+    # -- command sources and locks (DESIGN 14) -------------------------------------------------
+
+    def _declare_source_inputs(
+        self, session: zenoh.Session, robot_id: str, driver: Driver
+    ) -> list[zenoh.Subscriber[None]]:
+        """Subscribers for the ``zenoh`` sources and Zenoh-fed locks; the driver's ROS 2 ones
+        report through ``set_input_listeners`` (none without ``[[source]]`` tables)."""
+        mux = self._controller.config.sources
+        if mux is None:
+            return []
+        subscribers = []
+        for source in mux.sources:
+            if source.kind == "zenoh":
+                key = keys.source(robot_id, source.name)
+                subscribers.append(
+                    session.declare_subscriber(
+                        key, lambda s, n=source.name: self._on_source_sample(n, s)
+                    )
+                )
+        for lock in mux.locks:
+            if lock.topic is None:
+                key = keys.lock(robot_id, lock.name)
+                subscribers.append(
+                    session.declare_subscriber(
+                        key, lambda s, n=lock.name: self._on_lock_sample(n, s)
+                    )
+                )
+        attach = getattr(driver, "set_input_listeners", None)
+        if callable(attach):
+            attach(self._on_ros_velocity, self._on_ros_lock)
+        return subscribers
+
+    def _on_source_sample(self, name: str, sample: zenoh.Sample) -> None:
+        rx_ns = self._clock()
+        payload = payload_bytes(sample)
+        self._source_input(
+            f"source {name}", lambda: self._controller.on_source(name, payload, rx_ns)
+        )
+
+    def _on_lock_sample(self, name: str, sample: zenoh.Sample) -> None:
+        rx_ns = self._clock()
+        payload = payload_bytes(sample)
+        self._source_input(f"lock {name}", lambda: self._controller.on_lock(name, payload, rx_ns))
+
+    def _on_ros_velocity(self, name: str, v_mps: float, w_radps: float, rx_ns: int) -> None:
+        """A ``ros2`` source's Twist (the driver's executor thread)."""
+        self._source_input(
+            f"source {name}",
+            lambda: self._controller.on_source_velocity(name, v_mps, w_radps, rx_ns),
+        )
+
+    def _on_ros_lock(self, name: str, value: bool, rx_ns: int) -> None:
+        """A ROS 2 lock's ``std_msgs/Bool`` (the driver's executor thread)."""
+        self._source_input(
+            f"lock {name}", lambda: self._controller.on_lock_value(name, value, rx_ns)
+        )
+
+    def _source_input(self, what: str, apply: Callable[[], InputVerdict]) -> None:
+        """Hand one source command or lock value to the controller; run a cycle on it now when
+        it may change what drives. Never raises (a Zenoh or rclpy callback)."""
+        with self._lock:
+            if self._shut_down:
+                return
+            try:
+                verdict = apply()
+                if verdict.urgent:
+                    now = self._clock()
+                    self._poll_driver(now)
+                    self._cycle(now)
+            except Exception as exc:
+                self._fail_safe(exc)
+                return
+        rejection = verdict.rejection
+        if rejection is not None:
+            held = self._events.allow(f"{what} {rejection.reason.value}", self._clock())
+            if held is not None:  # a flood must not flood the log
+                log.warning(
+                    "rejected %s (%s): %s%s",
+                    what,
+                    rejection.reason.value,
+                    rejection.detail,
+                    f" (+{held} more since the last line)" if held else "",
+                )
+
     # -- the fixed-rate loop ------------------------------------------------------------------
 
     def run(self, stop: threading.Event) -> None:
@@ -320,6 +412,8 @@ class RobotNode:
         while not stop.wait(max(0, deadline - self._clock()) / 1e9):
             now = self._clock()
             with self._lock:
+                if self._stats is not None:  # how late the cycle starts (the lock included)
+                    self._stats.on_loop_start(self._clock() - deadline, period)
                 try:
                     self._poll_driver(now)
                     self._cycle(now)
@@ -394,6 +488,12 @@ class RobotNode:
             self._recorder.on_command(payload, verdict.accepted, reason, rx_ns)
         if verdict.rejection is not None:
             self._rejections.log(verdict, controller.counters.rejected_total, rx_ns)
+        elif verdict.took_from is not None:
+            log.info(
+                "operator %s took control from %s (higher priority)",
+                controller.operator,
+                verdict.took_from,
+            )
         elif verdict.took_control:
             log.info("operator %s took control", controller.operator)
         return verdict
@@ -420,20 +520,40 @@ class RobotNode:
         if cmd is None:
             return
         if self._stats is not None and cmd.camera_age_ms is not None:
-            self._stats.on_camera_age(cmd.camera_age_ms)
+            self._stats.on_camera_age(cmd.camera_age_ms, rx_ns)
         report = Report(
             view_age_ms=None if cmd.view_age_ms is None else float(cmd.view_age_ms),
             rx_kbps=None if cmd.rx_kbps is None else float(cmd.rx_kbps),
             camera_age_ms=None if cmd.camera_age_ms is None else float(cmd.camera_age_ms),
+            stamp_ns=cmd.stamp_ns if cmd.stamp_ns > 0 else None,
         )
-        self._budget = on_report(
-            self._budget,
+        before = self._budget
+        self._budget = after = on_report(
+            before,
             self._budget_cfg,
             report,
             rx_ns,
-            camera_fps=self._plan.camera_fps,
-            telemetry_hz=self._plan.telemetry_hz,
+            self._plan,
+            self._view_sent.kbps(rx_ns),
         )
+        if after.undone > before.undone and self._events.allow("undo", rx_ns) is not None:
+            log.info(
+                "downlink budget cut taken back (%.0f kbit/s): its queue vanished faster than "
+                "a link drains one (a stall of this machine or of the link, not its rate)",
+                after.budget_kbps,
+            )
+        if after.cuts > before.cuts and (held := self._events.allow("cut", rx_ns)) is not None:
+            camera = after.camera_queue_ms
+            log.info(
+                "downlink budget cut %.0f -> %.0f kbit/s: a queue of %.0f ms (camera's %s), "
+                "the operator received %s kbit/s%s",
+                before.budget_kbps,
+                after.budget_kbps,
+                after.queue_ms or 0.0,
+                "--" if camera is None else f"{camera:.0f} ms",
+                "--" if report.rx_kbps is None else f"{report.rx_kbps:.0f}",
+                f" (+{held} more cuts since the last line)" if held else "",
+            )
 
     def _replan(self, now: int) -> None:
         """Count the camera's bytes, let the budget probe, and apply its plan."""
@@ -444,7 +564,8 @@ class RobotNode:
             self._camera_bytes = sent
         sent_kbps = self._view_sent.kbps(now)
         if self._stats is not None:
-            self._stats.on_view_rate(now, sent_kbps)
+            frames = None if camera is None else camera.frames_sent
+            self._stats.on_view_rate(now, sent_kbps, self._budget.budget_kbps, frames)
         cfg = self._budget_cfg
         beams_max = self._controller.scan_beams_max
         if beams_max is not None and beams_max != cfg.max_beams:
@@ -497,11 +618,14 @@ class RobotNode:
         if self._stats is not None:
             self._stats.on_cycle(out.telemetry)
         if out.state_changed is not None:
+            changed = out.state_changed
             log.info(
-                "state %s (%s)%s",
-                out.state_changed.state,
-                out.state_changed.reason,
-                f", operator {out.state_changed.operator}" if out.state_changed.operator else "",
+                "state %s (%s)%s%s%s",
+                changed.state,
+                changed.reason,
+                f", operator {changed.operator}" if changed.operator else "",
+                f", source {changed.source}" if changed.source else "",
+                f", lock {changed.lock}" if changed.lock else "",
             )
             if self._recorder is not None:
                 self._recorder.on_state(out.state_changed)

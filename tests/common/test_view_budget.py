@@ -3,8 +3,9 @@ the AIMD steps, and a closed loop against a fluid model of a link with a deep bu
 
 from __future__ import annotations
 
+import itertools
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import pytest
 from egc_common.view_budget import (
@@ -27,7 +28,9 @@ OVERHEAD = 700.0  # telemetry bytes besides the scan, as measured on the demo
 
 
 def test_plan_gives_way_in_design_order() -> None:
-    """Camera quality and rate first, then scan resolution, then telemetry rate, camera off last."""
+    """Camera quality and rate first down to a working camera (5 frames/s), then scan
+    resolution, then telemetry rate to 10 Hz, then the camera to 1 frame/s, then telemetry to
+    5 Hz, camera off last."""
     cfg = BudgetConfig(camera=True, max_beams=180)
     full_tel = telemetry_kbps(20, 180, OVERHEAD)
 
@@ -38,25 +41,49 @@ def test_plan_gives_way_in_design_order() -> None:
     assert top.cut == () and top.camera_fps == cfg.camera_max_fps and top.scan_beams == 180
     camera_cut = at(full_tel + 100)
     assert camera_cut.cut == ("camera",)
-    assert 1 < camera_cut.camera_fps < cfg.camera_max_fps and camera_cut.scan_beams == 180
-    assert camera_cut.telemetry_hz == 20
-    scan_cut = at(telemetry_kbps(20, 90, OVERHEAD) + cfg.camera_min_kbps + 1)
+    assert camera_cut.camera_fps == cfg.camera_max_fps  # fewer bits a frame first
+    assert camera_cut.camera_kbps < cfg.camera_max_kbps and camera_cut.scan_beams == 180
+    slower = at(full_tel + 30 + cfg.camera_keep_kbps)
+    assert slower.cut == ("camera",) and 5 <= slower.camera_fps < cfg.camera_max_fps
+    scan_cut = at(telemetry_kbps(20, 90, OVERHEAD) + cfg.camera_keep_kbps + 1)
     assert scan_cut.cut == ("camera", "scan")
-    assert scan_cut.camera_fps == 1.0 and scan_cut.scan_beams == 90
-    rate_cut = at(telemetry_kbps(10, cfg.min_beams, OVERHEAD) + cfg.camera_min_kbps)
+    assert scan_cut.camera_fps == cfg.camera_keep_fps and scan_cut.scan_beams == 90
+    rate_cut = at(telemetry_kbps(12, cfg.min_beams, OVERHEAD) + cfg.camera_keep_kbps)
     assert rate_cut.cut == ("camera", "scan", "rate")
-    assert rate_cut.scan_beams == cfg.min_beams and rate_cut.telemetry_hz == pytest.approx(10)
-    assert rate_cut.camera_fps == 1.0
+    assert rate_cut.scan_beams == cfg.min_beams and rate_cut.telemetry_hz == pytest.approx(12)
+    assert rate_cut.camera_fps == cfg.camera_keep_fps  # the camera keeps working down to here
+    camera_slower = at(telemetry_kbps(10, cfg.min_beams, OVERHEAD) + cfg.camera_keep_kbps - 20)
+    assert 1 <= camera_slower.camera_fps < cfg.camera_keep_fps
+    assert camera_slower.telemetry_hz == pytest.approx(10)
+    one_fps = at(telemetry_kbps(7, cfg.min_beams, OVERHEAD) + cfg.camera_min_kbps)
+    assert one_fps.camera_fps == 1.0 and one_fps.telemetry_hz == pytest.approx(7)
     starved = at(telemetry_kbps(5, cfg.min_beams, OVERHEAD) + 1)
     assert starved.camera_fps == 0.0 and starved.camera_kbps == 0.0  # off before the view starves
     assert starved.telemetry_hz >= cfg.min_telemetry_hz
     floor = at(1.0)
     assert floor.telemetry_hz == cfg.min_telemetry_hz  # never below 5 Hz: control never gives way
-    # Every plan keeps to its budget while it can (all but the floor).
-    for kbps in (100, 150, 250, 400, 800):
+    # Every plan keeps to its budget while it can (all but the floor), and the camera's rate
+    # and the telemetry's never rise as the budget falls (but when the camera goes off).
+    previous = None
+    for kbps in range(400, 40, -2):
         p = at(kbps)
         used = telemetry_kbps(p.telemetry_hz, p.scan_beams, OVERHEAD) + p.camera_kbps
         assert used <= kbps + 1e-6
+        if previous is not None:
+            assert p.camera_fps <= previous.camera_fps and p.camera_kbps <= previous.camera_kbps
+            if p.camera_fps > 0 or previous.camera_fps == 0:  # off: its share goes to the view
+                assert p.telemetry_hz <= previous.telemetry_hz + 1e-9
+                assert p.scan_beams <= previous.scan_beams
+        previous = p
+
+
+def test_a_192_kbits_link_keeps_a_working_camera() -> None:
+    """Issue 27: 0.7-0.85 of a 192 kbit/s link (a cut, cruise) keeps 5 frames/s."""
+    cfg = BudgetConfig(camera=True, max_beams=180)
+    for kbps in (0.7 * 185, 0.85 * 185, 185):
+        p = plan(BudgetState(budget_kbps=kbps), cfg, 800.0)
+        assert p.camera_fps >= 5.0, (kbps, p)
+        assert p.telemetry_hz >= 10.0
 
 
 def test_no_camera_the_whole_budget_goes_to_telemetry() -> None:
@@ -66,10 +93,16 @@ def test_no_camera_the_whole_budget_goes_to_telemetry() -> None:
 
 
 def test_camera_fps_scale() -> None:
+    """Whole frames a second at the working rate's kbit a frame, 1 to the configured most."""
     cfg = BudgetConfig(camera=True)
     assert camera_fps(cfg.camera_min_kbps / 2, cfg) == 0.0
+    assert camera_fps(float("nan"), cfg) == 0.0
     assert camera_fps(cfg.camera_min_kbps, cfg) == 1.0
+    assert camera_fps(cfg.camera_keep_kbps, cfg) == cfg.camera_keep_fps
+    assert camera_fps(cfg.camera_keep_kbps * 0.99, cfg) == cfg.camera_keep_fps - 1
     assert camera_fps(cfg.camera_max_kbps, cfg) == cfg.camera_max_fps
+    steps = {camera_fps(k, cfg) for k in range(0, 500)}
+    assert all(f == int(f) for f in steps)  # the encoder reopens only on whole steps
 
 
 def test_flat_ages_never_cut_and_a_standing_queue_cuts_once() -> None:
@@ -114,7 +147,9 @@ def test_probe_only_when_the_budget_is_used_and_ages_are_flat() -> None:
     cfg = BudgetConfig()
     state = initial_state(cfg)
     t = 0
-    state = on_report(state, cfg, Report(view_age_ms=50.0), t)
+    for _ in range(10):  # flat ages over 200 ms
+        t += 20 * MS
+        state = on_report(state, cfg, Report(view_age_ms=50.0), t)
     for _ in range(100):  # 1 s, the view plane sends a third of its budget
         t += 10 * MS
         state = on_cycle(state, cfg, t, sent_kbps=cfg.start_kbps / 3)
@@ -123,6 +158,173 @@ def test_probe_only_when_the_budget_is_used_and_ages_are_flat() -> None:
         t += 10 * MS
         state = on_cycle(state, cfg, t, sent_kbps=state.budget_kbps)
     assert cfg.start_kbps + cfg.ai_kbps < state.budget_kbps < 2 * cfg.start_kbps
+
+
+def test_the_first_report_after_a_gap_does_not_count_alone() -> None:
+    """An operator whose process stalled for 300 ms (a busy machine): its first report holds
+    the stall in its view age; the next ones, a few ms later, do not. No cut."""
+    cfg = BudgetConfig()
+    state = BudgetState(budget_kbps=400.0)
+    t = 0
+    for _ in range(100):
+        t += 20 * MS
+        state = on_report(state, cfg, Report(view_age_ms=60.0, rx_kbps=380.0), t)
+    t += 300 * MS
+    state = on_report(state, cfg, Report(view_age_ms=360.0, rx_kbps=300.0), t)
+    assert state.queue_ms is None and state.cuts == 0
+    for age in (70.0, 60.0, 60.0, 60.0, 60.0, 60.0, 60.0):
+        t += 20 * MS
+        state = on_report(state, cfg, Report(view_age_ms=age, rx_kbps=300.0), t)
+    assert state.cuts == 0 and state.queue_ms == 0.0
+    # A queue that stands is seen once the reports span the window again.
+    for _ in range(10):
+        t += 20 * MS
+        state = on_report(state, cfg, Report(view_age_ms=360.0, rx_kbps=300.0), t)
+    assert state.cuts == 1
+
+
+def test_a_fast_growing_queue_says_what_the_link_delivers_before_rx_does() -> None:
+    """The link narrows from 2 Mbit/s to 128 kbit/s under a view plane sending 500 kbit/s: the
+    queue grows by 0.74 ms a ms in the reports' time (fed at 500, drained at 128), while the
+    operator's rx_kbps (a second's worth) still says 450. The cut goes below what the link
+    delivers, not to 0.8 x 450."""
+    cfg = BudgetConfig()
+    state = replace(BudgetState(budget_kbps=600.0), link_kbps=480.0, cut_rx_kbps=480.0)
+    t = 0
+    for _ in range(200):
+        t += 20 * MS
+        state = on_report(state, cfg, Report(100.0, 480.0, stamp_ns=t), t, sent_kbps=500.0)
+    age = 100.0
+    while state.cuts == 0:
+        t += 20 * MS
+        age += 20 * (1.0 - 128.0 / 500.0)
+        state = on_report(state, cfg, Report(age, 450.0, stamp_ns=t), t, sent_kbps=500.0)
+    assert state.budget_kbps < 128.0, state.budget_kbps
+    assert state.link_kbps is not None and state.link_kbps < 200.0
+
+
+def test_at_the_floor_a_standing_queue_does_not_restart_the_hold() -> None:
+    cfg = BudgetConfig()
+    state = replace(BudgetState(budget_kbps=cfg.floor_kbps), last_cut_ns=0, cuts=3)
+    t = 0
+    for _ in range(100):
+        t += 20 * MS
+        state = on_report(state, cfg, Report(100.0 if t < NS else 900.0, 40.0), t)
+    assert state.cuts == 3 and state.last_cut_ns == 0
+
+
+def test_a_queue_that_vanishes_faster_than_a_link_drains_is_taken_back() -> None:
+    """A busy machine: the operator's process stalls 300 ms, and for a window its reports show
+    the view 300 ms older; 20 ms later (by their stamps) it is fresh again. Bytes in a link's
+    queue cannot leave that fast, so the cut is undone. A queue that drains no faster than a
+    millisecond a millisecond stays cut."""
+    cfg = BudgetConfig()
+
+    def run(after_ms: list[float]) -> BudgetState:
+        state = replace(BudgetState(budget_kbps=500.0), link_kbps=480.0, cut_rx_kbps=480.0)
+        t = 0
+        for _ in range(100):
+            t += 20 * MS
+            state = on_report(state, cfg, Report(60.0, 470.0, stamp_ns=t), t)
+        for age in [360.0] * 8 + after_ms:
+            t += 20 * MS
+            state = on_report(state, cfg, Report(age, 300.0, stamp_ns=t), t)
+        return state
+
+    stall = run([60.0] * 10)
+    assert stall.cuts == 1 and stall.undone == 1
+    assert stall.budget_kbps == 500.0 and stall.link_kbps == 480.0
+    draining = run([340.0, 320.0, 300.0, 280.0, 260.0, 240.0, 220.0, 200.0])
+    assert draining.cuts == 1 and draining.undone == 0 and draining.budget_kbps < 300.0
+
+
+def test_a_camera_that_slowed_or_stopped_is_no_queue() -> None:
+    """Issue 27 (a): the operator keeps reporting the age of the last frame shown, growing
+    without bound once frames stop coming; that is no queue (the budget used to read it as one,
+    cut, and the camera never came back)."""
+    cfg = BudgetConfig(camera=True)
+    in_force = plan(BudgetState(budget_kbps=300.0), cfg, OVERHEAD)
+    assert in_force.camera_fps >= 5
+    state = BudgetState(budget_kbps=300.0)
+    t = 10 * NS
+    frame = t - 120 * MS
+    for i in range(500):  # 10 s of commands at 50 Hz; frames stop after the first second
+        t += 20 * MS
+        if i < 50 and (t - frame) >= 200 * MS:
+            frame = t - 120 * MS  # a new frame every 200 ms, shown 120 ms after capture
+        report = Report(
+            view_age_ms=100.0, rx_kbps=280.0, camera_age_ms=(t - frame) / MS, stamp_ns=t
+        )
+        state = on_report(state, cfg, report, t + 80 * MS, in_force)
+    assert state.cuts == 0 and state.budget_kbps == 300.0
+    assert state.camera_queue_ms is None  # no frame for seconds: the camera says nothing
+
+
+def test_camera_frames_that_arrive_later_and_later_cut() -> None:
+    """What only the camera sees (its frames waiting at the robot or in the operator's
+    decoder) is a queue: frames shown each later after capture than the last."""
+    cfg = BudgetConfig(camera=True)
+    in_force = plan(BudgetState(budget_kbps=300.0), cfg, OVERHEAD)
+    state = BudgetState(budget_kbps=300.0)
+    t = 10 * NS
+    latency_ms = 120.0
+    frame = t - int(latency_ms * MS)
+    for i in range(300):
+        t += 20 * MS
+        if (t - frame) >= int((latency_ms + 100) * MS):  # the next frame is shown
+            latency_ms += 0.0 if i < 100 else 60.0  # from 2 s on, 60 ms later each frame
+            frame = t - int(latency_ms * MS)
+        report = Report(
+            view_age_ms=100.0, rx_kbps=280.0, camera_age_ms=(t - frame) / MS, stamp_ns=t
+        )
+        state = on_report(state, cfg, report, t + 80 * MS, in_force)
+    assert state.cuts >= 1 and state.budget_kbps < 300.0
+    assert state.camera_queue_ms is not None and state.camera_queue_ms > cfg.margin_ms
+
+
+def test_one_frame_a_second_is_no_queue_signal() -> None:
+    """At 1 frame/s a queue would be seen a second late; the telemetry's age is earlier."""
+    cfg = BudgetConfig(camera=True)
+    in_force = replace(plan(BudgetState(budget_kbps=300.0), cfg, OVERHEAD), camera_fps=1.0)
+    state = BudgetState(budget_kbps=300.0)
+    t = 10 * NS
+    frame, latency = t, 120.0
+    for _ in range(300):
+        t += 20 * MS
+        if t - frame >= int((latency + 1000) * MS):
+            latency += 200.0
+            frame = t - int(latency * MS)
+        report = Report(
+            view_age_ms=100.0, rx_kbps=280.0, camera_age_ms=(t - frame) / MS, stamp_ns=t
+        )
+        state = on_report(state, cfg, report, t, in_force)
+    assert state.cuts == 0 and state.camera_queue_ms is None
+
+
+def test_the_probe_past_the_last_cut_starts_slowly_and_doubles() -> None:
+    cfg = BudgetConfig()
+    state = replace(
+        initial_state(cfg),
+        budget_kbps=200.0,
+        cut_rx_kbps=180.0,
+        link_kbps=180.0,
+        queue_ms=0.0,
+        last_step_ns=0,
+    )
+    budgets = []
+    t = 0
+    for _ in range(400):  # 4 s, the view plane filling its budget, no queue
+        t += 10 * MS
+        state = on_cycle(state, cfg, t, sent_kbps=state.budget_kbps)
+        if t % NS == 0:
+            budgets.append(state.budget_kbps)
+    steps = [b - a for a, b in zip([200.0, *budgets], budgets, strict=False)]
+    assert steps[0] < 2 * cfg.ai_kbps  # a link that did not widen sees a few kbit/s too many
+    assert all(b > 1.5 * a for a, b in itertools.pairwise(steps)), steps  # doubling
+    # A queue that begins stops the doubling; the next probe starts slowly again.
+    state = replace(state, queue_ms=cfg.margin_ms * 0.6)
+    state = on_cycle(state, cfg, t + 10 * MS, sent_kbps=state.budget_kbps)
+    assert state.beyond_ns is None
 
 
 def test_rate_meter() -> None:
@@ -164,67 +366,126 @@ class FluidLink:
         return sum(k for _, k in self.delivered)
 
 
+@dataclass(frozen=True)
+class Sample:
+    """Every 100 ms of a closed-loop run: what the operator sees and the plan in force."""
+
+    t_s: float
+    view_age_ms: float
+    camera_age_ms: float | None
+    plan: Plan
+
+
 def run_loop(
     phases: list[tuple[float, float]], duration_s: float, delay_ms: float = 80.0
-) -> list[tuple[float, float, Plan]]:
-    """(t_s, view age ms, plan) every 100 ms; ``phases``: (start_s, rate_kbps)."""
+) -> list[Sample]:
+    """``phases``: (start_s, rate_kbps). The operator reports every 20 ms; the reports take
+    ``delay_ms`` up. Telemetry messages go out at the plan's rate and arrive after the delay,
+    the queue and their own time on the link; the view's age is the newest arrived message's.
+    Camera frames likewise; the last one shown stays (its age grows while the camera is off)."""
     cfg = BudgetConfig(camera=True, max_beams=180)
     state = initial_state(cfg)
     link = FluidLink(delay_ms, phases[0][1])
+    sent_meter = RateMeter()
     dt_ns = 10 * MS
     in_flight: deque[tuple[int, Report]] = deque()  # reports on their way up
-    out: list[tuple[float, float, Plan]] = []
+    out: list[Sample] = []
     current = plan(state, cfg, OVERHEAD)
+    shown_ns: int | None = None  # the capture stamp of the camera frame shown
+    telemetry: deque[tuple[int, int]] = deque()  # (stamp, arrival) of messages on their way
+    view_ns: int | None = None  # the stamp of the newest telemetry message arrived
+    next_tel = 0
     for i in range(int(duration_s * 100)):
         t = i * dt_ns
         t_s = t / NS
         for start_s, rate in phases:
             if t_s >= start_s:
                 link.rate_kbps = rate
-        state = on_cycle(state, cfg, t, sent_kbps=link.rx_kbps() if i else None)
+        state = on_cycle(state, cfg, t, sent_kbps=sent_meter.kbps(t) if i >= 100 else None)
         current = plan(state, cfg, OVERHEAD)
         sent = telemetry_kbps(current.telemetry_hz, current.scan_beams, OVERHEAD)
         sent += current.camera_kbps
+        sent_meter.add(t, int(sent * dt_ns / NS * 1000 / 8))
         link.step(t, dt_ns / NS, sent * dt_ns / NS)
-        # The view's age when the operator sends a command: the downlink's delay, the queue,
-        # and the time since the newest telemetry message arrived (a sawtooth).
-        period_ms = 1000.0 / current.telemetry_hz
-        view_age = delay_ms + link.queue_ms + (t / MS) % period_ms
+        if t >= next_tel:
+            own_ms = current.telemetry_bytes * 8.0 / link.rate_kbps
+            telemetry.append((t, t + int((delay_ms + link.queue_ms + own_ms) * MS)))
+            next_tel += int(NS / current.telemetry_hz)
+        while telemetry and telemetry[0][1] <= t:
+            stamp = telemetry.popleft()[0]
+            view_ns = stamp if view_ns is None else max(view_ns, stamp)
+        if view_ns is None:
+            continue  # nothing to report before the first message
+        view_age = (t - view_ns) / MS
+        if current.camera_fps > 0:
+            frame_ms = current.camera_kbps / current.camera_fps / link.rate_kbps * 1000.0
+            latency_ns = int((delay_ms + link.queue_ms + frame_ms) * MS)
+            frame_period_ns = int(NS / current.camera_fps)
+            newest = (t - latency_ns) // frame_period_ns * frame_period_ns
+            shown_ns = newest if shown_ns is None else max(shown_ns, newest)
+        camera_age = None if shown_ns is None else max(0.0, (t - shown_ns) / MS)
         if i % 2 == 0:  # a command every 20 ms
-            report = Report(view_age_ms=round(view_age), rx_kbps=round(link.rx_kbps()))
+            report = Report(
+                view_age_ms=round(view_age),
+                rx_kbps=round(link.rx_kbps()),
+                camera_age_ms=None if camera_age is None else round(camera_age),
+                stamp_ns=t,
+            )
             in_flight.append((t + int(delay_ms * MS), report))
         while in_flight and in_flight[0][0] <= t:
-            state = on_report(
-                state,
-                cfg,
-                in_flight.popleft()[1],
-                t,
-                camera_fps=current.camera_fps,
-                telemetry_hz=current.telemetry_hz,
-            )
+            state = on_report(state, cfg, in_flight.popleft()[1], t, current, sent_meter.kbps(t))
         if i % 10 == 0:
-            out.append((t_s, view_age, current))
+            out.append(Sample(t_s, view_age, camera_age, current))
     return out
 
 
-def test_closed_loop_thin_link_keeps_the_view_fresh() -> None:
-    trace = run_loop([(0.0, 192.0)], duration_s=30.0)
-    late = [age for t, age, _ in trace if t >= 5.0]
-    late.sort()
-    assert late[len(late) // 2] <= 80.0 + 200.0  # p50 within delay + 200 ms
-    assert max(late) < 80.0 + 600.0  # the sawtooth's peaks stay short
-    assert all(p.telemetry_hz >= 5.0 for _, _, p in trace)
+def test_closed_loop_thin_link_keeps_the_view_fresh_and_the_camera_on() -> None:
+    """Issue 27 at 192 kbit/s: view age p50 within delay + 200 ms, the camera at 5 frames/s or
+    more nearly all the time, its age p50 within delay + 300 ms."""
+    trace = [s for s in run_loop([(0.0, 192.0)], duration_s=40.0) if s.t_s >= 5.0]
+    ages = sorted(s.view_age_ms for s in trace)
+    assert ages[len(ages) // 2] <= 80.0 + 200.0
+    assert ages[-1] < 80.0 + 600.0  # the sawtooth's peaks stay short
+    assert all(s.plan.telemetry_hz >= 5.0 for s in trace)
+    working = [s.plan.camera_fps >= 5.0 for s in trace]
+    assert sum(working) >= 0.9 * len(trace), [s.plan.camera_fps for s in trace]
+    camera = sorted(s.camera_age_ms for s in trace if s.camera_age_ms is not None)
+    assert camera[len(camera) // 2] <= 80.0 + 300.0
 
 
 def test_closed_loop_recovers_within_3_s_of_each_change() -> None:
-    """2 Mbit/s -> 128 kbit/s -> 2 Mbit/s, 10 s each (the issue's scenario)."""
+    """2 Mbit/s -> 128 kbit/s -> 2 Mbit/s, 10 s each (the issue's scenario): the view's age back
+    under delay + 200 ms within 3 s of each change (its median over half a second: the
+    telemetry period's sawtooth rides on top) and at the median over the rest of the phase (the
+    probes' sawtooth too), and the camera back up after the link widens."""
     trace = run_loop([(0.0, 2000.0), (10.0, 128.0), (20.0, 2000.0)], duration_s=30.0)
+
+    def median(values: list[float]) -> float:
+        return sorted(values)[len(values) // 2]
+
     for change_s in (10.0, 20.0):
-        after = sorted(age for t, age, _ in trace if change_s + 3.0 <= t < change_s + 10.0)
-        # Back under delay + 200 ms; the probes' short peaks (AIMD's sawtooth) stay below 400.
-        assert after[int(0.9 * len(after))] <= 80.0 + 200.0, (change_s, after)
-        assert after[-1] <= 80.0 + 400.0, (change_s, after[-1])
-    wide = [p for t, _, p in trace if 25.0 <= t < 30.0]
-    assert min(p.camera_fps for p in wide) >= 2.0  # the camera came back up
-    thin = [p for t, _, p in trace if 15.0 <= t < 20.0]
+        # the median over the last half second, every 100 ms from the change on
+        halves = [
+            (s.t_s, median([a.view_age_ms for a in trace if s.t_s - 0.5 < a.t_s <= s.t_s]))
+            for s in trace
+            if change_s + 0.5 <= s.t_s < change_s + 10.0
+        ]
+        assert [age for t, age in halves if t <= change_s + 3.0][-1] <= 80.0 + 200.0, halves
+        rest = [s.view_age_ms for s in trace if change_s + 3.0 <= s.t_s < change_s + 10.0]
+        assert median(rest) <= 80.0 + 200.0, (change_s, halves)
+        assert max(rest) <= 80.0 + 600.0, (change_s, halves)
+    thin = [s.plan for s in trace if 13.0 <= s.t_s < 20.0]
     assert all("camera" in p.cut for p in thin)
+    assert max(p.camera_fps for p in thin) >= 1.0  # a thin link still carries some camera
+    wide = [s.plan for s in trace if 27.0 <= s.t_s < 30.0]
+    assert min(p.camera_fps for p in wide) == BudgetConfig().camera_max_fps  # back up
+
+
+def test_closed_loop_camera_comes_back_after_a_long_thin_stretch() -> None:
+    """Issue 27 (a): 30 s at 64 kbit/s (the camera at 1 frame/s or off, its age growing), then
+    the link widens: the camera is back at full rate within 10 s."""
+    trace = run_loop([(0.0, 64.0), (30.0, 2000.0)], duration_s=42.0)
+    thin = [s.plan for s in trace if 5.0 <= s.t_s < 30.0]
+    assert sorted(p.camera_fps for p in thin)[len(thin) // 2] <= 2.0  # mostly 1 frame/s or off
+    assert trace[-1].plan.camera_fps == BudgetConfig().camera_max_fps
+    assert trace[-1].camera_age_ms is not None and trace[-1].camera_age_ms < 300.0

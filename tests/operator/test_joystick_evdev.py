@@ -202,3 +202,22 @@ def test_an_unplugged_pad_keeps_its_filter_pick():
     pad.unplugged = True
     s = js.sample(0.0)
     assert (s.deadman, s.filter, s.via_next) == (False, "dwa", False)
+
+
+def test_the_d_pad_switches_robots_as_a_hat_or_as_buttons():
+    """DESIGN 15: D-pad right/left (a hat on xpad and hid-playstation, buttons on others)
+    read as robot_next/robot_prev while held, and at least once after a tap."""
+    hat = CODES["ABS_HAT0X"]
+    pad = FakePad()
+    js = EvdevJoystick(pad)
+    pad.push((EV_ABS, hat, 1))
+    assert js.sample(0.0).robot_next and js.sample(0.02).robot_next  # held right
+    pad.push((EV_ABS, hat, 0), (EV_ABS, hat, -1), (EV_ABS, hat, 0))  # a tap left between samples
+    s = js.sample(0.04)
+    assert s.robot_prev and not s.robot_next
+    assert not js.sample(0.06).robot_prev
+    pad.push((EV_KEY, CODES["BTN_DPAD_RIGHT"], 1), (EV_KEY, CODES["BTN_DPAD_RIGHT"], 0))
+    assert js.sample(0.08).robot_next
+    generic = PRESETS["generic"]
+    assert (generic.robot_next, generic.robot_prev) == (CODES["BTN_BASE6"], CODES["BTN_BASE5"])
+    assert ButtonMap.from_table({"robot_next": "BTN_SOUTH"}).robot_next == CODES["BTN_SOUTH"]

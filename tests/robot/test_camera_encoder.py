@@ -125,6 +125,21 @@ def test_the_bitrate_follows_the_target(renderer, target):
     assert kbps_of(run, 10.0) == pytest.approx(target, rel=0.3)
 
 
+@pytest.mark.parametrize(("fps", "target"), [(10.0, 100.0), (5.0, 40.0), (10.0, 400.0)])
+def test_no_frame_bursts_keyframes_included(renderer, fps, target):
+    """Issue 27 (b): on a thin link a frame of B bits holds everything behind it for B / rate;
+    with half a second of VBV a keyframe was ~5 times the average frame (250 ms a second on a
+    192 kbit/s link). A VBV of one frame: none above 1.5 times the target's frame."""
+    encoder = CameraEncoder()
+    encoder.set_plan(StreamPlan("h264", 320, 240, fps, target))
+    run = encode_run(encoder, renderer, fps, 4.0)
+    frame_bytes = target * 1000.0 / 8.0 / fps
+    sizes = [len(out.data) for _, out in run if out is not None]
+    keys = [len(out.data) for _, out in run if out is not None and out.key]
+    assert len(keys) >= 4
+    assert max(sizes) <= 1.5 * frame_bytes, (max(sizes), frame_bytes)
+
+
 def test_the_bitrate_follows_a_target_that_changes_at_run_time(renderer):
     encoder = CameraEncoder()
     encoder.set_plan(StreamPlan("h264", 320, 240, 10.0, 600.0))

@@ -25,7 +25,7 @@ from sensor_msgs.msg import CompressedImage
 from sensor_msgs.msg import Image as ImageMsg
 
 from tests.integration.harness import ROBOT, Processes
-from tests.ros2.fake_base import FakeBase
+from tests.ros2.fake_base import STOP_PATIENCE_S, FakeBase
 from tests.ros2.test_robot_ros import wait_log
 from tests.view.rrd import read_recording
 
@@ -93,7 +93,9 @@ class ImagePublisher:
 
     def close(self) -> None:
         self._stop.set()
-        self._thread.join(2)
+        self._thread.join(STOP_PATIENCE_S)
+        if self._thread.is_alive():  # never destroy the node under its thread (issue 31)
+            raise AssertionError(f"the camera's thread did not stop in {STOP_PATIENCE_S} s")
         self.node.destroy_node()
         self._context.try_shutdown()
 

@@ -19,6 +19,9 @@ from tests.ros2.fake_base import FakeBase
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 MS = 1_000_000
+# A ROS 2 process's exit after SIGTERM (its node closed, then rclpy's and Fast DDS's teardown)
+# took 4-14 s with the cores taken (issue 31), past the harness's default of 5 s.
+STOP_TIMEOUT_S = 60.0
 
 
 @pytest.fixture
@@ -119,7 +122,7 @@ def test_sigterm_while_driving_leaves_a_zero_twist_last(base, procs, tmp_path):
     start_robot_and_operator(base, procs, tmp_path, 1.0)
     base.wait_driving()
     base.wait_for("moving", lambda: base.commands()[-1].linear_mps > 0.05, 10.0)
-    assert procs.stop("robot", signal.SIGTERM) == 0
+    assert procs.stop("robot", signal.SIGTERM, STOP_TIMEOUT_S) == 0
     # the robot has exited: nothing more comes, but its last twist may still be on its way to
     # our executor (a fixed 0.3 s was assumed enough)
     base.wait_for(

@@ -14,7 +14,7 @@ pytest.importorskip("rclpy", reason="ROS 2's rclpy is not installed (pip install
 from egc_common.transport import free_tcp_port, loopback_endpoint
 
 from tests.integration.harness import ROBOT, Processes, joystick_file, operator_args
-from tests.ros2.test_robot_ros import wait_log
+from tests.ros2.test_robot_ros import STOP_TIMEOUT_S, wait_log
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 
@@ -63,7 +63,7 @@ def test_sim_ros2_drives_under_the_robot_and_stops_on_silence(
     procs.children["robot"].send_signal(signal.SIGKILL)
     procs.children["robot"].wait(5)
     time.sleep(1.0)
-    assert procs.stop("sim") == 0
+    assert procs.stop("sim", timeout_s=STOP_TIMEOUT_S) == 0
     sim_log = procs.log("sim")
     assert "collided: False" in sim_log
     commands = int(sim_log.rsplit("stopped after ", 1)[1].split()[0])
@@ -119,6 +119,7 @@ def test_sim_ros2_base_stops_half_a_second_after_cmd_vel_goes_silent(ros_domain,
         assert all(v == 0.0 for t, v in odom if t > stopped)
         assert math.isfinite(odom[-1][1])
     finally:
-        executor.shutdown(timeout_sec=1.0)
+        # Spun in this thread only (spin_once above), so nothing is inside it now (issue 31).
+        executor.shutdown()
         node.destroy_node()
         context.try_shutdown()

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from egc_common.messages import StateMessage
+from egc_common.messages import StateMessage, Telemetry
 from egc_operator import view_blueprint as paths
 from egc_operator.view import OperatorView, record_episode
 from egc_operator.view_scene import command_vector, status_text
@@ -286,3 +286,10 @@ def test_a_round_robot_is_drawn_round(tmp_path: Path) -> None:
     assert len(outline) == 33 and np.allclose(np.hypot(*outline.T), 0.171)
     world = rec[_entity(paths.POSE_FOOTPRINT)].static_column("LineStrips2D:strips")
     assert np.allclose(np.hypot(*np.array(world[0][0]).T), 0.171)
+
+
+def test_the_status_text_names_the_source_and_the_lock():
+    """DESIGN 14: which source drives and which lock holds, in the robot-frame view."""
+    t = Telemetry(1, 1, "DRIVING", "shared", 0.1, 0.0, 0.1, 0.0, 1.0, source="nav", lock="pause")
+    assert status_text(t).endswith(" · source nav · lock pause")
+    assert "source" not in status_text(Telemetry(1, 1, "IDLE", "shared", 0, 0, 0, 0, 1.0))
