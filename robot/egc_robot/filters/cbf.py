@@ -35,11 +35,10 @@ beyond which nothing is known to be free):
   default alpha and margin.
 - Condition, per point: dh_i/dt >= -alpha h_i with the margin held for the cycle, i.e.
   u_i(v, w) <= alpha max(h_i, 0). Inside the margin (h_i <= 0) this asks for no further approach
-  instead of the recovery a textbook barrier demands: a filter that drove the robot away from a
-  wall on its own, with the operator's stick centred, would break DESIGN 1 (nothing from the
-  operator's side can make the robot move more than asked; here: the filter never adds motion
-  the QP's closeness does not justify). So the zero command is always feasible: the filter can
-  always stop, and any motion that approaches no point (moving away) is never refused.
+  instead of the recovery a textbook barrier demands: that one would drive the robot away from
+  a wall on its own, the operator's stick centred, and a teleoperated robot must not move when
+  nobody asks it to. So the zero command is always feasible: the filter can always stop, and
+  any motion that approaches no point (moving away) is never refused.
 
 The margin's speed is taken twice, which makes two half-planes per point:
 
@@ -57,19 +56,28 @@ In a replay (the current speed is the recorded command) (S) and (C) agree on the
 command. Box limits |v| <= v_max, |w| <= w_max from the profile close the feasible set.
 
 **Solving** min wv (v - v0)^2 + ww (w - w0)^2 over the half-planes and the box, exactly, in
-closed form, vectorised (no iterative solver): in coordinates scaled by the weights this is the
-Euclidean projection onto a convex polygon. A strictly convex QP has one minimiser and the KKT
-conditions are sufficient, so the projection onto a single violated line, when feasible, is the
-answer; otherwise the answer is a vertex of two lines (the feasible one nearest the command).
-Which points enter: only those within reach (a point whose barrier no command within the box and
-within ``||u0||`` of u0 in the weighted norm can violate is dropped; the answer never lies
-farther, since the zero command is feasible), then cutting planes: the working set starts with
-the ``points_considered`` rows the command violates most; the answer on the working set is
-checked against every point in reach and the most violated are added, until none is (a few
-rounds; the answer is then optimal for the whole set, being optimal for a subset and feasible
-for all). Should that not settle within ``_MAX_ROUNDS`` rounds, or the polygon
-come out empty through rounding, the filter stops translation and keeps the rotation every
-barrier allows (the interval of w at v = 0 always holds 0).
+closed form (no iterative solver): in coordinates scaled by the weights this is the Euclidean
+projection onto a convex polygon. A strictly convex QP has one minimiser and the KKT conditions
+are sufficient, so the projection onto a single violated line, when feasible, is the answer;
+otherwise the answer is a vertex of two lines, one of which the command violates (else KKT puts
+the optimum at the command), the feasible one nearest the command. The rows are built for all
+points at once (numpy); the few the solver works on are projected in plain Python, cheaper than
+numpy's per-call cost at that size.
+
+Which points enter: a point whose barrier no command of a "cover" (a range of v and |w|) can
+violate is left out, by its distance from the footprint alone. The first cover runs from a
+standstill to the command (plus a little reversing and turning), so it holds every point the
+command violates; then cutting planes: the working set starts with the ``points_considered``
+rows the command violates most, the answer on it is checked against every row built and the
+most violated are added, until none is (a round or two; the answer is then optimal for every
+point built, being optimal for a subset and feasible for all). If the answer leaves the cover,
+the rows are built again for a cover holding it too, and after ``_MAX_COVERS`` such covers for
+the cover of every answer the filter can give (the box, within ``||u0||`` of the command in the
+weighted norm: the zero command is feasible). The answer is then optimal for every point: no
+point outside the cover that holds it can be approached too fast by it. Should the rounds not
+settle within ``_MAX_ROUNDS``, or the polygon come out empty through rounding, the filter stops
+translation and keeps the rotation every barrier allows (the interval of w at v = 0 always
+holds 0).
 
 Cases, each never less safe than stopping (as EGC's DESIGN 5.9 rules):
 
@@ -149,8 +157,8 @@ class CbfParams:
     - ``period_s``: the control period (s), which the robot sets from its rate as for the
       footprint sweep (``SweepParams.period_s``).
     - ``points_considered``: how many constraints the solver takes at a time, the most violated
-      ones (first by the command, then each round by the last answer). It checks every point in
-      reach after each round, so this sets the cost of a round, not the answer: 8 is a wall
+      ones (first by the command, then each round by the last answer). It checks every row
+      built after each round, so this sets the cost of a round, not the answer: 8 holds a wall
       ahead and one beside, each with its (S) and (C) rows and neighbours, settled in one or
       two rounds.
     """
