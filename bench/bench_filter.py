@@ -12,6 +12,12 @@ pioneer3dx profile on the same input (points beyond its reach cost nothing), and
 the jackal profile on the same scan (2.5 m look-ahead: nearly every point is within reach, the
 expensive case). DWA's cost is reported as a ratio to EGC's, without a target.
 
+``cbf`` (DESIGN 13, issue 28): on EGC's own input (pioneer3dx at 0.14 m/s: the box 1 m ahead is
+beyond anything the command could reach, so it passes after the reach test), then the jackal on
+the same scans at 1.2 m/s (the box within reach: the QP is solved) and at 2 m/s (most of the
+room within reach, the expensive case), and the disc and the pentagon at speed. Target: every
+cbf row <= 2x EGC's median at 720 points, same run.
+
     python bench/bench_filter.py [--repeats N] [--out FILE.json]
 """
 
@@ -28,6 +34,7 @@ from pathlib import Path
 import numpy as np
 from egc_common.profiles import JACKAL, PIONEER3DX, TURTLEBOT4, RobotProfile, load_profile
 from egc_experiments.bench_results import write_result
+from egc_robot.filters.cbf import CbfParams, cbf_filter
 from egc_robot.filters.dwa import DwaParams, dwa_filter
 from egc_robot.filters.egc import EgcCase, EgcParams, egc_filter
 
@@ -48,6 +55,14 @@ DWA_CASES: dict[str, tuple[RobotProfile, tuple[float, float]]] = {
     "dwa jackal": (JACKAL, (2.0, 0.5)),
     "dwa tb4": (TURTLEBOT4, (0.31, 0.5)),
     "dwa pentagon": (PENTAGON, (0.8, 0.3)),
+}
+# cbf: the profile and the command, already driving it, on a perfect link (tau 0.25 s).
+CBF_CASES: dict[str, tuple[RobotProfile, tuple[float, float]]] = {
+    "cbf": (PIONEER3DX, COMMAND),
+    "cbf jackal": (JACKAL, (1.2, 0.3)),
+    "cbf jackal 2": (JACKAL, (2.0, 0.5)),
+    "cbf tb4": (TURTLEBOT4, (0.31, 0.5)),
+    "cbf pentagon": (PENTAGON, (0.8, 0.3)),
 }
 
 
@@ -121,6 +136,9 @@ def family_rows(cases: dict, egc_by_points: dict, repeats: int) -> list[dict]:
     for name, (profile, cmd) in DWA_CASES.items():
         params = DwaParams.from_profile(profile)
         fns[name] = lambda pts, p=profile, c=cmd, d=params: dwa_filter(*c, pts, *c, None, p, d)
+    for name, (profile, cmd) in CBF_CASES.items():
+        cbf = CbfParams.from_profile(profile)
+        fns[name] = lambda pts, p=profile, c=cmd, d=cbf: cbf_filter(*c, pts, *c, None, p, d)
     rows = []
     print()
     print("Filter family per call, same scans (EGC median from the table above)")
@@ -141,6 +159,11 @@ def family_rows(cases: dict, egc_by_points: dict, repeats: int) -> list[dict]:
                 note = (
                     f"{profile.name}, {within} points in reach, {res.candidates} candidates, "
                     f"{res.admissible} admissible, {'modified' if res.modified else 'passed'}"
+                )
+            elif name.startswith("cbf"):
+                note = (
+                    f"{CBF_CASES[name][0].name}, {res.case.value}, {res.considered} points "
+                    f"considered, {res.rounds} rounds"
                 )
             else:
                 note = str(res.case.value)
@@ -230,6 +253,11 @@ def main(argv: list[str] | None = None) -> int:
                 r["ratio_to_egc"] for r in family if r["filter"] == "ek-egc" and r["points"] == n
             )
             targets[f"ek-egc <= 2x egc at {n} points"] = ratio <= 2.0
+    for name in CBF_CASES:
+        ratio = next(
+            r["ratio_to_egc"] for r in family if r["filter"] == name and r["points"] == 720
+        )
+        targets[f"{name} <= 2x egc at 720 points"] = ratio <= 2.0
     for k, ok in targets.items():
         print(f"target {k}: {'met' if ok else 'MISSED'}")
     result = {"rows": rows, "family": family, "targets": targets, "python": sys.version}

@@ -4,8 +4,8 @@ A CSV file with a header row. Required columns: ``t_s`` (seconds from the start,
 ``x`` (forward deflection) and ``y`` (left deflection), both in [-1, 1]. Optional columns, with
 their defaults: ``deadman`` (0/1, default 1), ``mode`` (``direct`` | ``shared``, default
 ``shared``), ``estop`` (0/1, default 0), ``reset`` (0/1, default 0), ``filter`` (the
-operator's pick of shared-mode filter, one of ``egc``, ``ek-egc``, ``assist``, ``dwa``; empty or
-absent: no pick, the robot runs its default), ``via_next`` and ``via_clear`` (0/1, default 0:
+operator's pick of shared-mode filter, one of ``egc``, ``ek-egc``, ``assist``, ``dwa``,
+``cbf``; empty or absent: no pick, the robot runs its default), ``via_next`` and ``via_clear`` (0/1, default 0:
 "button held"; the operator acts on the press, skipping the active via point or clearing them
 all), ``robot_next`` and ``robot_prev`` (0/1, default 0: "button held"; an operator driving a
 fleet switches to the next or previous robot on the press, DESIGN 15). Blank lines and lines starting with ``#`` are ignored. Between rows the last row holds (zero-order hold); after the

@@ -291,12 +291,14 @@ def _fmt(value: float | None, digits: int = 1) -> str:
 def outcome_table(
     records: Sequence[dict[str, Any]], filters: Sequence[str], operators: Sequence[str]
 ) -> list[str]:
-    """Per operator and filter: outcomes, time and path of reached runs, interventions."""
+    """Per operator and filter: outcomes, time and path of reached runs, interventions, and
+    DESIGN 13's metrics over every cycle of the episodes that report them (``changed`` share,
+    ``mean_cut``, ``hold_s``; older records without them show a dash)."""
     lines = [
         "| operator | filter | episodes | reached | collided | stalled | timeout | error "
         "| time s (reached, mean) | path m (reached, mean) | interventions / episode "
-        "| interventions / s |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| interventions / s | changed share | mean cut | hold s / episode |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for op in operators:
         for f in filters:
@@ -310,13 +312,23 @@ def outcome_table(
             ok = [r for r in rows if "error" not in r]
             total_t = sum(r["time_s"] for r in ok)
             total_i = sum(r["interventions"] for r in ok)
+            measured = [r for r in ok if "changed" in r and "commands" in r]
+            commands = sum(r["commands"] for r in measured)
+            share = sum(r["changed"] for r in measured) / commands if commands else None
+            cut = (
+                sum(r["mean_cut"] * r["commands"] for r in measured) / commands
+                if commands
+                else None
+            )
             lines.append(
                 f"| {op} | {f} | {len(rows)} | {count['reached']} | {count['collided']} "
                 f"| {count['stalled']} | {count['timeout']} | {count['error']} "
                 f"| {_fmt(_mean([r['time_s'] for r in reached]))} "
                 f"| {_fmt(_mean([r['path_m'] for r in reached]), 2)} "
                 f"| {_fmt(_mean([r['interventions'] for r in ok]), 0)} "
-                f"| {_fmt(total_i / total_t if total_t else None, 1)} |"
+                f"| {_fmt(total_i / total_t if total_t else None, 1)} "
+                f"| {_fmt(share, 3)} | {_fmt(cut, 3)} "
+                f"| {_fmt(_mean([r['hold_s'] for r in measured]), 1)} |"
             )
     return lines
 
@@ -429,7 +441,11 @@ SETUP_TEXT = [
     "goal tolerance), `collided` (footprint contact), `stalled` (standing still for "
     f"{STALL_TIME_S:g} s) or `timeout` (after max(60, 2 x planned route / v_max + 30) s). "
     "Times and paths are means over reached episodes; interventions are control cycles in which "
-    "the filter changed the command or the sweep scaled it down.",
+    "the filter changed the command or the sweep scaled it down. Changed share, mean cut and "
+    "hold s are DESIGN 13's metrics over every cycle (`egc_robot.intervention`): the share of "
+    "commands whose v or w the filter or sweep moved by more than 0.01 from what direct mode "
+    "would have sent, the mean of |dv|/v_max + |dw|/w_max, and the time a moving command was "
+    "stopped.",
     "",
 ]
 

@@ -33,6 +33,9 @@ and the settings. An **intervention** is a control cycle in which the pipeline's
 ``egc`` (the filter changed the operator's command) or ``sweep`` (the footprint check scaled it
 down). Cycles limited only by the profile's velocity/acceleration limits, stopped by the deadman
 or passed through by the anti-dead-lock rule do not count; in direct mode the count is 0.
+DESIGN 13's metrics (``egc_robot.intervention``): ``commands`` (cycles through the pipeline),
+``changed``, ``changed_share``, ``mean_cut`` and ``hold_s``, each against what direct mode would
+have sent on the same cycle.
 
 Bad settings raise ``UsageError`` with one line for the user. Many episodes in worker
 processes: ``egc_experiments.episode_batch``.
@@ -51,6 +54,7 @@ from egc_common.errors import UsageError
 from egc_common.messages import Telemetry
 from egc_common.profiles import get_profile
 from egc_common.scan import Scan
+from egc_robot.intervention import InterventionTally
 from egc_robot.pipeline import (
     INTERVENING,
     Limiter,
@@ -112,6 +116,8 @@ class PipelineController:
         self._via_tolerance_m = via_tolerance_m
         self._now_ns = 0
         self._memory: object | None = None
+        profile = config.profile
+        self.tally = InterventionTally(profile.v_max_mps, profile.w_max_radps)  # DESIGN 13
 
     def _goal_in_robot_frame(self) -> tuple[float, float] | None:
         if self._pose is None:
@@ -139,6 +145,7 @@ class PipelineController:
                 memory=self._memory,
             )
             self._memory = r.memory
+            self.tally.add(r, dt_s)
             out = ControlOutput(
                 r.v_cmd_mps,
                 r.w_cmd_radps,
@@ -250,6 +257,8 @@ def run_settings(
         "seed": settings.seed,
         "via": settings.via,
         "via_points": len(via),
+        # DESIGN 13: commands, changed, changed_share, mean_cut, hold_s
+        **controller.tally.as_dict(),
     }
     return result, summary
 

@@ -43,7 +43,7 @@ Axes (every one takes a value or a list; a sweep is the product of its lists):
 - ``operator``: ``sighted``, ``route``, ``goal``, ``forward`` (with options, e.g.
   ``"sighted:reaction_s=0.5"``, ``"route:map=building"``; ``egc_sim.operators.make_operator``)
   or a joystick file.
-- ``filter``: ``none`` | ``egc`` | ``ek-egc`` | ``assist`` | ``dwa``; ``mode``: ``direct`` |
+- ``filter``: ``none`` | ``egc`` | ``ek-egc`` | ``assist`` | ``dwa`` | ``cbf``; ``mode``: ``direct`` |
   ``shared``, by default ``direct`` for
   ``filter = "none"`` and ``shared`` otherwise.
 - ``transport``: ``tcp`` (ordered, nothing lost: a TCP link retransmits, so a loss shows up as

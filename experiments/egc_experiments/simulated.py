@@ -33,6 +33,9 @@ Metrics (``RESULT_KEYS`` and more; times in simulated seconds):
   not driving (telemetry state HOLD, or IDLE: no operator in control, e.g. at the start while
   every command arrives too old) while the operator wanted to move (its model's stick
   deflected, before any centring);
+- ``changed``, ``changed_share``, ``mean_cut``, ``filter_hold_s`` (DESIGN 13's ``hold_s``) and
+  ``filter_commands``: how much the filter and the sweep changed the operator's commands,
+  against what direct mode would have sent on the same cycles (``egc_robot.intervention``);
 - ``interventions``: cycles in which the filter or the footprint sweep changed the command
   (the pipeline's limiter names the filter, or ``sweep``); ``latency_limited_s``: time in which the
   latency governor capped the speed (telemetry limiter ``latency``);
@@ -65,6 +68,7 @@ from egc_common.messages import (
 from egc_common.profiles import get_profile
 from egc_operator.prediction import CommandHistory, SentCommand
 from egc_robot.controller import ControllerConfig, RobotController
+from egc_robot.intervention import InterventionTally
 from egc_robot.pipeline import INTERVENING, Limiter, PipelineConfig
 from egc_sim.grid_world import Pose
 from egc_sim.observation import Observation, ViewBuffer
@@ -241,6 +245,8 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
     ages_ms: list[float] = []
     loop_delays: list[float] = []
     hold_cycles = hold_events = interventions = latency_cycles = cycles = 0
+    profile = controller.config.pipeline.profile
+    tally = InterventionTally(profile.v_max_mps, profile.w_max_radps)  # DESIGN 13
     in_hold = False
     max_speed = 0.0
     before = contact = (0.0, 0.0)  # the base's twist entering the step that made contact
@@ -322,8 +328,9 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
             hold_cycles += holding
             hold_events += holding and not in_hold
             in_hold = holding
-            if out.result is not None and out.result.limiter in INTERVENING:
-                interventions += 1
+            if out.result is not None:
+                interventions += out.result.limiter in INTERVENING
+                tally.add(out.result, dt_s)
             latency_cycles += tel.limiter == Limiter.LATENCY.value
             size = _TELEMETRY_BASE_BYTES + 8 * len(tel.scan_xy)
             arrival = down.transit(t_s, size)
@@ -353,6 +360,12 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
         "hold_s": round(hold_cycles * dt_s, 3),
         "hold_events": hold_events,
         "interventions": interventions,
+        # DESIGN 13 (egc_robot.intervention); its hold_s is filter_hold_s here, since DESIGN 10
+        # pins hold_s for the robot's holds (HOLD / IDLE while the operator wants to move).
+        **{
+            ("filter_" + k if k in ("hold_s", "commands") else k): v
+            for k, v in tally.as_dict().items()
+        },
         "cmd_age_p50_ms": _percentile(ages_ms, 50),
         "cmd_age_p99_ms": _percentile(ages_ms, 99),
         "stale_rejected": counters.rejected.get(RejectReason.STALE.value, 0),

@@ -6,8 +6,8 @@ in ``egc_operator/scripts/``; ``--script list`` lists them). A file or script en
 deadman released and the process exits 0 (``--loop`` repeats it instead, until stopped; a file
 whose rows are all at one instant holds that row).
 
-Shared mode's filter: ``--filter NAME`` (one of ``egc``, ``ek-egc``, ``assist``, ``dwa``) is
-sent with every command unless the source picks one (the gamepad's filter button, a file's
+Shared mode's filter: ``--filter NAME`` (one of ``egc``, ``ek-egc``, ``assist``, ``dwa``,
+``cbf``) is sent with every command unless the source picks one (the gamepad's filter button, a file's
 ``filter`` column); without it the robot runs its own default. Direct mode (no filter) is
 ``--mode direct`` or the mode button, not ``--filter none``.
 
@@ -126,7 +126,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="NAME",
         help="shared mode's filter, sent with every command unless the gamepad's filter button "
-        "or a file's filter column picks one: egc, ek-egc, assist, dwa (default: the robot's)",
+        "or a file's filter column picks one: egc, ek-egc, assist, dwa, cbf (default: the robot's)",
     )
     via = parser.add_argument_group("via points (sent to the robot, which goes to each in turn)")
     via.add_argument(

@@ -18,7 +18,7 @@
   e-stop        BTN_EAST        B / Circle
   reset         BTN_START       Menu (Start) / Options
   filter cycle  BTN_NORTH       Y / Triangle: next filter of shared mode (egc, ek-egc, assist,
-                                dwa, then egc again); in direct mode it switches to shared
+                                dwa, cbf, then egc again); in direct mode it switches to shared
   via next      BTN_TR          RB / R1: skip the active via point
   via clear     BTN_WEST        X / Square: clear all via points
   next robot    ABS_HAT0X +1    D-pad right (DESIGN 15: the operator drives the next robot)

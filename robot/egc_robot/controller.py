@@ -1122,7 +1122,8 @@ def _cbf_view(result: PipelineResult | None) -> dict[str, Any]:
     if not isinstance(detail, CbfResult):
         return {}
     xy = _NO_POINTS
-    if detail.tight is not None and detail.tight.x_m.size:
-        pairs = np.column_stack((detail.tight.x_m, detail.tight.y_m)).astype(np.float32)
+    tight = detail.tight
+    if tight is not None and tight.x_m.size:
+        pairs = np.column_stack((tight.x_m, tight.y_m)).astype(np.float32)
         xy = np.unique(pairs, axis=0)[:MAX_CBF_POINTS]  # a point's (S) and (C) rows: once
     return {"cbf_xy": xy, "cbf_margin_m": detail.margin_m, "cbf_ahead_m": detail.margin_ahead_m}

@@ -126,6 +126,10 @@ class PipelineResult:
     family: FilterResult | None  # what the filter of DESIGN 6 said (None: no filter ran)
     sweep_scale: float = 1.0
     escape: bool = False
+    # What direct mode would have sent this cycle: the reference within the profile's velocity
+    # and acceleration limits, no filter, no sweep. The safety layer's intervention (DESIGN 13)
+    # is the difference from it (``intervention.InterventionTally``); None: not computed.
+    plain: tuple[float, float] | None = None
 
     @property
     def filter_name(self) -> str:
@@ -205,6 +209,12 @@ def filter_velocity(
     if previous_cmd is not None:
         v, w = limit_acceleration(v, w, previous_cmd, dt_s, profile)
     limited = abs(v - after_filter[0]) > _SAME or abs(w - after_filter[1]) > _SAME
+    if not shared:
+        plain = (v, w)
+    else:
+        plain = limit_velocity(v_ref_mps, w_ref_radps, profile)
+        if previous_cmd is not None:
+            plain = limit_acceleration(*plain, previous_cmd, dt_s, profile)
 
     scale = 1.0
     if shared:
@@ -229,7 +239,7 @@ def filter_velocity(
         limiter = Limiter.LIMITS
     else:
         limiter = Limiter.NONE
-    return PipelineResult(v_ref_mps, w_ref_radps, v, w, limiter, family, scale, escape)
+    return PipelineResult(v_ref_mps, w_ref_radps, v, w, limiter, family, scale, escape, plain)
 
 
 def step_command(

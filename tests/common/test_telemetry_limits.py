@@ -217,7 +217,7 @@ def test_a_robot_s_telemetry_is_never_refused():
 
     c.on_goal(GoalMessage(1, now, "alice", "odom", ((2.0, 1.0), (4.0, -1.0))).encode(), now)
     plan = [(0.0, 0.0, "shared", "egc")] * 3
-    for filt in ("egc", "ek-egc", "assist", "dwa"):
+    for filt in ("egc", "ek-egc", "assist", "dwa", "cbf"):
         plan += [(1.0, 0.0, "shared", filt)] * 20 + [(0.7, 0.6, "shared", filt)] * 20
     plan += [(1.0, 0.0, "direct", None)] * 20
     for k, (x, y, mode, filt) in enumerate(plan):

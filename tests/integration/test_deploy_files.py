@@ -129,3 +129,21 @@ def test_a_resume_window_beyond_the_session_limits_is_named_at_start():
     assert resume_window_caveat(released_later, 4000) is None
     assert resume_window_caveat(released_later, None) is None  # lease unknown: a config file
     assert resume_window_caveat(dataclasses.replace(longer, link_aware=False), 2000) is None
+
+
+def test_the_cbf_table_sets_cbf_over_the_profiles_defaults(tmp_path):
+    """DESIGN 13: ``[cbf]`` in the robot TOML (and ``--set cbf.KEY=VALUE``); the control period
+    follows the robot's rate; a bad key or value is one line."""
+    path = tmp_path / "robot.toml"
+    path.write_text("[robot]\nrate_hz = 25\n[cbf]\nalpha_per_s = 6\nweight_w = 2.0\n")
+    args = argparse.Namespace(profile="jackal", filter="cbf", rate_hz=None)
+    cbf = build_controller_config(args, config_mod.load(path)).pipeline.settings.cbf
+    assert cbf is not None
+    assert (cbf.alpha_per_s, cbf.weight_w, cbf.margin_m) == (6.0, 2.0, pytest.approx(0.12))
+    assert cbf.period_s == pytest.approx(0.04)
+    over = config_mod.load(path, ["cbf.margin_m=0.2"])
+    assert build_controller_config(args, over).pipeline.settings.cbf.margin_m == 0.2
+    for bad in ("[cbf]\nalpha = 6\n", "[cbf]\nalpha_per_s = -1\n", "cbf = 3\n"):
+        path.write_text(bad)
+        with pytest.raises(UsageError, match="cbf"):
+            build_controller_config(args, config_mod.load(path))

@@ -274,7 +274,7 @@ def test_minus_inf_beyond_the_footprint_adds_a_point_at_its_edge():
 
 
 @pytest.mark.parametrize("profile_name", ["pioneer3dx", "jackal"])
-@pytest.mark.parametrize("filter_name", ["egc", "ek-egc", "assist", "dwa"])
+@pytest.mark.parametrize("filter_name", ["egc", "ek-egc", "assist", "dwa", "cbf"])
 def test_no_filter_drives_on_into_minus_inf_readings_beyond_the_footprint(
     filter_name, profile_name
 ):
@@ -338,7 +338,7 @@ def _gap_to_footprint(pose, post, half) -> float:
     return math.hypot(max(abs(lx) - half[0], 0.0), max(abs(ly) - half[1], 0.0)) - r
 
 
-@pytest.mark.parametrize("filter_name", ["egc", "ek-egc", "assist", "dwa"])
+@pytest.mark.parametrize("filter_name", ["egc", "ek-egc", "assist", "dwa", "cbf"])
 @pytest.mark.parametrize("post_x_m", [0.9, 1.9])  # -inf from the start; seen first, then -inf
 @pytest.mark.parametrize(
     "mount, y_o",
@@ -420,7 +420,7 @@ def test_a_short_range_laser_caps_the_speed_to_what_it_can_stop_within():
     assert mounted.obstacles().seen_behind_m == pytest.approx(0.4)
 
 
-@pytest.mark.parametrize("filter_name", ["egc", "ek-egc", "assist", "dwa"])
+@pytest.mark.parametrize("filter_name", ["egc", "ek-egc", "assist", "dwa", "cbf"])
 def test_the_zenoh_scan_message_reads_minus_inf_as_the_ros2_driver_does(filter_name):
     """Outside check: on egc/<robot>/scan (the LaserScan layout) -inf was dropped as no
     return: a sector of -inf ahead left the robot at full speed, limiter none."""
@@ -472,7 +472,7 @@ def test_one_informative_beam_among_nan_is_a_scan(reading):
     assert isinstance(scan_from_message(ScanMessage(0, -1.0, 0.02, 0.05, 10.0, ranges), None), Scan)
 
 
-@pytest.mark.parametrize("filter_name", ["egc", "ek-egc", "assist", "dwa"])
+@pytest.mark.parametrize("filter_name", ["egc", "ek-egc", "assist", "dwa", "cbf"])
 @pytest.mark.parametrize(
     "fov_deg, mount, ahead",
     [
@@ -567,7 +567,7 @@ def test_the_unseen_directions_are_those_of_the_laser_where_it_sits():
 
 
 @pytest.mark.parametrize("failed", [math.nan, 0.0, -1.0])
-@pytest.mark.parametrize("filter_name", ["egc", "ek-egc", "assist", "dwa"])
+@pytest.mark.parametrize("filter_name", ["egc", "ek-egc", "assist", "dwa", "cbf"])
 def test_a_wall_whose_beams_all_fail_is_not_free_space(failed, filter_name):
     """An outside fuzz: a wall across a corridor 0.45 m ahead, its 147 beams reading NaN (or 0,
     or -1: below range_min, errors per REP 117), and the robot drove at it at full speed, the

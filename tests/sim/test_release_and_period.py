@@ -96,7 +96,7 @@ def test_releasing_the_deadman_in_a_fast_curve_does_not_leave_the_arc_into_a_wal
     assert not summary["collided"], summary
 
 
-@pytest.mark.parametrize("filter_name", ["egc", "dwa"])
+@pytest.mark.parametrize("filter_name", ["egc", "dwa", "cbf"])
 @pytest.mark.parametrize("seed", [5101, 5102, 5103])
 def test_a_longer_control_period_is_swept_as_such(filter_name, seed):
     settings = EpisodeSettings(

@@ -54,7 +54,13 @@ def drive_randomly(filter_name: str, seed: int, steps: int = 200) -> tuple[bool,
 
 @pytest.mark.parametrize(
     ("filter_name", "seeds"),
-    [("egc", range(4)), ("ek-egc", range(4)), ("assist", range(4)), ("dwa", (13, 14))],
+    [
+        ("egc", range(4)),
+        ("ek-egc", range(4)),
+        ("assist", range(4)),
+        ("dwa", (13, 14)),
+        ("cbf", (0, 1, 2, 3, 13, 14)),
+    ],
 )
 def test_random_sticks_never_touch(filter_name, seeds):
     for seed in seeds:

@@ -35,12 +35,11 @@ beyond which nothing is known to be free):
   default alpha and margin.
 - Condition, per point: dh_i/dt >= -alpha h_i with the margin held for the cycle, i.e.
   u_i(v, w) <= max(alpha h_i, kappa_i sd_i^+). Inside the margin (h_i <= 0) this asks for no
-  further approach (kappa_i = 0, below) instead of the recovery a textbook barrier demands: a
-  filter that drove the robot away from a wall on its own, with the operator's stick centred,
-  would break DESIGN 1 (nothing from the operator's side can make the robot move more than
-  asked; here: the filter never adds motion the QP's closeness does not justify). So the zero
-  command is always feasible: the filter can always stop, and any motion that approaches no
-  point (moving away) is never refused.
+  further approach (kappa_i = 0, below) instead of the recovery a textbook barrier demands:
+  that one would drive the robot away from a wall on its own, the operator's stick centred,
+  and a teleoperated robot must not move when nobody asks it to. So the zero command is always
+  feasible: the filter can always stop, and any motion that approaches no point (moving away)
+  is never refused.
 - kappa_i, the creep: "no further approach" is a row a v + b w >= 0 through the origin, and
   for a point beside the middle of the footprint's flank its normal (a, b) = (-n_x, b_i)
   shrinks to zero and flips as the point passes: the allowed turn jumped between none and
@@ -68,19 +67,28 @@ In a replay (the current speed is the recorded command) (S) and (C) agree on the
 command. Box limits |v| <= v_max, |w| <= w_max from the profile close the feasible set.
 
 **Solving** min wv (v - v0)^2 + ww (w - w0)^2 over the half-planes and the box, exactly, in
-closed form, vectorised (no iterative solver): in coordinates scaled by the weights this is the
-Euclidean projection onto a convex polygon. A strictly convex QP has one minimiser and the KKT
-conditions are sufficient, so the projection onto a single violated line, when feasible, is the
-answer; otherwise the answer is a vertex of two lines (the feasible one nearest the command).
-Which points enter: only those within reach (a point whose barrier no command within the box and
-within ``||u0||`` of u0 in the weighted norm can violate is dropped; the answer never lies
-farther, since the zero command is feasible), then cutting planes: the working set starts with
-the ``points_considered`` rows the command violates most; the answer on the working set is
-checked against every point in reach and the most violated are added, until none is (a few
-rounds; the answer is then optimal for the whole set, being optimal for a subset and feasible
-for all). Should that not settle within ``_MAX_ROUNDS`` rounds, or the polygon
-come out empty through rounding, the filter stops translation and keeps the rotation every
-barrier allows (the interval of w at v = 0 always holds 0).
+closed form (no iterative solver): in coordinates scaled by the weights this is the Euclidean
+projection onto a convex polygon. A strictly convex QP has one minimiser and the KKT conditions
+are sufficient, so the projection onto a single violated line, when feasible, is the answer;
+otherwise the answer is a vertex of two lines, one of which the command violates (else KKT puts
+the optimum at the command), the feasible one nearest the command. The rows are built for all
+points at once (numpy); the few the solver works on are projected in plain Python, cheaper than
+numpy's per-call cost at that size.
+
+Which points enter: a point whose barrier no command of a "cover" (a range of v and |w|) can
+violate is left out, by its distance from the footprint alone. The first cover runs from a
+standstill to the command (plus a little reversing and turning), so it holds every point the
+command violates; then cutting planes: the working set starts with the ``points_considered``
+rows the command violates most, the answer on it is checked against every row built and the
+most violated are added, until none is (a round or two; the answer is then optimal for every
+point built, being optimal for a subset and feasible for all). If the answer leaves the cover,
+the rows are built again for a cover holding it too, and after ``_MAX_COVERS`` such covers for
+the cover of every answer the filter can give (the box, within ``||u0||`` of the command in the
+weighted norm: the zero command is feasible). The answer is then optimal for every point: no
+point outside the cover that holds it can be approached too fast by it. Should the rounds not
+settle within ``_MAX_ROUNDS``, or the polygon come out empty through rounding, the filter stops
+translation and keeps the rotation every barrier allows (the interval of w at v = 0 always
+holds 0).
 
 Cases, each never less safe than stopping (as EGC's DESIGN 5.9 rules):
 
@@ -95,6 +103,7 @@ Cases, each never less safe than stopping (as EGC's DESIGN 5.9 rules):
 from __future__ import annotations
 
 import enum
+import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
@@ -119,6 +128,11 @@ PATH_POWER = 4
 CREEP_PER_S = 1.0
 CREEP_BELOW = 0.05
 _MAX_ROUNDS = 16  # cutting-plane rounds before the stop-and-turn fallback (a handful is usual)
+_MAX_COVERS = 3  # covers grown to hold the answer before the one that holds every answer
+# The first cover reaches this much (of v_max, w_max) beyond the command: answers that back off
+# a little or turn away usually stay inside it, with no second build of the rows.
+_COVER_V = 0.05
+_COVER_W = 0.25
 _TOL = 1e-9  # a constraint is met when short of it by no more than this (m/s)
 _SAME = 1e-12
 _EMPTY = np.empty(0)
@@ -159,8 +173,8 @@ class CbfParams:
     - ``period_s``: the control period (s), which the robot sets from its rate as for the
       footprint sweep (``SweepParams.period_s``).
     - ``points_considered``: how many constraints the solver takes at a time, the most violated
-      ones (first by the command, then each round by the last answer). It checks every point in
-      reach after each round, so this sets the cost of a round, not the answer: 8 is a wall
+      ones (first by the command, then each round by the last answer). It checks every row
+      built after each round, so this sets the cost of a round, not the answer: 8 holds a wall
       ahead and one beside, each with its (S) and (C) rows and neighbours, settled in one or
       two rounds.
     """
@@ -272,15 +286,21 @@ class CbfResult:
     braking_s: float  # K = tau + P + T / 2 of (S): metres of margin per m/s of approach
     considered: int = 0  # points within reach (scan points and unseen edges)
     rounds: int = 0  # cutting-plane rounds
-    tight: TightRows | None = None
+    working: _Working | None = None  # the solver's rows (``tight`` reads them when asked)
     nearest_m: float = math.inf  # smallest sd_i among the points considered
     # Margin straight ahead in the direction of travel at the current speed (m), for the view.
     margin_ahead_m: float = 0.0
 
     @property
-    def active(self) -> tuple[CbfConstraint, ...]:
+    def tight(self) -> TightRows | None:
         """The constraints the command violated and the answer meets with equality (at most
-        ``_MAX_REPORTED``)."""
+        ``_MAX_REPORTED``), as arrays; None when nothing changed. Computed when asked: the
+        control loop does not."""
+        return None if self.working is None else self.working.tight()
+
+    @property
+    def active(self) -> tuple[CbfConstraint, ...]:
+        """``tight`` as one ``CbfConstraint`` each."""
         t = self.tight
         if t is None:
             return ()
@@ -326,55 +346,92 @@ def cbf_filter(
     sv = math.sqrt(params.weight_v) / profile.v_max_mps  # z = (sv v, sw w): Euclidean QP
     sw = math.sqrt(params.weight_w) / profile.w_max_radps
     scene = _Scene(profile, params, v0, w0, v_now, w_now, k_now, k_cmd)
-    # Only points the command itself could approach too fast can make it change.
-    if scene.points_in_reach(pts, (v0, v0), abs(w0)) is None:
+    # Rows are built for the points some command within a "cover" could approach too fast:
+    # first the command's own (from a standstill to it: slowing down needs no more points; a
+    # little reversing and turning added), then, if the answer leaves the cover, one holding
+    # the answer too, until one holds
+    # it (the answer is then optimal for every point: optimal for those in the cover, and no
+    # point outside it can be approached too fast by it). The last resort covers every command
+    # the filter can return: within the box and within norm0 of the command (the zero command
+    # is feasible). First, a test without numpy: nothing within the command's own reach,
+    # nothing to change.
+    cover = (
+        min(v0, 0.0) - _COVER_V * profile.v_max_mps,
+        max(v0, 0.0),
+        min(abs(w0) + _COVER_W * profile.w_max_radps, profile.w_max_radps),
+    )
+    reach = scene.points_in_reach(pts, cover[:2], cover[2], quiet=(v0, abs(w0)))
+    if reach is None:
         case = CbfCase.NO_POINTS_FREE if pts.count == 0 else CbfCase.CLEAR
         return CbfResult(
             v0, w0, False, case, params.margin_m, tau, k_now, 0, 0, None, math.inf, ahead
         )
-    # The rows of every point that any command the filter can return could approach too fast:
-    # it returns one within the box and within norm0 of the command (the zero command is
-    # feasible). The command is checked on them too (they include its own points).
-    norm0 = math.hypot(sv * v0, sw * w0)
-    v_hi = max(v0, min(profile.v_max_mps, v0 + norm0 / sv))
-    v_lo = min(v0, max(-profile.v_max_mps, v0 - norm0 / sv))
-    w_bound = max(abs(w0), min(profile.w_max_radps, abs(w0) + norm0 / sw))
-    reach = scene.points_in_reach(pts, (v_lo, v_hi), w_bound)
-    assert reach is not None  # it holds the command's
     rows = scene.rows(*reach)
     if rows.worst_for_command <= _TOL:  # the command keeps every barrier: unchanged, to the bit
         return CbfResult(
             v0, w0, False, CbfCase.CLEAR, params.margin_m, tau, k_now, rows.n, 0, None,
             rows.nearest, ahead,
         )  # fmt: skip
-
-    a_all = np.concatenate((rows.a, rows.gain * rows.a))  # (S) then (C)
-    b_all = np.concatenate((rows.b, rows.gain * rows.b))
-    c_all = np.concatenate((rows.c_state, rows.c_cmd))
-    v_out, w_out, rounds, case, working = _solve(
-        a_all, b_all, c_all, v0, w0, sv, sw, profile, params.points_considered
-    )
+    rounds_total = 0
+    for attempt in range(_MAX_COVERS + 1):
+        a_all = np.concatenate((rows.a, rows.gain * rows.a))  # (S) then (C)
+        b_all = np.concatenate((rows.b, rows.gain * rows.b))
+        c_all = np.concatenate((rows.c_state, rows.c_cmd))
+        short = np.concatenate((rows.short_state, rows.short_cmd))
+        v_out, w_out, rounds, case, working = _solve(
+            a_all, b_all, c_all, short, v0, w0, sv, sw, profile, params.points_considered
+        )
+        rounds_total += rounds
+        if case is not CbfCase.SOLVED or (cover[0] <= v_out <= cover[1] and abs(w_out) <= cover[2]):
+            break
+        if attempt + 1 < _MAX_COVERS:
+            cover = (min(cover[0], v_out), max(cover[1], v_out), max(cover[2], abs(w_out)))
+        else:
+            norm0 = math.hypot(sv * v0, sw * w0)
+            cover = (
+                min(v0, max(-profile.v_max_mps, v0 - norm0 / sv)),
+                max(v0, min(profile.v_max_mps, v0 + norm0 / sv)),
+                max(abs(w0), min(profile.w_max_radps, abs(w0) + norm0 / sw)),
+            )
+        wider = scene.points_in_reach(pts, cover[:2], cover[2])
+        assert wider is not None  # it holds the command's points
+        rows = scene.rows(*wider)
     # A stop computed as the projection onto a line through the origin comes out as 1e-17.
     v_out = 0.0 if abs(v_out) <= _SAME else v_out
     w_out = 0.0 if abs(w_out) <= _SAME else w_out
-    # The constraints that changed the command: in the working set (violated by the command),
-    # met with equality by the answer.
-    wc = c_all[working]
-    gap = a_all[working] * v_out + b_all[working] * w_out - wc
-    tight = working[np.abs(gap) <= 1e-7 * (1.0 + np.abs(wc))][:_MAX_REPORTED]
-    n = rows.n
-    point = tight % n
-    state = tight < n
-    margins = rows.margins(point, state)
-    found = TightRows(
-        rows.x[point], rows.y[point], a_all[tight], b_all[tight], c_all[tight],
-        rows.sd[point], margins, state, point >= rows.n_scan,
-    )  # fmt: skip
+    found = _Working(rows, a_all, b_all, c_all, working, v_out, w_out)
     modified = bool(v_out != v0 or w_out != w0)
     return CbfResult(
-        v_out, w_out, modified, case, params.margin_m, tau, k_now, n, rounds, found, rows.nearest,
-        ahead,
+        v_out, w_out, modified, case, params.margin_m, tau, k_now, rows.n, rounds_total, found,
+        rows.nearest, ahead,
     )  # fmt: skip
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _Working:
+    """The solver's rows and answer, kept for ``CbfResult.tight``."""
+
+    rows: _Rows
+    a: FloatArray  # every row, (S) then (C)
+    b: FloatArray
+    c: FloatArray
+    working: IntArray  # the rows the solver took (each violated by the command or an answer)
+    v: float
+    w: float
+
+    def tight(self) -> TightRows:
+        wc = self.c[self.working]
+        gap = self.a[self.working] * self.v + self.b[self.working] * self.w - wc
+        violated = self.a[self.working] * self.rows.v0 + self.b[self.working] * self.rows.w0 < wc
+        tight = self.working[violated & (np.abs(gap) <= 1e-7 * (1.0 + np.abs(wc)))]
+        tight = tight[:_MAX_REPORTED]
+        rows, n = self.rows, self.rows.n
+        point = tight % n
+        state = tight < n
+        return TightRows(
+            rows.x[point], rows.y[point], self.a[tight], self.b[tight], self.c[tight],
+            rows.sd[point], rows.margins(point, state), state, point >= rows.n_scan,
+        )  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -391,10 +448,16 @@ class _Rows:
     c_state: FloatArray
     c_cmd: FloatArray
     m_state_extra: FloatArray | None  # omega K u^+ at the current speed (None: standing)
-    m_cmd_extra: FloatArray  # ... at the commanded speed
+    omega_cmd: FloatArray  # omega and u at the commanded speed (its margin, for the report)
+    u_ref: FloatArray
+    k_cmd: float
     margin_m: float
     worst_for_command: float  # the command's largest shortfall over every row
+    short_state: FloatArray  # by how much the command falls short of each (S) row, (C) row
+    short_cmd: FloatArray
     nearest: float
+    v0: float  # the command the rows were checked against
+    w0: float
 
     @property
     def n(self) -> int:
@@ -402,7 +465,7 @@ class _Rows:
 
     def margins(self, point: IntArray, state: npt.NDArray[np.bool_]) -> FloatArray:
         """The margins m_i of (S) rows (``state``) and (C) rows of the given points (m)."""
-        extra = self.m_cmd_extra[point]
+        extra = self.omega_cmd[point] * self.k_cmd * np.maximum(self.u_ref[point], 0.0)
         if self.m_state_extra is not None:
             extra = np.where(state, self.m_state_extra[point], extra)
         else:
@@ -425,50 +488,73 @@ class _Scene:
     k_cmd: float
 
     def points_in_reach(
-        self, pts: ObstaclePoints, v_range: tuple[float, float], w_bound: float
+        self,
+        pts: ObstaclePoints,
+        v_range: tuple[float, float],
+        w_bound: float,
+        quiet: tuple[float, float] | None = None,
     ) -> tuple[FloatArray, FloatArray, int, list[tuple[float, float, float]]] | None:
         """The points (x, y), how many are scan points, and the unseen edges, that a command
         with v in ``v_range`` and |w| <= ``w_bound`` could approach faster than their barriers
-        allow; None when there is none.
+        allow; None when there is none, or when ``quiet`` = (v, |w|) of the command itself could
+        approach none of them too fast (then nothing changes it).
 
         A point farther from the footprint than reach_sd has slack in (S) and (C):
         (S) alpha (sd - margin - K u_now) >= u and (C) alpha (sd - margin) >= u (1 + alpha K)
-        with u the largest approach. Points ahead (x > 0: n_x >= 0) are approached by forward
-        motion and turning only, points behind by reversing and turning only.
+        with u the largest approach. Points ahead (``_ahead_from``) are approached by forward
+        motion and turning only, the others by reversing and turning only.
         """
-        p, alpha, q_max = self.params, self.params.alpha_per_s, self.profile.half_diagonal_m
-        x_back, x_front, _, _ = self.profile.footprint.bounds
-        reach_sd = []
-        for v_away, v_state in (
-            (max(v_range[1], 0.0), max(self.v_now, 0.0)),
-            (max(-v_range[0], 0.0), max(-self.v_now, 0.0)),
-        ):
-            u = v_away + q_max * w_bound
-            u_state = v_state + q_max * abs(self.w_now)
-            reach_sd.append(p.margin_m + u / alpha + max(u * self.k_cmd, self.k_now * u_state))
-        reach_f, reach_b = q_max + reach_sd[0], q_max + reach_sd[1]
+        x_back, x_front, q_max = _extents(self.profile.footprint)
+        reach_f, reach_b = self._reach_sd(v_range, w_bound)
+        if quiet is not None:
+            quiet_f, quiet_b = self._reach_sd((quiet[0], quiet[0]), quiet[1])
+            unseen_near = (
+                pts.seen_ahead_m - x_front < quiet_f or pts.seen_behind_m + x_back < quiet_b
+            )
+            if not unseen_near:
+                if pts.count == 0:
+                    return None
+                index = pts.prepared_index
+                r2_min = index.r2_sorted[0] if index is not None else float(pts.r2.min())
+                if r2_min > (q_max + max(quiet_f, quiet_b)) ** 2:
+                    return None
         x = y = _EMPTY
         if pts.count:
-            index = pts.prepared_index
-            far = max(reach_f, reach_b)
-            if index is None or index.r2_sorted[0] <= far * far:
-                if reach_f == reach_b:
-                    near = pts.r2 <= reach_f * reach_f
-                else:
-                    near = pts.r2 <= np.where(pts.x > 0.0, reach_f * reach_f, reach_b * reach_b)
-                if near.any():
-                    x, y = pts.x[near], pts.y[near]
+            rf, rb = q_max + reach_f, q_max + reach_b
+            split = _ahead_from(self.profile.footprint)
+            if rf == rb or split is None:
+                far = max(rf, rb)
+                near = pts.r2 <= far * far
+            else:
+                near = pts.r2 <= np.where(pts.x > split, rf * rf, rb * rb)
+            if near.any():
+                x, y = pts.x[near], pts.y[near]
         unseen = [  # (direction, how far it saw, the footprint's extent that way)
             (sign, seen, extent)
             for sign, seen, extent, room in (
-                (1.0, pts.seen_ahead_m, x_front, reach_sd[0]),
-                (-1.0, pts.seen_behind_m, -x_back, reach_sd[1]),
+                (1.0, pts.seen_ahead_m, x_front, reach_f),
+                (-1.0, pts.seen_behind_m, -x_back, reach_b),
             )
             if seen - extent < room
         ]
         if x.size == 0 and not unseen:
             return None
         return x, y, x.size, unseen
+
+    def _reach_sd(self, v_range: tuple[float, float], w_bound: float) -> tuple[float, float]:
+        """How far from the footprint (m) a point ahead and a point behind can have its barrier
+        violated by a command with v in ``v_range`` and |w| <= ``w_bound``."""
+        p, alpha, q_max = self.params, self.params.alpha_per_s, _extents(self.profile.footprint)[2]
+        turn = q_max * w_bound
+        turn_now = q_max * abs(self.w_now)
+        u_f = max(v_range[1], 0.0) + turn
+        u_b = max(-v_range[0], 0.0) + turn
+        s_f = max(self.v_now, 0.0) + turn_now
+        s_b = max(-self.v_now, 0.0) + turn_now
+        return (
+            p.margin_m + u_f / alpha + max(u_f * self.k_cmd, self.k_now * s_f),
+            p.margin_m + u_b / alpha + max(u_b * self.k_cmd, self.k_now * s_b),
+        )
 
     def rows(
         self, x: FloatArray, y: FloatArray, n_scan: int, unseen: list[tuple[float, float, float]]
@@ -490,31 +576,49 @@ class _Scene:
         b = nx * qy - ny * qx
         # Approach speeds u = nx v - b w under the command and under the current motion, and
         # how squarely each point lies in that motion's path (omega).
-        u_ref = nx * v0 - b * w0
-        omega_cmd = _omega(u_ref, v0, w0, qx, qy)
-        room = sd - p.margin_m
+        u_ref = nx * v0 - b * w0 if w0 else nx * v0
+        omega_cmd, up_ref = _omega(u_ref, v0, w0, qx, qy)
         reach_u = np.abs(nx) * self.profile.v_max_mps + np.abs(b) * self.profile.w_max_radps
         flank = np.maximum(1.0 - reach_u / (CREEP_BELOW * self.profile.v_max_mps), 0.0)
         creep = (CREEP_PER_S * flank) * np.maximum(sd, 0.0)
-        c_cmd = -np.maximum(alpha * room, creep)
+        alpha_room = np.maximum(alpha * (sd - p.margin_m), creep)  # -c of (C)
         m_extra: FloatArray | None = None
-        c_state = c_cmd
+        c_state = c_cmd = -alpha_room
         if v_now or w_now:
             if v_now == v0 and w_now == w0:  # a replay, a steady cycle: the same speeds twice
-                u_now, omega_now = u_ref, omega_cmd
+                omega_now, up_now = omega_cmd, up_ref
             else:
                 u_now = nx * v_now - b * w_now
-                omega_now = _omega(u_now, v_now, w_now, qx, qy)
-            m_extra = (omega_now * self.k_now) * np.maximum(u_now, 0.0)
-            c_state = -np.maximum(alpha * (room - m_extra), creep)
+                omega_now, up_now = _omega(u_now, v_now, w_now, qx, qy)
+            m_extra = (omega_now * self.k_now) * up_now
+            c_state = -np.maximum(alpha * (sd - p.margin_m - m_extra), creep)
         gain = 1.0 + (alpha * self.k_cmd) * omega_cmd  # (C): u gain <= max(alpha room, creep)
-        # The command meets row i when u_ref <= -c (S), gain u_ref <= -c (C).
-        worst = max(float((c_state + u_ref).max()), float((c_cmd + gain * u_ref).max()))
-        m_extra_cmd = (omega_cmd * self.k_cmd) * np.maximum(u_ref, 0.0)
+        # The command falls short of row i by c + u_ref (S), c + gain u_ref (C), if positive.
+        short_state = c_state + u_ref
+        short_cmd = gain * u_ref - alpha_room
+        worst = max(float(short_state.max()), float(short_cmd.max()))
         return _Rows(
-            x, y, n_scan, sd, -nx, b, gain, c_state, c_cmd, m_extra, m_extra_cmd, p.margin_m,
-            worst, float(sd.min()),
+            x, y, n_scan, sd, -nx, b, gain, c_state, c_cmd, m_extra, omega_cmd, u_ref,
+            self.k_cmd, p.margin_m, worst, short_state, short_cmd, float(sd.min()), v0, w0,
         )  # fmt: skip
+
+
+def _ahead_from(fp: Footprint) -> float | None:
+    """The x beyond which every point outside the footprint has n_x > 0 and short of which
+    n_x <= 0 (forward motion approaches only the points beyond it), or None when no such x
+    exists: the front edge of a centred rectangle (beside it n = (0, +-1)), 0 for a disc
+    (n = p / |p|); a general polygon's nearest boundary point may lie behind a point anywhere."""
+    box = fp.centred_box
+    if box is not None:
+        return box[0]
+    return 0.0 if fp.is_disc else None
+
+
+@functools.lru_cache(maxsize=32)
+def _extents(fp: Footprint) -> tuple[float, float, float]:
+    """(x_back, x_front, reach) of a footprint (numpy reductions: once per shape, not per call)."""
+    x0, x1, _, _ = fp.bounds
+    return x0, x1, fp.reach_m
 
 
 def _geometry(
@@ -574,28 +678,32 @@ def _box_geometry(
     return sd, dx / norm, dy / norm, qx, qy
 
 
-def _omega(u: FloatArray, v: float, w: float, qx: FloatArray, qy: FloatArray) -> FloatArray:
+def _omega(
+    u: FloatArray, v: float, w: float, qx: FloatArray, qy: FloatArray
+) -> tuple[FloatArray, FloatArray]:
     """(cos of the angle between n_i and the velocity of q_i under (v, w))^PATH_POWER, 0 for
-    points the footprint does not approach (u_i <= 0)."""
+    points the footprint does not approach (u_i <= 0), and max(u_i, 0).
+    cos^2 = u^2 / |velocity|^2."""
+    up = np.maximum(u, 0.0)
     if w == 0.0:
         if v == 0.0:
-            return np.zeros(u.size)
-        cos = np.maximum(u, 0.0) / abs(v)  # u = nx v <= |v|: no overflow, even for subnormal v
+            return np.zeros(u.size), up
+        cos = up / abs(v)  # u = nx v <= |v|: no overflow, even for a subnormal v
+        c2 = cos * cos
     else:
         gx = v - w * qy
         gy = w * qx
-        speed = np.sqrt(gx * gx + gy * gy)
-        cos = np.maximum(u, 0.0) / np.maximum(speed, _SAME)
-    cos = np.minimum(cos, 1.0)
-    c2 = cos * cos
+        c2 = up * up / np.maximum(gx * gx + gy * gy, _SAME)
+    c2 = np.minimum(c2, 1.0)
     out: FloatArray = c2 * c2
-    return out
+    return out, up
 
 
 def _solve(
     a: FloatArray,
     b: FloatArray,
     c: FloatArray,
+    short: FloatArray,
     v0: float,
     w0: float,
     sv: float,
@@ -605,29 +713,28 @@ def _solve(
 ) -> tuple[float, float, int, CbfCase, IntArray]:
     """Cutting planes over the rows a v + b w >= c (module docstring): the ``k`` most violated
     rows first, then each round the ``k`` most violated by the last answer. Returns the
-    answer, the rounds, the case and the working set."""
-    # By how much each row is violated (m/s): the order in which rows join, not the answer.
-    short = a * v0 + b * w0 - c
+    answer, the rounds, the case and the working set. ``short``: by how much the command falls
+    short of each row (m/s, > 0: violated): the order in which rows join, not the answer."""
     working = _most_violated(short, k)
     for rounds in range(1, _MAX_ROUNDS + 1):
         found = _project(a[working], b[working], c[working], v0, w0, sv, sw, profile)
         if found is None:
             break
         v, w = found
-        short = a * v + b * w - c
-        add = _most_violated(short, k)
-        if add.size == 0:
+        short = c - (a * v + b * w)
+        if float(short.max()) <= _TOL:
             return v, w, rounds, CbfCase.SOLVED, working
+        add = _most_violated(short, k)
         working = np.concatenate((working, add))
     v, w = _stop_and_turn(b, c, w0, profile)
     return v, w, _MAX_ROUNDS, CbfCase.STOP_TURN, working
 
 
 def _most_violated(short: FloatArray, k: int) -> IntArray:
-    """Indices of the (at most) ``k`` rows with the most negative ``short`` below -tolerance."""
-    bad = np.flatnonzero(short < -_TOL)
+    """Indices of the (at most) ``k`` rows with the largest ``short`` above the tolerance."""
+    bad = np.flatnonzero(short > _TOL)
     if bad.size > k:
-        bad = bad[np.argpartition(short[bad], k)[:k]]
+        bad = bad[np.argpartition(-short[bad], k)[:k]]
     return bad
 
 
@@ -645,57 +752,58 @@ def _project(
     when none of the candidates is feasible (empty polygon, through rounding). The box's rows
     join only when the answer without them leaves it."""
     vm, wm = profile.v_max_mps, profile.w_max_radps
-    found = _nearest_in(a * (1.0 / sv), b * (1.0 / sw), c, sv * v0, sw * w0)
+    gx = (a * (1.0 / sv)).tolist()
+    gy = (b * (1.0 / sw)).tolist()
+    e = c.tolist()
+    z0x, z0y = sv * v0, sw * w0
+    found = _nearest_in(gx, gy, e, z0x, z0y)
     if found is not None and abs(found[0]) <= sv * vm and abs(found[1]) <= sw * wm:
         return found[0] / sv, found[1] / sw
-    m = a.size
-    gx = np.empty(m + 4)
-    gy = np.empty(m + 4)
-    e = np.empty(m + 4)
-    gx[:m], gy[:m], e[:m] = a * (1.0 / sv), b * (1.0 / sw), c
-    gx[m:], gy[m:] = (1.0 / sv, -1.0 / sv, 0.0, 0.0), (0.0, 0.0, 1.0 / sw, -1.0 / sw)
-    e[m:] = (-vm, -vm, -wm, -wm)
-    found = _nearest_in(gx, gy, e, sv * v0, sw * w0)
+    gx += [1.0 / sv, -1.0 / sv, 0.0, 0.0]
+    gy += [0.0, 0.0, 1.0 / sw, -1.0 / sw]
+    e += [-vm, -vm, -wm, -wm]
+    found = _nearest_in(gx, gy, e, z0x, z0y)
     return None if found is None else (found[0] / sv, found[1] / sw)
 
 
 def _nearest_in(
-    gx: FloatArray, gy: FloatArray, e: FloatArray, z0x: float, z0y: float
+    gx: list[float], gy: list[float], e: list[float], z0x: float, z0y: float
 ) -> tuple[float, float] | None:
     """The point of {z : gx zx + gy zy >= e} nearest to z0 (Euclidean), or None when no
-    candidate is feasible."""
-    n2 = gx * gx + gy * gy
-    keep = n2 > _SAME
-    if not keep.all():
-        gx, gy, e, n2 = gx[keep], gy[keep], e[keep], n2[keep]
-    r0 = gx * z0x + gy * z0y - e
-    bad = np.flatnonzero(r0 < 0.0)
-    if bad.size == 0:
+    candidate is feasible. A few rows (the working set): plain Python beats numpy's per-call
+    cost here."""
+    rows = [i for i in range(len(gx)) if gx[i] * gx[i] + gy[i] * gy[i] > _SAME]
+    tol = [_TOL * (1.0 + abs(v)) for v in e]
+
+    def feasible(zx: float, zy: float) -> bool:
+        return all(gx[i] * zx + gy[i] * zy - e[i] >= -tol[i] for i in rows)
+
+    bad = [i for i in rows if gx[i] * z0x + gy[i] * z0y - e[i] < 0.0]
+    if not bad:
         return z0x, z0y
-    tol = _TOL * (1.0 + np.abs(e))
     # One line: the projection onto a violated row, optimal whenever feasible (KKT).
-    step = -r0[bad] / n2[bad]
-    zx = z0x + step * gx[bad]
-    zy = z0y + step * gy[bad]
-    feasible = (np.outer(zx, gx) + np.outer(zy, gy) - e >= -tol).all(axis=1)
-    if feasible.any():
-        i = int(np.argmax(feasible))  # all feasible ones are the one optimum
-        return float(zx[i]), float(zy[i])
-    # Two lines: every vertex, the feasible one nearest the command.
-    p, q = np.triu_indices(gx.size, 1)
-    det = gx[p] * gy[q] - gy[p] * gx[q]
-    ok = np.abs(det) > _SAME * np.sqrt(n2[p] * n2[q])
-    p, q, det = p[ok], q[ok], det[ok]
-    if p.size == 0:
-        return None
-    zx = (e[p] * gy[q] - e[q] * gy[p]) / det
-    zy = (gx[p] * e[q] - gx[q] * e[p]) / det
-    feasible = (np.outer(zx, gx) + np.outer(zy, gy) - e >= -tol).all(axis=1)
-    if not feasible.any():
-        return None
-    d2 = (zx - z0x) ** 2 + (zy - z0y) ** 2
-    i = int(np.argmin(np.where(feasible, d2, np.inf)))
-    return float(zx[i]), float(zy[i])
+    for i in bad:
+        step = (e[i] - gx[i] * z0x - gy[i] * z0y) / (gx[i] * gx[i] + gy[i] * gy[i])
+        zx, zy = z0x + step * gx[i], z0y + step * gy[i]
+        if feasible(zx, zy):
+            return zx, zy
+    # Two lines: a vertex, one of whose rows the command violates (else KKT would put the
+    # optimum at the command itself); the feasible one nearest the command.
+    best: tuple[float, float] | None = None
+    best_d2 = math.inf
+    for i in bad:
+        for j in rows:
+            if j == i or (j in bad and j < i):
+                continue
+            det = gx[i] * gy[j] - gy[i] * gx[j]
+            if abs(det) <= _SAME * math.hypot(gx[i], gy[i]) * math.hypot(gx[j], gy[j]):
+                continue
+            zx = (e[i] * gy[j] - e[j] * gy[i]) / det
+            zy = (gx[i] * e[j] - gx[j] * e[i]) / det
+            d2 = (zx - z0x) ** 2 + (zy - z0y) ** 2
+            if d2 < best_d2 and feasible(zx, zy):
+                best, best_d2 = (zx, zy), d2
+    return best
 
 
 def _stop_and_turn(
