@@ -3,7 +3,7 @@
     egc-teleop episode --map PATH --start X,Y,YAW --goal X,Y
         [--operator goal|forward|sighted|route|FILE]
         [--filter none|egc] [--profile NAME] [--max-time S] [--goal-tolerance M] [--seed N]
-        [--stall-time S] [--record OUT.rrd] --json
+        [--stall-time S] [--record OUT.rrd] [--bag OUT.mcap|DIR] --json
     egc-teleop episode --batch SUITE.jsonl | --random-worlds N  [...] [--jobs J] [--out FILE]
 
 This module is wiring (DESIGN 2): ``egc_sim`` supplies the world, the simulated robot, the
@@ -26,6 +26,10 @@ deadman or presses e-stop the robot's stop rule applies (``egc_robot.safety.dece
 - ``--record OUT.rrd`` saves the episode as the operator view shows a live run
   (``egc_operator.view.record_episode``), one telemetry message per cycle; open it with
   ``rerun OUT.rrd``.
+- ``--bag OUT`` writes the episode as a ROS 2 log (``egc_sim.episode_bag``): ``/scan``,
+  ``/odom`` and the driver's ``/cmd_vel`` (the command *before* the filter), stamped with the
+  simulated clock; ``OUT.mcap`` is one MCAP file, any other name a ROS 2 bag directory. Replay
+  it with ``egc-teleop replay OUT``.
 - ``--stall-time S`` ends an episode as ``stalled`` once the robot has stood still for S
   simulated seconds (``egc_sim.episodes``); off by default, so that an episode ends only at the
   goal, at a contact or at ``--max-time``.
@@ -80,6 +84,7 @@ from egc_robot.pipeline import (
 )
 from egc_robot.safety import MAX_CONTROL_PERIOD_S, SweepParams, decelerate
 from egc_robot.via_points import DEFAULT_TOLERANCE_M, ViaPoints, advance, to_robot_frame
+from egc_sim.episode_bag import BagError, BagStep, EpisodeBag, check_bag_path
 from egc_sim.episodes import ControlOutput, EpisodeResult, TraceRow, run_episode
 from egc_sim.grid_world import World
 from egc_sim.observation import SimSensor
@@ -192,11 +197,15 @@ class PipelineController:
 
 
 def run_settings(
-    settings: EpisodeSettings, record_trace: bool = False, record_path: str | None = None
+    settings: EpisodeSettings,
+    record_trace: bool = False,
+    record_path: str | None = None,
+    bag_path: str | None = None,
 ) -> tuple[EpisodeResult, dict[str, Any]]:
     """Run one episode; returns the result and its JSON summary. Bad settings -> UsageError.
 
-    ``record_path`` saves the operator view of the episode to a Rerun .rrd file.
+    ``record_path`` saves the operator view of the episode to a Rerun .rrd file; ``bag_path``
+    writes it as a ROS 2 log (``egc_sim.episode_bag``).
     """
     try:
         world = load_world(settings.map, seed=settings.seed)
@@ -246,14 +255,24 @@ def run_settings(
             half_width_m=0.5 * profile.width_m,
             sensor=SimSensor(sim, via=active_via_point),
             via=active_via_point,
+            profile=profile,
         )
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    recorder = (
-        None if record_path is None else EpisodeRecorder(record_path, world, goal, controller)
-    )
-    t0 = time.perf_counter()
+    observers: list[Callable[[TraceRow, Scan], None]] = []
+    bag: EpisodeBag | None = None
+    recorder: EpisodeRecorder | None = None
     try:
+        if record_path is not None:
+            recorder = EpisodeRecorder(record_path, world, goal, controller)
+            observers.append(recorder)
+        if bag_path is not None:
+            try:
+                bag = EpisodeBag(bag_path)
+            except BagError as exc:
+                raise UsageError(f"--bag {exc}") from None
+            observers.append(_bag_observer(bag, sim))
+        t0 = time.perf_counter()
         result = run_episode(
             sim,
             operator,
@@ -264,11 +283,13 @@ def run_settings(
             settings.dt_s,
             record_trace,
             settings.stall_time_s,
-            recorder,
+            _each(observers),
         )
     finally:
         if recorder is not None:
             recorder.close()
+        if bag is not None:
+            bag.close()
     wall_s = time.perf_counter() - t0
     summary = {
         **result.summary(),
@@ -286,6 +307,40 @@ def run_settings(
         "via_points": len(via),
     }
     return result, summary
+
+
+def _bag_observer(bag: EpisodeBag, sim: Simulator) -> Callable[[TraceRow, Scan], None]:
+    """Each cycle into the log: the scan, the simulator's odometry and base twist at the start
+    of the cycle, and the driver's command before the filter (``v_ref``, ``w_ref``)."""
+
+    def observe(row: TraceRow, scan: Scan) -> None:
+        bag.write(
+            BagStep(
+                round(row.t_s * NS_PER_S),
+                scan,
+                sim.odometry,
+                sim.twist,
+                (row.v_ref_mps, row.w_ref_radps),
+            )
+        )
+
+    return observe
+
+
+def _each(
+    observers: Sequence[Callable[[TraceRow, Scan], None]],
+) -> Callable[[TraceRow, Scan], None] | None:
+    """One observer calling ``observers`` in order; None when there are none."""
+    if not observers:
+        return None
+    if len(observers) == 1:
+        return observers[0]
+
+    def observe(row: TraceRow, scan: Scan) -> None:
+        for observer in observers:
+            observer(row, scan)
+
+    return observe
 
 
 def episode_via_points(
@@ -348,7 +403,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--operator",
         default="goal",
-        help="goal | forward | sighted | route | a joystick CSV file (default goal)",
+        help="goal | forward | sighted | route | careful | a joystick CSV file (default goal)",
     )
     parser.add_argument(
         "--filter",
@@ -377,6 +432,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--record", metavar="OUT.rrd", help="save the episode's operator view (Rerun .rrd)"
+    )
+    parser.add_argument(
+        "--bag",
+        metavar="OUT.mcap|DIR",
+        help="write the episode as a ROS 2 log: /scan, /odom and the driver's /cmd_vel (before "
+        "the filter); OUT.mcap is one MCAP file, another name a bag directory",
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     batch = parser.add_argument_group("batch")
@@ -485,6 +546,8 @@ def run(args: argparse.Namespace) -> int:
     if args.batch or args.random_worlds is not None:
         if args.record:
             raise UsageError("--record saves a single episode; it cannot be used with a batch")
+        if args.bag:
+            raise UsageError("--bag writes a single episode; it cannot be used with a batch")
         return _run_batch(args, base)
     if args.out is not None:
         raise UsageError(
@@ -495,7 +558,14 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--map is required (a map.yaml, a .toml world or a built-in name)")
     if args.record:
         check_writable(args.record, "--record")
-    _, summary = run_settings(base, record_path=args.record)
+    if args.bag:
+        try:
+            check_bag_path(args.bag)
+        except BagError as exc:
+            raise UsageError(f"--bag {exc}") from None
+    _, summary = run_settings(base, record_path=args.record, bag_path=args.bag)
+    if args.bag:
+        summary["bag"] = args.bag
     if args.json:
         print(json.dumps(summary, allow_nan=False))
     else:
