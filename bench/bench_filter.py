@@ -18,7 +18,6 @@ expensive case). DWA's cost is reported as a ratio to EGC's, without a target.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import platform
 import statistics
@@ -27,7 +26,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from egc_common.profiles import JACKAL, PIONEER3DX, RobotProfile
+from egc_common.profiles import JACKAL, PIONEER3DX, TURTLEBOT4, RobotProfile, load_profile
+from egc_experiments.bench_results import write_result
 from egc_robot.filters.dwa import DwaParams, dwa_filter
 from egc_robot.filters.egc import EgcCase, EgcParams, egc_filter
 
@@ -40,9 +40,14 @@ PARAMS = EgcParams.from_profile(PIONEER3DX.r_min_m, PIONEER3DX.r_max_m, PIONEER3
 COMMAND = (0.14, 0.05)
 EK_L_M = PIONEER3DX.v_max_mps / PIONEER3DX.w_max_radps  # L = v_max / w_max (DESIGN 6)
 # DWA: the profile and the command at full speed, already driving it (goal: none).
+# Beyond the centred rectangle's closed form (DESIGN 14): a disc (two circles) and a polygon
+# (orbit x edge crossings, the documented pentagon).
+PENTAGON = load_profile(str(Path(__file__).resolve().parents[1] / "docs/profiles/pentagon.toml"))
 DWA_CASES: dict[str, tuple[RobotProfile, tuple[float, float]]] = {
     "dwa": (PIONEER3DX, COMMAND),
     "dwa jackal": (JACKAL, (2.0, 0.5)),
+    "dwa tb4": (TURTLEBOT4, (0.31, 0.5)),
+    "dwa pentagon": (PENTAGON, (0.8, 0.3)),
 }
 
 
@@ -166,7 +171,7 @@ def family_rows(cases: dict, egc_by_points: dict, repeats: int) -> list[dict]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=2000)
-    ap.add_argument("--out", default="bench/results/bench_filter.json")
+    ap.add_argument("--out", help="JSON file (default bench/results/filter.json)")
     args = ap.parse_args(argv)
 
     cases = {f"scan {n}": room_scan(n) for n in (360, 720, 1440)}
@@ -227,13 +232,8 @@ def main(argv: list[str] | None = None) -> int:
             targets[f"ek-egc <= 2x egc at {n} points"] = ratio <= 2.0
     for k, ok in targets.items():
         print(f"target {k}: {'met' if ok else 'MISSED'}")
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(
-        json.dumps(
-            {"rows": rows, "family": family, "targets": targets, "python": sys.version}, indent=2
-        )
-    )
+    result = {"rows": rows, "family": family, "targets": targets, "python": sys.version}
+    out = write_result("filter", result, args.out)
     print(f"wrote {out}")
     return 0 if all(targets.values()) else 1
 

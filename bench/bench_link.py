@@ -39,10 +39,8 @@ from __future__ import annotations
 
 import argparse
 import functools
-import json
 import math
 import os
-import platform
 import select
 import signal
 import subprocess
@@ -69,6 +67,7 @@ from egc_common.messages import (
 )
 from egc_common.profiles import PIONEER3DX
 from egc_common.transport import ZenohOptions, free_tcp_port, loopback_endpoint, open_session
+from egc_experiments.bench_results import write_result
 from egc_operator.clock_sync import ClockSync
 
 ROBOT = "bench"
@@ -407,7 +406,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=20.0, help="latency run length")
     ap.add_argument("--trials", type=int, default=5, help="SIGKILL and SIGSTOP trials each")
-    ap.add_argument("--out", default="bench/results/bench_link.json")
+    ap.add_argument("--out", help="JSON file (default bench/results/link.json)")
     args = ap.parse_args()
     workdir = Path(tempfile.mkdtemp(prefix="egc-bench-link-"))
     endpoint = loopback_endpoint(free_tcp_port())
@@ -475,7 +474,6 @@ def main() -> int:
         "sigstop_to_zero_ms": stop_zero,
         "stop_from_full_speed_ms": STOP_MS,
         "python": sys.version,
-        "machine": platform.machine(),
     }
     targets = {
         "latency p50 <= 1 ms": results["latency_ms"]["p50"] <= 1.0,
@@ -531,9 +529,7 @@ def main() -> int:
     )
     for name, ok in targets.items():
         print(f"  [{'ok' if ok else 'MISSED'}] {name}")
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(results, indent=2) + "\n")
+    out = write_result("link", results, args.out)
     print(f"wrote {out}")
     return 0 if all(targets.values()) else 1
 

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import re
 import select
 import signal
@@ -34,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from egc_experiments.bench_results import write_result
 
 LINK = [sys.executable, "-m", "egc_app.cli", "link"]
 MESSAGE = b"x" * 64
@@ -190,7 +190,7 @@ def bench_protocol(proto: str, n: int, workdir: Path) -> dict[str, Any]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--round-trips", type=int, default=2000, help="per path and protocol")
-    ap.add_argument("--out", default="bench/results/bench_relay.json")
+    ap.add_argument("--out", help="JSON file (default bench/results/relay.json)")
     ap.add_argument("--echo", choices=("tcp", "udp"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.echo:
@@ -201,7 +201,6 @@ def main() -> int:
         proto: bench_protocol(proto, args.round_trips, workdir) for proto in ("tcp", "udp")
     }
     results["python"] = sys.version
-    results["machine"] = platform.machine()
     targets = {}
     print(f"round trips of {len(MESSAGE)}-byte messages, loopback, ms (p50 / p99 / max):")
     for proto in ("tcp", "udp"):
@@ -233,9 +232,7 @@ def main() -> int:
     results["targets"] = targets
     for name, ok in targets.items():
         print(f"  [{'ok' if ok else 'MISSED'}] {name}")
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(results, indent=2) + "\n")
+    out = write_result("relay", results, args.out)
     print(f"wrote {out}")
     return 0 if all(targets.values()) else 1
 

@@ -17,7 +17,6 @@ Target: at least 500 scans/s without ``--record`` for 720-beam scans; exits non-
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import platform
 import sys
@@ -27,14 +26,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from egc_common.cli_args import PROFILE_HELP, profile_arg
 from egc_common.profiles import get_profile
+from egc_experiments.bench_results import write_result
+from egc_experiments.log_replay import replay
 from egc_robot.replay_core import Replayer
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from egc_app.replay_cmd import replay
-
-RESULTS = Path(__file__).resolve().parent / "results"
 MAPPING1 = Path(__file__).resolve().parents[1] / ".." / "shared" / "bags" / "Mapping1.bag"
 TARGET_SCANS_PER_S = 500.0
 BEAMS = 720
@@ -112,9 +111,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scans", type=int, default=2000)
     ap.add_argument("--filter", default="egc")
-    ap.add_argument("--profile", default="pioneer3dx")
+    ap.add_argument("--profile", default="pioneer3dx", type=profile_arg, help=PROFILE_HELP)
     ap.add_argument("--repeats", type=int, default=2)
-    ap.add_argument("--out", type=Path, default=RESULTS / "bench_replay.json")
+    ap.add_argument("--out", type=Path, help="JSON file (default bench/results/replay.json)")
     args = ap.parse_args(argv)
     replayer = Replayer.for_filter(args.filter, get_profile(args.profile))
     rows: list[dict[str, Any]] = []
@@ -144,7 +143,6 @@ def main(argv: list[str] | None = None) -> int:
     plain = [r for r in rows if r["beams"] == BEAMS and not r["record"]]
     met = all(r["scans_per_s"] >= TARGET_SCANS_PER_S for r in plain)
     print(f"target {BEAMS} beams >= {TARGET_SCANS_PER_S:.0f} scans/s: {'met' if met else 'MISSED'}")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
     result = {
         "rows": rows,
         "target_scans_per_s": TARGET_SCANS_PER_S,
@@ -153,8 +151,7 @@ def main(argv: list[str] | None = None) -> int:
         "profile": args.profile,
         "python": sys.version,
     }
-    args.out.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {args.out}")
+    print(f"wrote {write_result('replay', result, args.out)}")
     return 0 if met else 1
 
 

@@ -27,19 +27,17 @@ Exits non-zero when the target is missed; skips (exit 0, a line) without rclpy.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import multiprocessing as mp
 import os
 import random
 import sys
 import time
-from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
+from egc_experiments.bench_results import write_result
 
-ROOT = Path(__file__).resolve().parents[1]
 RATE_HZ = 20.0
 TARGET_P99_MS = 50.0
 
@@ -51,6 +49,7 @@ def _pct(values: list[float], q: float) -> float:
 def sensor_process(n_scans: int, ready: Any, go: Any, out: Any) -> None:
     """The ROS 2 robot's sensor and base: scans out, /cmd_vel arrivals recorded."""
     import rclpy
+    from egc_common.executor_thread import ExecutorThread
     from geometry_msgs.msg import Twist
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import qos_profile_sensor_data
@@ -63,9 +62,8 @@ def sensor_process(n_scans: int, ready: Any, go: Any, out: Any) -> None:
     pub = node.create_publisher(LaserScan, "/scan", qos_profile_sensor_data)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    import threading
-
-    threading.Thread(target=executor.spin, daemon=True).start()
+    spinner = ExecutorThread(executor, lambda exc: print(f"bench_ros2: sensor executor: {exc}"))
+    spinner.start()
     beams = 360
     angles = -math.pi + 2 * math.pi / beams * np.arange(beams)
     c = np.cos(angles)
@@ -94,9 +92,10 @@ def sensor_process(n_scans: int, ready: Any, go: Any, out: Any) -> None:
         time.sleep(1 / 18 + rng.uniform(-0.01, 0.01))
     time.sleep(0.3)
     out.put({"published": published, "arrivals": list(arrivals)})
-    executor.shutdown()
-    node.destroy_node()
-    rclpy.shutdown()
+    if spinner.stop(10.0):  # never destroy the node under its executor's thread (issue 31)
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown()
 
 
 def _controller() -> Any:
@@ -286,7 +285,7 @@ def bench_sim(n_scans: int) -> dict[str, Any]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scans", type=int, default=1000)
-    parser.add_argument("--out", default=str(ROOT / "bench" / "results" / "bench_ros2.json"))
+    parser.add_argument("--out", help="JSON file (default bench/results/ros2.json)")
     args = parser.parse_args()
     try:
         import rclpy  # noqa: F401
@@ -330,8 +329,7 @@ def main() -> int:
         f"(target: ROS 2 p99 < {TARGET_P99_MS:.0f} ms); {ros['driving_cycles']} of the measured "
         f"cycles drove; load {load_before:.2f} -> {result['load_after']:.2f}"
     )
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+    print(f"wrote {write_result('ros2', result, args.out)}")
     return 0 if ros["p99_ms"] < TARGET_P99_MS else 1
 
 

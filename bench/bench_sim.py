@@ -22,7 +22,6 @@ egc_sim, and >= 20x IR-SIM's steps/s.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import platform
@@ -35,6 +34,7 @@ from pathlib import Path
 import numpy as np
 from egc_common.profiles import PIONEER3DX
 from egc_common.scan import ranges_to_points
+from egc_experiments.bench_results import write_result
 from egc_robot.filters.egc import EgcParams, egc_filter
 from egc_sim.lidar import LidarConfig, Raycaster
 from egc_sim.simulator import Simulator
@@ -171,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps-per-start", type=int, default=1500)
     ap.add_argument("--irsim-steps", type=int, default=60)
-    ap.add_argument("--out", default="bench/results/bench_sim.json")
+    ap.add_argument("--out", help="JSON file (default bench/results/sim.json)")
     args = ap.parse_args(argv)
     cores = os.sched_getaffinity(0) if hasattr(os, "sched_setaffinity") else None
     if cores is not None:
@@ -220,20 +220,14 @@ def _run(args: argparse.Namespace) -> int:
         targets[">= 20x IR-SIM"] = ratio >= 20.0
     for name, ok in targets.items():
         print(f"target {name}: {'met' if ok else 'MISSED'}")
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(
-        json.dumps(
-            {
-                "egc_sim": ours,
-                "irsim": theirs,
-                "ratio": ratio,
-                "targets": targets,
-                "python": sys.version,
-            },
-            indent=2,
-        )
-    )
+    result = {
+        "egc_sim": ours,
+        "irsim": theirs,
+        "ratio": ratio,
+        "targets": targets,
+        "python": sys.version,
+    }
+    out = write_result("sim", result, args.out)
     print(f"wrote {out}")
     return 0 if all(targets.values()) else 1
 

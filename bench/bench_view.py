@@ -22,10 +22,7 @@ the first window's, and 99% of the last window's messages logged within one peri
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import platform
-import sys
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -35,9 +32,9 @@ from typing import Any
 import numpy as np
 from egc_common.messages import StateMessage, Telemetry, decode_telemetry
 from egc_common.transport import free_tcp_port
+from egc_experiments.bench_results import write_result
 from egc_operator.view import OperatorView, open_view, record_episode
 
-RESULTS = Path(__file__).resolve().parent / "results"
 RATE_HZ = 20.0
 BEAMS = 720
 
@@ -181,7 +178,6 @@ def run(minutes: float, sink: str, window_s: float) -> dict[str, Any]:
         "window_s": window_s,
         "windows": [w.summary() for w in windows],
         "keeps_up": keeps_up,
-        "machine": {"python": sys.version.split()[0], "platform": platform.platform()},
     }
 
 
@@ -197,7 +193,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--minutes", type=float, default=10.0, help="run length (default 10)")
     parser.add_argument("--sink", choices=("file", "web"), default="file")
     parser.add_argument("--window", type=float, help="seconds per reported window (default 60)")
-    parser.add_argument("--out", type=Path, help="JSON file (default bench/results/)")
+    parser.add_argument(
+        "--out", type=Path, help="JSON file (default bench/results/view.json, view-web.json)"
+    )
     args = parser.parse_args(argv)
     if args.minutes <= 0:
         parser.error("--minutes must be positive")
@@ -223,9 +221,7 @@ def main(argv: list[str] | None = None) -> int:
         f"file {result['file_mb'] or 0:.0f} MB; keeps up: {result['keeps_up']} "
         "(all times in ms; lag = arrival to logged)"
     )
-    out = args.out or RESULTS / f"bench_view_{args.sink}.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
+    out = write_result("view" if args.sink == "file" else f"view-{args.sink}", result, args.out)
     print(f"wrote {out}")
     return 0 if result["keeps_up"] else 1
 

@@ -1,7 +1,7 @@
 """Regenerate the figures of the paper's hallway experiment (Park & Kim 2014, sec. 4.2).
 
 Runs the built-in ``hallway`` world with the stick held forward and the EGC filter on, through
-the robot's own command pipeline (``egc_app.episode``), and draws
+the robot's own command pipeline (``egc_experiments.episode``), and draws
 
 - ``docs/fig9_hallway_trajectory.png`` (after Fig. 9): the map, the areas A-D and the robot's
   footprint every 2 s along its path;
@@ -22,11 +22,10 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 from egc_common.profiles import get_profile
+from egc_experiments.episode import EpisodeSettings, run_settings
 from egc_sim.episodes import EpisodeResult
 from egc_sim.worlds import World, load_world
 from matplotlib.patches import Polygon, Rectangle
-
-from egc_app.episode import EpisodeSettings, run_settings
 
 FOOTPRINT_EVERY_S = 2.0
 

@@ -1,8 +1,11 @@
 """``egc-teleop bench [NAME ...]`` and ``egc-teleop bench NAME [OPTION ...]``: run the
-benchmarks in bench/ (from a source checkout).
+benchmarks in bench/ (from a source checkout); ``egc-teleop bench report`` renders their results.
 
-Each benchmark is a script ``bench/bench_<name>.py`` that prints a table, writes JSON under
-``bench/results/`` and exits non-zero when it misses a target. Several names run one after the
+Each benchmark is a script ``bench/bench_<name>.py`` that prints a table, writes its result to
+``bench/results/<name>.json`` with the machine, date and commit (``egc_experiments.bench_results``)
+and exits non-zero when it misses a target. After a run that wrote a result there,
+``docs/benchmarks.md`` is rendered again from all of them (``egc_experiments.bench_report``);
+``bench report [--out FILE]`` does only that. Several names run one after the
 other with their defaults; after one name, everything from the first option on goes to that
 script (``egc-teleop bench view --minutes 0.3``, ``egc-teleop bench link --trials 1``), and
 ``egc-teleop bench NAME --help`` shows the script's own options. A bad option of the script is
@@ -20,6 +23,8 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from egc_common.errors import UsageError
+from egc_experiments import bench_report
+from egc_experiments.bench_results import PAGE, RESULTS_DIR
 
 BENCH_DIR = Path(__file__).resolve().parents[1] / "bench"
 
@@ -34,7 +39,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
         nargs=argparse.REMAINDER,
         metavar="NAME ... | NAME OPTION ...",
         help="benchmarks to run (default: all; 'list' shows them), or one benchmark and its "
-        "own options (egc-teleop bench NAME --help shows them)",
+        "own options (egc-teleop bench NAME --help shows them); 'report [--out FILE]' writes "
+        "docs/benchmarks.md from bench/results/ (a run that writes a result there does too)",
     )
 
 
@@ -75,6 +81,23 @@ def _exit_status(code: Any) -> int:
     return 1
 
 
+def _report(options: list[str]) -> int:
+    """``bench report [--out FILE]``: the page from the results, nothing run."""
+    out = PAGE
+    if options[:1] == ["--out"] and len(options) == 2:
+        out = Path(options[1])
+    elif options:
+        raise UsageError(f"'report' takes only --out FILE, got {' '.join(options)}")
+    if out.is_dir() or not out.parent.is_dir():
+        raise UsageError(f"--out {out}: not a file in an existing folder")
+    print(f"wrote {bench_report.write_page(out)}")
+    return 0
+
+
+def _result_stamps() -> dict[Path, int]:
+    return {p: p.stat().st_mtime_ns for p in RESULTS_DIR.glob("*.json")}
+
+
 def run(args: argparse.Namespace) -> int:
     names, options = split_words(args.words)
     names = names or ["all"]
@@ -86,6 +109,8 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(f"'list' takes no options, got {' '.join(options)}")
         print("\n".join(known))
         return 0
+    if names == ["report"]:
+        return _report(options)
     unknown = [n for n in names if n not in (*known, "all")]
     if unknown:
         raise UsageError(f"unknown benchmark(s) {', '.join(unknown)} (known: {', '.join(known)})")
@@ -97,6 +122,7 @@ def run(args: argparse.Namespace) -> int:
             "e.g. egc-teleop bench view --minutes 0.3"
         )
     status = 0
+    before = _result_stamps()
     for name in names:
         if len(names) > 1:  # which table is which
             print(f"== bench {name} ==", flush=True)
@@ -109,4 +135,6 @@ def run(args: argparse.Namespace) -> int:
             status = status or _exit_status(exc.code)
         finally:
             sys.argv = saved
+    if _result_stamps() != before and PAGE.parent.is_dir():  # a result in bench/results/
+        print(f"wrote {bench_report.write_page()}")
     return status

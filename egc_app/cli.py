@@ -6,14 +6,12 @@ Rerun. Each module exposes ``configure(parser)`` and ``run(args) -> int``.
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import os
 import sys
 from collections.abc import Sequence
-from typing import Any, NoReturn
 
-from egc_common.cli_args import numbers_are_values
+from egc_common.cli_args import CliArgumentParser
 from egc_common.errors import UsageError
 
 # name -> (module, one-line help)
@@ -43,18 +41,6 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "replay a recorded robot log (.bag, ROS 2 bag, .db3, .mcap) through a filter",
     ),
 }
-
-
-class CliArgumentParser(argparse.ArgumentParser):
-    """Bad arguments: one clear line on stderr and exit code 2 (DESIGN 2); values that start with
-    a minus and a digit are values, not options (``egc_common.cli_args``)."""
-
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        numbers_are_values(self)
-
-    def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
 DESCRIPTION = (

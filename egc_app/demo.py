@@ -39,7 +39,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from egc_common.cli_args import check_writable
+from egc_common.cli_args import PROFILE_HELP, check_writable
 from egc_common.errors import UsageError
 from egc_common.profiles import get_profile
 from egc_common.transport import free_port
@@ -65,7 +65,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--profile",
         default="pioneer3dx",
-        help="robot profile: jackal, pioneer3dx (default: pioneer3dx)",
+        metavar="NAME|FILE",
+        help=f"{PROFILE_HELP} (default: pioneer3dx)",
     )
     parser.add_argument(
         "--script",
@@ -86,6 +87,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="run the robot without link-aware driving, to compare",
     )
     parser.add_argument("--json", metavar="FILE", help="also write the summary as JSON")
+    parser.add_argument(
+        "--camera",
+        choices=("sim", "none"),
+        default=None,
+        help="the robot's camera (DESIGN 12): sim, the simulator's forward camera in the view, "
+        "or none (default: sim; none with --ros2, whose simulator publishes no images)",
+    )
     parser.add_argument(
         "--ros2",
         action="store_true",
@@ -148,6 +156,23 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"{summary.get('latency_limited_s', 0.0):.1f} s",
         f"  rejected        {summary.get('rejected') or 'none'}",
     ]
+    camera = summary.get("camera")
+    if camera:
+        lines.append(
+            f"  camera          {camera['codec']} {camera['width']}x{camera['height']}, "
+            f"{camera['frames_sent']} frames sent, {camera['fps']:g} frames/s, "
+            f"{camera['kbps']:g} kbit/s"
+        )
+    downlink = summary.get("downlink_kbps") or {}
+    if downlink.get("p50") is not None:  # DESIGN 12: what the view plane cost
+        view = (summary.get("view_age_ms") or {}).get("p50_ms")
+        lines.append(
+            f"  view plane      {downlink['p50']:.0f} kbit/s p50, {downlink['max']:.0f} max; "
+            f"telemetry {summary.get('telemetry_sent', 0)} messages of "
+            f"{summary.get('telemetry_bytes_mean') or 0:.0f} bytes; view age p50 "
+            f"{'n/a' if view is None else f'{view:.0f} ms'}; operator lost "
+            f"{summary.get('operator_lost', 0)} times while driving"
+        )
     return "\n".join(lines)
 
 
@@ -195,6 +220,11 @@ def check_arguments(args: argparse.Namespace) -> None:
         check_writable(args.save, "--save")
     if args.json is not None:  # now, not as a traceback once the whole demo has run
         check_writable(args.json, "--json")
+    if args.camera == "sim" and args.ros2:
+        raise UsageError(
+            "--camera sim needs the simulator in the robot process; with --ros2 the robot runs "
+            "--driver ros2 and the ROS 2 simulator publishes no images (use --camera none)"
+        )
     try:
         profile = get_profile(args.profile)
         load_script(args.script)
@@ -231,6 +261,7 @@ def run(args: argparse.Namespace) -> int:
     robot_cmd += ["--listen", endpoint, "--summary", str(summary_path)]
     if args.no_link_aware:
         robot_cmd.append("--no-link-aware")
+    robot_cmd += ["--camera", args.camera or ("none" if args.ros2 else "sim")]
     operator_cmd = ["operator", "--script", args.script, "--operator-id", "demo-operator"]
     operator_cmd += ["--zenoh-connect", operator_endpoint]
     if args.duration is not None:
@@ -254,6 +285,7 @@ def run(args: argparse.Namespace) -> int:
         base = _start(["sim", "--ros2", "--map", args.world, "--profile", args.profile], ros_env)
     robot = _start(robot_cmd, ros_env)
     relay: subprocess.Popen[bytes] | None = None
+    link_started_s: float | None = None
     operator: subprocess.Popen[bytes] | None = None
     try:
         if linked:
@@ -262,6 +294,10 @@ def run(args: argparse.Namespace) -> int:
             _wait_ready(robot, "127.0.0.1", int(endpoint.rsplit(":", 1)[1]))
             relay = _start(_link_cmd(args, operator_endpoint, endpoint))
             _wait_ready(relay, "127.0.0.1", link_port)
+            # A scenario's time 0 (on the robot's clock too): the relay takes it just before it
+            # listens, so within one poll (50 ms) before this; the relay's first line says it
+            # exactly. Not when it was started: Python takes seconds to start on a busy machine.
+            link_started_s = time.monotonic()
         operator = _start(operator_cmd)
         while not stop.wait(0.1):
             if operator.poll() is not None or robot.poll() is not None:
@@ -289,6 +325,10 @@ def run(args: argparse.Namespace) -> int:
     except (OSError, ValueError) as exc:
         print(f"demo: no robot summary ({exc})", file=sys.stderr)
         return 1
+    if link_started_s is not None:
+        # the view_timeline's t_s is on the same monotonic clock (DESIGN 12: how the budget
+        # followed a scenario's phases)
+        summary["link_started_s"] = round(link_started_s, 3)
     print(format_summary(summary), flush=True)
     if args.json is not None:
         try:  # checked before the start; the folder may have gone since

@@ -10,7 +10,8 @@ and ``/cmd_vel`` (``egc_robot.ros2_driver``, DESIGN 11).
 Configuration: defaults < ``--config FILE`` (TOML) < ``--set section.key=value`` < explicit
 flags. Tables and keys (units in the names):
 
-    [robot]    rate_hz, telemetry_scan_decimation
+    [robot]    rate_hz, telemetry_scan_decimation, telemetry_hz, downlink_kbps (a number of
+               kbit/s or "auto"; DESIGN 12; flags --telemetry-hz, --downlink-kbps)
     [safety]   max_command_age_s (direct mode), max_command_age_filtered_s, command_timeout_s,
                scan_timeout_s, release_timeout_s, centre_tolerance, require_clock_sync
     [link]     link_aware, resume_window_s, reaction_time_s, blind_time_direct_s,
@@ -18,8 +19,19 @@ flags. Tables and keys (units in the names):
                latency governor; latency_turn_cap = false caps the speed alone)
     [pipeline] horizon_s, gamma_v, gamma_w, no_return_is_free
     [sim]      scan_hz, beams, seed
+    [dwa], [assist], [cbf]  the filters' parameters (DESIGN 6, 13; defaults from the profile:
+               ``DwaParams``, ``AssistParams``, ``CbfParams`` say why each default is what it is)
     [ros2]     scan, odom, cmd, cmd_type, namespace, laser_pose ("X,Y,YAW" or [x, y, yaw]),
                laser_upside_down (flags --ros-scan ... --laser-upside-down override them)
+    [camera]   source ("sim", "ros2:TOPIC", "none"), size ("WxH"), fps, codec ("h264", "jpeg")
+               (DESIGN 12; flags --camera, --camera-size, --camera-fps, --camera-codec)
+
+Command sources and locks (DESIGN 14; ``egc_robot.source_config`` documents the keys):
+``[[source]]`` tables (``name``, ``kind`` operator | zenoh | ros2, ``priority``, ``timeout_s``;
+``topic`` and ``cmd_type`` for ros2), ``[[lock]]`` tables (``name``, ``priority``,
+``timeout_s``; ``kind = "ros2"`` and ``topic`` for a ``std_msgs/Bool`` topic) and ``[[operator]]``
+tables (``id``, ``priority``). Without ``[[source]]`` tables the robot is as before: one operator
+source. ``ros2`` sources and locks need ``--driver ros2`` (docs/ros2-sources.md).
 
 ``pipeline.no_return_is_free`` unset (the default): each scan's sensor says whether a beam with no
 return means free. The simulator's lidar says so, the ROS 2 driver says so for REP 117 scans
@@ -45,12 +57,12 @@ from typing import Any
 
 from egc_common import config as config_mod
 from egc_common import keys
-from egc_common.cli_args import check_writable
+from egc_common.cli_args import PROFILE_HELP, check_writable
 from egc_common.clock_id import monotonic_clock_id
 from egc_common.errors import UsageError
 from egc_common.joystick import JoystickMapping
 from egc_common.messages import BaseCommand
-from egc_common.profiles import PROFILES, get_profile
+from egc_common.profiles import get_profile
 from egc_common.robot_info import RobotInfo
 from egc_common.transport import (
     DEFAULT_ENDPOINT,
@@ -60,21 +72,27 @@ from egc_common.transport import (
     options_from_args,
     serve_static,
 )
+from egc_common.view_budget import BudgetConfig
+from egc_robot.camera_config import CAMERA_KEYS, CameraConfig, camera_config
+from egc_robot.camera_stream import CameraStreamer
 from egc_robot.controller import ControllerConfig, RobotController
 from egc_robot.drivers import Driver, SensorUpdate
 from egc_robot.filters.assist import AssistParams
+from egc_robot.filters.cbf import CbfParams
 from egc_robot.filters.dwa import DwaParams
 from egc_robot.info_server import InfoServer
 from egc_robot.pipeline import FILTERS, PipelineConfig
 from egc_robot.ros2_core import CMD_TYPES, ROS2_KEYS, Ros2Settings, ros2_settings
 from egc_robot.run_stats import RunStats
 from egc_robot.safety import MAX_CONTROL_PERIOD_S, SweepParams
+from egc_robot.source_config import mux_config, operator_priorities
+from egc_robot.source_mux import MuxConfig
 from egc_robot.zenoh_node import Recorder, RobotNode
 
 log = logging.getLogger("egc.robot")
 
 SECTIONS: dict[str, tuple[str, ...]] = {
-    "robot": ("rate_hz", "telemetry_scan_decimation"),
+    "robot": ("rate_hz", "telemetry_scan_decimation", "telemetry_hz", "downlink_kbps"),
     "safety": (
         "max_command_age_s",
         "max_command_age_filtered_s",
@@ -95,16 +113,20 @@ SECTIONS: dict[str, tuple[str, ...]] = {
     "pipeline": ("horizon_s", "gamma_v", "gamma_w", "no_return_is_free"),
     "sim": ("scan_hz", "beams", "seed"),
     "ros2": ROS2_KEYS,
+    "camera": CAMERA_KEYS,
 }
-ROBOT_TABLES = (*SECTIONS, "dwa", "assist")  # [dwa] and [assist] are checked by their params
+# [dwa], [assist] and [cbf] are checked by their params; [[source]], [[lock]], [[operator]]
+# (DESIGN 14) by egc_robot.source_config.
+ROBOT_TABLES = (*SECTIONS, "dwa", "assist", "cbf", "source", "lock", "operator")
 
 
 class SimDriver:
     """sim_robot in this process, stepped in real time on every poll."""
 
-    def __init__(self, rt: Any, map_server: Any = None) -> None:
+    def __init__(self, rt: Any, map_server: Any = None, map_id: str | None = None) -> None:
         self._rt = rt
         self._map_server = map_server  # the queryable egc/<robot>/map, for the operator view
+        self.map_id = map_id  # the map frame's id in egc/<robot>/info (DESIGN 15)
 
     def poll(self, now_ns: int) -> SensorUpdate:
         self._rt.advance(now_ns)
@@ -113,6 +135,19 @@ class SimDriver:
 
     def send(self, command: BaseCommand) -> None:
         self._rt.set_command(command.linear_mps, command.angular_radps)
+
+    def camera_source(self, width_px: int, height_px: int) -> Any:
+        """``--camera sim``: a callable rendering the forward camera from the simulator's pose
+        now (DESIGN 12), stamped with the robot's monotonic clock; for the camera's thread."""
+        from egc_sim.camera import CameraModel, CameraRenderer
+
+        renderer = CameraRenderer(self._rt.sim.world, CameraModel(width_px, height_px))
+
+        def grab() -> tuple[Any, int]:
+            stamp = time.monotonic_ns()
+            return renderer.render(self._rt.sim.pose), stamp
+
+        return grab
 
     def close(self) -> None:
         if self._map_server is not None:
@@ -140,8 +175,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--profile",
         default="pioneer3dx",
-        metavar="NAME",
-        help=f"{', '.join(sorted(PROFILES))} (default: pioneer3dx)",
+        metavar="NAME|FILE",
+        help=f"{PROFILE_HELP} (default: pioneer3dx)",
     )
     parser.add_argument(
         "--filter", choices=FILTERS, default="egc", help="filter of shared mode (default: egc)"
@@ -154,6 +189,21 @@ def configure(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="turn link-aware driving off (one max command age, no short-gap resume, no latency "
         "governor), for comparisons; same as --set link.link_aware=false",
+    )
+    parser.add_argument(
+        "--telemetry-hz",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="telemetry rate to the operators (DESIGN 12; default: 20; the downlink budget may "
+        "lower it to 5)",
+    )
+    parser.add_argument(
+        "--downlink-kbps",
+        default=None,
+        metavar="N|auto",
+        help="the view plane's budget in kbit/s (telemetry and camera), or auto: estimated from "
+        "what the operator reports (DESIGN 12; default: auto)",
     )
     parser.add_argument("--start", metavar="X,Y,YAW", help="start pose for --driver sim")
     parser.add_argument("--config", metavar="FILE", help="robot TOML configuration")
@@ -183,7 +233,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     ros.add_argument(
         "--laser-pose",
         metavar="X,Y,YAW",
-        help="the laser in the base frame, metres and radians (default: 0,0,0)",
+        help="the laser in the base frame, metres and radians (default: [ros2] laser_pose, else "
+        "the profile's laser_pose, else 0,0,0)",
     )
     ros.add_argument(
         "--laser-upside-down",
@@ -191,7 +242,72 @@ def configure(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="the laser is mounted upside down (mirrors its sweep)",
     )
+    cam = parser.add_argument_group("camera (DESIGN 12; same keys in the config's [camera] table)")
+    cam.add_argument(
+        "--camera",
+        metavar="SOURCE",
+        help="sim (the simulator renders a forward camera; the default with --driver sim), "
+        "ros2:TOPIC (sensor_msgs/Image or CompressedImage, with --driver ros2) or none "
+        "(the default otherwise)",
+    )
+    cam.add_argument("--camera-size", metavar="WxH", help="largest picture sent (default 320x240)")
+    cam.add_argument(
+        "--camera-fps", type=float, metavar="N", help="most frames a second (default 10)"
+    )
+    cam.add_argument(
+        "--camera-codec", choices=("h264", "jpeg"), default=None, help="(default: h264)"
+    )
     add_zenoh_arguments(parser, default_listen=(DEFAULT_ENDPOINT,))
+
+
+def _camera_config(args: argparse.Namespace, cfg: dict[str, Any]) -> CameraConfig:
+    """``[camera]`` and the --camera flags, checked before anything opens (one line if bad)."""
+    flags = {
+        "source": args.camera,
+        "size": args.camera_size,
+        "fps": args.camera_fps,
+        "codec": args.camera_codec,
+    }
+    try:
+        return camera_config(config_mod.section(cfg, "camera", CAMERA_KEYS), flags, args.driver)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _open_camera(
+    config: CameraConfig, robot: str, session: Any, driver: Driver
+) -> tuple[CameraStreamer, Any] | None:
+    """The camera stream on ``egc/<robot>/camera`` (DESIGN 12), started, and the liveliness
+    subscriber that gives each new operator a keyframe at once; None for ``none``."""
+    from egc_robot.camera_stream import camera_publisher, keyframe_for_new_operators
+
+    if not config.enabled:
+        return None
+    if isinstance(driver, SimDriver):
+        source = driver.camera_source(config.width_px, config.height_px)
+    else:
+        source = driver.newest_image  # type: ignore[attr-defined]  # the Ros2Driver's
+    publisher = camera_publisher(session, keys.camera(robot))
+    streamer = CameraStreamer(source, publisher.put, config)
+    viewers = keyframe_for_new_operators(session, robot, streamer)
+    streamer.start()
+    what = config.source if config.topic is None else f"ros2 topic {config.topic}"
+    log.info(
+        "camera: %s, up to %dx%d at %g frames/s, %s",
+        what,
+        config.width_px,
+        config.height_px,
+        config.max_fps,
+        config.codec,
+    )
+    return streamer, viewers
+
+
+def _close_camera(streamer: CameraStreamer | None, viewers: Any) -> None:
+    if viewers is not None:
+        viewers.undeclare()
+    if streamer is not None:
+        streamer.close()
 
 
 def _number(table: dict[str, Any], key: str, default: float) -> float:
@@ -230,8 +346,9 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
         )
         dwa_table = cfg.get("dwa", {})
         assist_table = cfg.get("assist", {})
-        if not isinstance(dwa_table, dict) or not isinstance(assist_table, dict):
-            raise UsageError("[dwa] and [assist] must be tables")
+        cbf_table = cfg.get("cbf", {})
+        if not all(isinstance(t, dict) for t in (dwa_table, assist_table, cbf_table)):
+            raise UsageError("[dwa], [assist] and [cbf] must be tables")
 
         def pipeline_config(free: bool) -> PipelineConfig:
             filter_tables = {"no_return_is_free": free}
@@ -248,6 +365,10 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
                 sweep=SweepParams(period_s=1.0 / rate_hz),
                 dwa=DwaParams.from_mapping(filter_tables | dwa_table, profile),
                 assist=AssistParams.from_mapping(filter_tables | assist_table, profile),
+                # cbf's margin counts one control period at the command, as the sweep does.
+                cbf=CbfParams.from_mapping(
+                    filter_tables | {"period_s": 1.0 / rate_hz} | cbf_table, profile
+                ),
             )
 
         rate_hz = args.rate_hz if args.rate_hz is not None else _number(robot, "rate_hz", 20.0)
@@ -287,9 +408,68 @@ def build_controller_config(args: argparse.Namespace, cfg: dict[str, Any]) -> Co
                 _number(robot, "telemetry_scan_decimation", defaults.telemetry_scan_decimation)
             ),
             nominal_period_s=1.0 / rate_hz,
+            sources=build_sources(args, cfg),
+            operator_priorities=operator_priorities(cfg.get("operator")),
         )
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+
+
+def build_sources(args: argparse.Namespace, cfg: dict[str, Any]) -> MuxConfig | None:
+    """DESIGN 14: the ``[[source]]`` and ``[[lock]]`` tables (None without ``[[source]]``),
+    checked against the driver: ``ros2`` ones need ``--driver ros2`` and may not listen on the
+    topic this robot publishes its commands to (a loop)."""
+    mux = mux_config(cfg.get("source"), cfg.get("lock"))
+    if mux is None:
+        return None
+    topics = [(f"source {s.name}", s.topic) for s in mux.sources if s.topic is not None]
+    topics += [(f"lock {lk.name}", lk.topic) for lk in mux.locks if lk.topic is not None]
+    if topics and args.driver != "ros2":
+        what = topics[0][0]
+        raise ValueError(f"{what} is fed by the ROS 2 topic {topics[0][1]}: it needs --driver ros2")
+    if topics:
+        ros = _ros2_settings(args, cfg, need_rclpy=False)
+
+        def resolved(topic: str) -> str:  # as the node in its namespace resolves it
+            return topic if topic.startswith("/") else f"{ros.namespace.rstrip('/')}/{topic}"
+
+        for what, topic in topics:
+            if resolved(topic) == resolved(ros.cmd_topic):
+                raise ValueError(
+                    f"{what} listens on {topic}, where this robot publishes its own commands "
+                    "(--ros-cmd): a loop; give the navigation stack's output another topic, "
+                    "e.g. /cmd_vel_nav"
+                )
+    return mux
+
+
+def build_budget_config(args: argparse.Namespace, cfg: dict[str, Any]) -> BudgetConfig:
+    """DESIGN 12: ``--telemetry-hz`` / ``robot.telemetry_hz`` and ``--downlink-kbps`` /
+    ``robot.downlink_kbps`` (kbit/s or "auto")."""
+    try:
+        robot = config_mod.section(cfg, "robot", SECTIONS["robot"])
+    except config_mod.ConfigError as exc:
+        raise UsageError(str(exc)) from None
+    defaults = BudgetConfig()
+    hz = args.telemetry_hz
+    if hz is None:
+        hz = _number(robot, "telemetry_hz", defaults.telemetry_hz)
+    if not math.isfinite(hz) or not defaults.min_telemetry_hz <= hz <= 1000:
+        raise UsageError(
+            f"--telemetry-hz must be within [{defaults.min_telemetry_hz:g}, 1000], got {hz:g}"
+        )
+    raw = args.downlink_kbps if args.downlink_kbps is not None else robot.get("downlink_kbps")
+    kbps: float | None = None
+    if raw is not None and raw != "auto":
+        try:
+            kbps = float(raw) if not isinstance(raw, bool) else math.nan
+        except (TypeError, ValueError):
+            kbps = math.nan
+        if not (math.isfinite(kbps) and 1.0 <= kbps <= 1e7):
+            raise UsageError(
+                f"--downlink-kbps must be auto or a number of kbit/s in [1, 10000000], got {raw!r}"
+            )
+    return BudgetConfig(downlink_kbps=kbps, telemetry_hz=hz, min_telemetry_hz=min(5.0, hz))
 
 
 def _ros2_settings(
@@ -309,7 +489,11 @@ def _ros2_settings(
         "laser_upside_down": args.laser_upside_down,
     }
     try:
-        settings = ros2_settings(config_mod.section(cfg, "ros2", SECTIONS["ros2"]), flags)
+        table = config_mod.section(cfg, "ros2", SECTIONS["ros2"])
+        laser = get_profile(args.profile).laser_pose
+        if laser is not None and "laser_pose" not in table:  # the profile's (DESIGN 14)
+            table = {**table, "laser_pose": list(laser)}
+        settings = ros2_settings(table, flags)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     if need_rclpy:
@@ -317,22 +501,33 @@ def _ros2_settings(
     return settings
 
 
-def _open_driver(args: argparse.Namespace, cfg: dict[str, Any], session: Any) -> Driver:
+def _open_driver(
+    args: argparse.Namespace, cfg: dict[str, Any], session: Any, camera_topic: str | None = None
+) -> Driver:
     if args.driver == "ros2":
         from egc_robot.ros2_driver import Ros2Driver
 
         settings = _ros2_settings(args, cfg)
+        mux = build_sources(args, cfg)
+        sources = () if mux is None else tuple(s for s in mux.sources if s.kind == "ros2")
+        locks = () if mux is None else tuple(lk for lk in mux.locks if lk.topic is not None)
         try:
-            footprint = get_profile(args.profile).half_size_m
-            return Ros2Driver(settings, footprint_half_m=footprint)
+            footprint = get_profile(args.profile).footprint
+            return Ros2Driver(
+                settings,
+                footprint_half_m=footprint,
+                camera_topic=camera_topic,
+                sources=sources,
+                locks=locks,
+            )
         except Exception as exc:  # rclpy's own errors (e.g. ROS_DOMAIN_ID out of range)
             raise UsageError(f"cannot start the ROS 2 node: {exc}") from None
     if args.driver == "zenoh":
         from egc_robot.zenoh_driver import ZenohDriver
 
-        return ZenohDriver(session, args.robot, get_profile(args.profile).half_size_m)
+        return ZenohDriver(session, args.robot, get_profile(args.profile).footprint)
     from egc_sim.bridge import RealTimeSim, open_simulator, parse_pose
-    from egc_sim.grid_world import map_message
+    from egc_sim.grid_world import map_message, world_id
 
     try:
         sim_cfg = config_mod.section(cfg, "sim", SECTIONS["sim"])
@@ -351,6 +546,7 @@ def _open_driver(args: argparse.Namespace, cfg: dict[str, Any], session: Any) ->
     return SimDriver(
         RealTimeSim(sim, time.monotonic_ns(), 1.0 / scan_hz),
         serve_static(session, keys.world_map(args.robot), world_map),
+        map_id=world_id(sim.world),
     )
 
 
@@ -392,17 +588,15 @@ def resume_window_caveat(config: ControllerConfig, lease_ms: int | None) -> str 
     )
 
 
-def _describer(args: argparse.Namespace, controller: RobotController) -> Any:
+def _describer(
+    args: argparse.Namespace, controller: RobotController, map_id: str | None = None
+) -> Any:
     """What ``egc/<robot>/info`` answers (DESIGN 15): fixed facts, plus the controller's state
     and operator read at the time of the query (two attribute reads: a snapshot may be one
-    cycle old, never inconsistent enough to matter for a listing)."""
-    half_length, half_width = get_profile(args.profile).half_size_m
-    footprint = (
-        (half_length, half_width),
-        (-half_length, half_width),
-        (-half_length, -half_width),
-        (half_length, -half_width),
-    )
+    cycle old, never inconsistent enough to matter for a listing). ``map_id``: the map frame
+    the driver's map poses are in, when it gives them (the simulator: its world's id)."""
+    profile = get_profile(args.profile)
+    footprint = tuple(profile.footprint.outline()[:-1])  # as given (DESIGN 14), open
     try:
         version = importlib.metadata.version("egc-teleop")
     except importlib.metadata.PackageNotFoundError:
@@ -414,12 +608,13 @@ def _describer(args: argparse.Namespace, controller: RobotController) -> Any:
             robot=args.robot,
             state=controller.state.value,
             driver=args.driver,
-            profile=args.profile,
+            profile=profile.name,
             filter=args.filter,
             camera=camera,
             version=version,
             footprint_m=footprint,
             operator=controller.operator,
+            map=map_id,
         )
 
     return describe
@@ -438,9 +633,11 @@ def run(args: argparse.Namespace) -> int:
     except config_mod.ConfigError as exc:
         raise UsageError(str(exc)) from None
     controller_config = build_controller_config(args, cfg)
+    budget_config = build_budget_config(args, cfg)
     # Bad ROS 2 flags are one line whatever the driver (a typo now, not on the day it runs on
     # --driver ros2); without rclpy only --driver ros2 stops.
     _ros2_settings(args, cfg, need_rclpy=args.driver == "ros2")
+    camera = _camera_config(args, cfg)
     if args.driver == "ros2":
         # DESIGN 11: a zero twist in HOLD; a ROS 2 base brakes at its own limits.
         controller_config = dataclasses.replace(controller_config, hold_ramp=False)
@@ -456,13 +653,15 @@ def run(args: argparse.Namespace) -> int:
     recorder = _open_recorder(args)  # a bad path: one line, before any session or driver opens
     session = open_session(options_from_args(args))
     try:
-        driver = _open_driver(args, cfg, session)
+        driver = _open_driver(args, cfg, session, camera.topic)
+        opened = _open_camera(camera, args.robot, session, driver)
     except BaseException:
         # The session's threads would keep the process alive, deaf to SIGTERM: close it.
         session.close()
         if recorder is not None:
             recorder.close()
         raise
+    streamer, viewers = (None, None) if opened is None else opened
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
@@ -476,15 +675,32 @@ def run(args: argparse.Namespace) -> int:
         recorder=recorder,
         stats=stats,
         clock_id=monotonic_clock_id(),
+        budget=budget_config
+        if streamer is None
+        else dataclasses.replace(budget_config, camera=True, camera_max_fps=camera.max_fps),
+        camera=streamer,
     )
-    info = InfoServer(session, args.robot, _describer(args, node.controller))
+    map_id = getattr(driver, "map_id", None)
+    info = InfoServer(session, args.robot, _describer(args, node.controller, map_id))
+    mux = controller_config.sources
+    if mux is not None:
+        log.info(
+            "command sources (DESIGN 14): %s; locks: %s",
+            ", ".join(f"{s.name} ({s.kind}, priority {s.priority})" for s in mux.sources),
+            ", ".join(f"{lk.name} (priority {lk.priority})" for lk in mux.locks) or "none",
+        )
     log.info(
-        "robot %r ready: driver %s, profile %s, filter %s, %.6g Hz",
+        "robot %r ready: driver %s, profile %s, filter %s, %.6g Hz, telemetry %.6g Hz, "
+        "downlink budget %s",
         args.robot,
         args.driver,
         args.profile,
         args.filter,
         rate_hz,
+        budget_config.telemetry_hz,
+        "auto"
+        if budget_config.downlink_kbps is None
+        else f"{budget_config.downlink_kbps:g} kbit/s",
     )
     # What exists now (modules, configuration, the session) lives as long as the process: keep
     # it out of the garbage collector's scans, so a collection in a control cycle stays short.
@@ -499,6 +715,7 @@ def run(args: argparse.Namespace) -> int:
         for what, step in (
             ("stop answering info queries", info.close),
             ("stop the node", node.shutdown),
+            ("stop the camera", lambda: _close_camera(streamer, viewers)),
             ("close the driver", driver.close),
             ("close the Zenoh session", session.close),
         ):
@@ -512,6 +729,8 @@ def run(args: argparse.Namespace) -> int:
         received, missing = node.controller.link_totals
         summary["seq_received"] = received
         summary["seq_missing"] = missing
+        if streamer is not None:
+            summary["camera"] = streamer.summary()  # DESIGN 12, pinned keys
         log.info("stopped: %s", json.dumps(summary))
         if args.summary:
             try:

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 
-def egc(*argv: str, timeout_s: float = 30.0) -> subprocess.CompletedProcess[str]:
+def egc(*argv: str, timeout_s: float = 120.0) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, "-m", "egc_app.cli", "bench", *argv],
         capture_output=True,
@@ -27,11 +27,17 @@ def egc(*argv: str, timeout_s: float = 30.0) -> subprocess.CompletedProcess[str]
 
 def test_options_after_a_name_go_to_that_script(tmp_path: Path) -> None:
     out = tmp_path / "filter.json"
-    proc = egc("filter", "--repeats", "3", "--out", str(out))
-    assert proc.returncode == 0, proc.stderr
-    assert f"wrote {out}" in proc.stdout
+    proc = egc("filter", "--repeats", "3", "--out", str(out), timeout_s=300.0)
+    assert f"wrote {out}" in proc.stdout, proc.stderr
     assert "== bench" not in proc.stdout  # one benchmark: no header
-    assert json.loads(out.read_text())  # written where --out said, not bench/results/
+    result = json.loads(out.read_text())  # written where --out said, not bench/results/
+    assert "benchmarks.md" not in proc.stdout  # nothing in bench/results/: the page is left alone
+    assert {row["repeats"] for row in result["rows"]} == {3}  # --repeats reached it too
+    # The script's verdict comes back as the exit status. Whether a speed target is met
+    # depends on how busy the machine is (issue 32): the status must agree with the
+    # targets the run reports, not be 0.
+    targets = result["targets"]
+    assert targets and proc.returncode == (0 if all(targets.values()) else 1), proc.stderr
 
 
 @pytest.mark.parametrize(("name", "option"), [("view", "--minutes"), ("link", "--trials")])
@@ -71,10 +77,11 @@ def test_list_and_several_names_still_work() -> None:
     assert proc.returncode == 0 and {"view", "link", "filter"} <= set(proc.stdout.split())
 
 
-def test_split_words() -> None:
-    from egc_app.bench import split_words
-
-    assert split_words([]) == ([], [])
-    assert split_words(["filter", "sim"]) == (["filter", "sim"], [])
-    assert split_words(["view", "--minutes", "0.3"]) == (["view"], ["--minutes", "0.3"])
-    assert split_words(["view", "--", "--minutes", "1"]) == (["view"], ["--minutes", "1"])
+def test_the_words_before_the_first_option_are_names_and_a_double_dash_is_dropped() -> None:
+    """How the command line splits into names and the script's options (a test of the real
+    process: nothing imports egc_app, DESIGN 2)."""
+    proc = egc("nosuch", "other")  # both are names: both are named as unknown
+    assert proc.returncode == 2 and "unknown benchmark(s) nosuch, other " in proc.stderr
+    proc = egc("view", "--", "--help")  # "--" after the name goes, the option reaches the script
+    assert proc.returncode == 0, proc.stderr
+    assert "bench_view.py" in proc.stdout and "--minutes" in proc.stdout

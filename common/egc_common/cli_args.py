@@ -23,8 +23,10 @@ import errno
 import os
 import re
 from pathlib import Path
+from typing import Any, NoReturn
 
 from egc_common.errors import UsageError
+from egc_common.profiles import PROFILES, ProfileError, load_profile
 
 # A minus then a digit, a point and a digit, or nan/inf, or a single minus and a comma later:
 # a value (so "-3,abc" reaches the option's own check and its message), never an option name.
@@ -92,6 +94,20 @@ def numbers_are_values(parser: argparse.ArgumentParser) -> argparse.ArgumentPars
     return parser
 
 
+class CliArgumentParser(argparse.ArgumentParser):
+    """The parser of every ``egc-teleop`` subcommand: bad arguments are one clear line on
+    stderr and exit code 2 (DESIGN 2), and values that start with a minus and a digit are
+    values, not options (``numbers_are_values``). Here, not in the console script, so that a
+    subcommand's parser can be built and checked without it (nothing imports ``egc_app``)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        numbers_are_values(self)
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
 def check_writable(path: str | Path, option: str) -> None:
     """Raise UsageError unless ``path`` can be written: its directory exists (it is not
     created) and a file can be created there (or the existing file opened for writing).
@@ -120,3 +136,20 @@ def check_writable(path: str | Path, option: str) -> None:
         raise UsageError(f"{option} {path}: not writable ({reason})") from None
     if not existed:
         target.unlink(missing_ok=True)
+
+
+PROFILE_HELP = (
+    f"robot profile: a built-in name ({', '.join(sorted(PROFILES))}) or a profile FILE.toml "
+    "with a [profile] table (DESIGN 14)"
+)
+
+
+def profile_arg(text: str) -> str:
+    """argparse ``type=`` of every ``--profile NAME|FILE.toml``: the profile is loaded now, so
+    an unknown name or a bad file is the parser's one line and exit 2 (naming the key and the
+    problem), before anything starts. The text is kept (it is handed on to child processes)."""
+    try:
+        load_profile(text)
+    except ProfileError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text

@@ -7,7 +7,8 @@ their defaults: ``deadman`` (0/1, default 1), ``mode`` (``direct`` | ``shared``,
 operator's pick of shared-mode filter, one of ``egc``, ``ek-egc``, ``assist``, ``dwa``; empty or
 absent: no pick, the robot runs its default), ``via_next`` and ``via_clear`` (0/1, default 0:
 "button held"; the operator acts on the press, skipping the active via point or clearing them
-all). Blank lines and lines starting with ``#`` are ignored. Between rows the last row holds (zero-order hold); after the
+all), ``robot_next`` and ``robot_prev`` (0/1, default 0: "button held"; an operator driving a
+fleet switches to the next or previous robot on the press, DESIGN 15). Blank lines and lines starting with ``#`` are ignored. Between rows the last row holds (zero-order hold); after the
 last row the stick is centred with the deadman released.
 
 Any other column, or a column twice, is an error naming it and the accepted columns: a
@@ -42,6 +43,8 @@ OPTIONAL = {
     "filter": "",
     "via_next": "0",
     "via_clear": "0",
+    "robot_next": "0",
+    "robot_prev": "0",
 }
 COLUMNS = (*REQUIRED, *OPTIONAL)
 # More than any recording needs (about an hour at 50 Hz; parsed, the worst case of short rows
@@ -71,6 +74,9 @@ class JoystickSample:
     # Via-point buttons, true while held (the operator node acts on the press edge).
     via_next: bool = False
     via_clear: bool = False
+    # Fleet buttons (DESIGN 15), true while held: switch to the next / previous robot on the press.
+    robot_next: bool = False
+    robot_prev: bool = False
 
 
 RELEASED = JoystickSample(0.0, 0.0, 0.0, deadman=False)
@@ -149,6 +155,8 @@ def parse_joystick_csv(text: str, name: str = "<joystick file>") -> tuple[Joysti
                 filter=picked or None,
                 via_next=_flag(str(values["via_next"]), f"{where} via_next"),
                 via_clear=_flag(str(values["via_clear"]), f"{where} via_clear"),
+                robot_next=_flag(str(values["robot_next"]), f"{where} robot_next"),
+                robot_prev=_flag(str(values["robot_prev"]), f"{where} robot_prev"),
             )
         )
     if not samples:

@@ -81,6 +81,7 @@ def info(robot: str) -> str:
 
 ALL_ROBOTS_ALIVE = "egc/*/alive/robot"
 ALL_ROBOTS_INFO = "egc/*/info"
+ALL_ROBOTS_STATE = "egc/*/state"
 
 
 def robot_id_from_key(key: str) -> str | None:
@@ -92,3 +93,18 @@ def robot_id_from_key(key: str) -> str | None:
         except ValueError:
             return None
     return None
+
+
+def camera(robot: str) -> str:
+    """Robot -> operators, the camera's encoded frames (DESIGN 12, view plane)."""
+    return f"egc/{validate_id(robot)}/camera"
+
+
+def source(robot: str, name: str) -> str:
+    """A ``zenoh`` command source -> robot (DESIGN 14)."""
+    return f"egc/{validate_id(robot)}/source/{validate_id(name, 'source name')}"
+
+
+def lock(robot: str, name: str) -> str:
+    """A lock's feed -> robot, a msgpack bool (DESIGN 14)."""
+    return f"egc/{validate_id(robot)}/lock/{validate_id(name, 'lock name')}"

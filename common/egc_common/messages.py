@@ -20,6 +20,8 @@ import msgpack
 import numpy as np
 import numpy.typing as npt
 
+from egc_common.scan_compact import PolarScan
+
 SCHEMA_VERSION: Final = 1
 MAX_COMMAND_BYTES: Final = 512
 MAX_TELEMETRY_BYTES: Final = 4 * 1024 * 1024
@@ -31,6 +33,11 @@ MAX_SCAN_BEAMS: Final = 200_000
 MAX_MAP_CELLS: Final = 64_000_000
 MAX_MAP_BYTES: Final = MAX_MAP_CELLS // 8 + 4096
 MAX_VIEW_AGE_MS: Final = 3_600_000
+MAX_KBPS: Final = 10_000_000  # 10 Gbit/s: rx_kbps, and the budget's figures in telemetry
+MAX_TELEMETRY_HZ: Final = 1000.0
+MAX_CAMERA_FPS: Final = 1000.0
+# What the downlink budget cut (DESIGN 12), in the order it gives way; telemetry ``cut``.
+BUDGET_CUTS: Final = ("camera", "scan", "rate")
 # Telemetry figures (DESIGN 7, 9), each in a physically sensible range; a message with one
 # outside it is rejected whole (OUT_OF_RANGE), as one with a NaN is. Generous: the robot's own
 # figures never come near them (its speeds are within the base's +-100, see BaseCommand).
@@ -53,7 +60,7 @@ MAX_RACE_MS: Final = 1000.0
 
 MODES: Final = ("direct", "shared")
 # The filter family of DESIGN 6, pinned names ("none" is direct mode).
-FILTER_NAMES: Final = ("none", "egc", "ek-egc", "assist", "dwa")
+FILTER_NAMES: Final = ("none", "egc", "ek-egc", "assist", "dwa", "cbf")
 GOAL_FRAMES: Final = ("odom", "map")
 MAX_GOAL_POINTS: Final = 64
 MAX_GOAL_COORD_M: Final = 1e6
@@ -90,6 +97,10 @@ class RejectReason(enum.Enum):
     OUT_OF_ORDER = "out_of_order"
     NOT_IN_CONTROL = "not_in_control"
     NO_INFORMATION = "no_information"  # a scan with no valid, +inf or -inf beam (REP 117)
+    # Camera frames (DESIGN 12, ``egc_common.camera_msg``; the operator's camera view):
+    UNKNOWN_CODEC = "unknown_codec"
+    CORRUPT = "corrupt"  # the picture does not decode (a cut H.264 frame, a broken JPEG)
+    FUTURE = "future"  # stamped after the robot's clock now, beyond the clock sync's error
 
 
 @dataclass(frozen=True, slots=True)
@@ -351,6 +362,10 @@ class OperatorCommand:
     view_age_ms: int | None = None  # DESIGN 7, 9: age of the newest telemetry the view showed
     # The filter the operator picked for shared mode (DESIGN 6); absent: the robot's default.
     filter: str | None = None
+    # DESIGN 12: view-plane kbit/s received over the last second, and the robot-clock age of
+    # the newest camera frame shown; absent when unknown (no camera: no camera_age_ms).
+    rx_kbps: int | None = None
+    camera_age_ms: int | None = None
 
     def __post_init__(self) -> None:
         rejection = decode_command(_pack(self._wire()))
@@ -359,7 +374,7 @@ class OperatorCommand:
 
     def _wire(self) -> dict[str, Any]:
         wire = {"v": SCHEMA_VERSION, **{k: getattr(self, k) for k in self.__slots__}}
-        for optional in ("view_age_ms", "filter"):
+        for optional in ("view_age_ms", "filter", "rx_kbps", "camera_age_ms"):
             if wire[optional] is None:
                 del wire[optional]  # optional keys: absent when unknown (DESIGN 7)
         return wire
@@ -383,6 +398,10 @@ def _build_command(m: Mapping[Any, Any]) -> OperatorCommand:
             None if m.get("view_age_ms") is None else _int(m, "view_age_ms", 0, MAX_VIEW_AGE_MS)
         ),
         "filter": _opt_str(m, "filter", FILTER_NAMES),
+        "rx_kbps": None if m.get("rx_kbps") is None else _int(m, "rx_kbps", 0, MAX_KBPS),
+        "camera_age_ms": (
+            None if m.get("camera_age_ms") is None else _int(m, "camera_age_ms", 0, MAX_VIEW_AGE_MS)
+        ),
     }
     cmd = object.__new__(OperatorCommand)
     for key, value in fields_.items():
@@ -421,6 +440,8 @@ def _fast_command(payload: object) -> OperatorCommand | None:
         return None
     view_age_ms = m.get("view_age_ms")
     filter_ = m.get("filter")
+    rx_kbps = m.get("rx_kbps")
+    camera_age_ms = m.get("camera_age_ms")
     if not (
         type(m) is dict
         and type(version) is int
@@ -446,12 +467,31 @@ def _fast_command(payload: object) -> OperatorCommand | None:
             or (type(view_age_ms) is int and 0 <= view_age_ms <= MAX_VIEW_AGE_MS)
         )
         and (filter_ is None or (type(filter_) is str and filter_ in FILTER_NAMES))
+        and (rx_kbps is None or (type(rx_kbps) is int and 0 <= rx_kbps <= MAX_KBPS))
+        and (
+            camera_age_ms is None
+            or (type(camera_age_ms) is int and 0 <= camera_age_ms <= MAX_VIEW_AGE_MS)
+        )
     ):
         return None
     cmd = object.__new__(OperatorCommand)  # no __post_init__: it is checked already
     for set_field, value in zip(
         _COMMAND_SETTERS,
-        (seq, stamp_ns, x, y, mode, deadman, estop, reset, op, view_age_ms, filter_),
+        (
+            seq,
+            stamp_ns,
+            x,
+            y,
+            mode,
+            deadman,
+            estop,
+            reset,
+            op,
+            view_age_ms,
+            filter_,
+            rx_kbps,
+            camera_age_ms,
+        ),
         strict=True,
     ):
         set_field(cmd, value)
@@ -459,7 +499,7 @@ def _fast_command(payload: object) -> OperatorCommand | None:
 
 
 # ---------------------------------------------------------------------------------------------
-# Telemetry (robot -> operators, every control cycle)
+# Telemetry (robot -> operators, at telemetry_hz: DESIGN 12)
 
 Circle = tuple[float, float, float]
 
@@ -469,6 +509,10 @@ class Telemetry:
     """One control cycle as the operator view needs it (DESIGN 7 keys plus view extras).
 
     ``scan_xy`` holds the (possibly decimated) scan points in {R}; circles are (x, y, r) in {R}.
+    With ``scan_polar`` (DESIGN 12's compact scan) ``scan_xy`` is its points first, in beam
+    order, then the points that are no beam's (REP 117 -inf readings); only those extra points
+    go out as float32 pairs, the beams as ``scan_mm`` (uint16 millimetres) with ``scan_a0``,
+    ``scan_da`` and ``scan_origin`` given once. A decoder rebuilds the same ``scan_xy``.
     """
 
     seq: int
@@ -512,14 +556,61 @@ class Telemetry:
     goal_frame: str | None = None
     goals_left: int = 0
     suggested_rad: float | None = None
+    scan_polar: PolarScan | None = None  # DESIGN 12's compact scan (see the class docstring)
+    # The downlink budget (DESIGN 12, ``egc_common.view_budget``): what the view plane sent over
+    # the last second, the budget, what the link is estimated to carry (None: not known), the
+    # plan (telemetry rate, scan beams, camera rate and kbit/s) and what gave way.
+    view_kbps: float | None = None
+    budget_kbps: float | None = None
+    link_kbps: float | None = None
+    tel_hz: float | None = None
+    scan_n: int | None = None
+    cam_fps: float | None = None
+    cam_kbps: float | None = None
+    cut: tuple[str, ...] = ()
+    # Command sources (DESIGN 14; absent without [[source]] tables): the source that drives and
+    # the highest active lock (None: none), and the age on the robot's clock of the newest
+    # command of the source that drives, since it arrived.
+    source: str | None = None
+    lock: str | None = None
+    source_age_ms: float | None = None
 
     def encode(self) -> bytes:
         d = _shallow_fields(self)
-        d["scan_xy"] = np.ascontiguousarray(self.scan_xy, dtype="<f4").tobytes()
+        polar = d.pop("scan_polar")
+        xy = np.ascontiguousarray(self.scan_xy, dtype="<f4")
+        if polar is not None:
+            d["scan_mm"] = np.ascontiguousarray(polar.ranges_mm, dtype="<u2").tobytes()
+            d["scan_a0"] = polar.angle_min_rad
+            d["scan_da"] = polar.angle_increment_rad
+            if polar.origin_xy_m != (0.0, 0.0):
+                d["scan_origin"] = [float(v) for v in polar.origin_xy_m]
+            xy = xy[polar.shown :]  # the beams' points travel as scan_mm
+        d["scan_xy"] = xy.tobytes()
         for key in ("igc", "agc", "egc", "pose", "goal"):
             if d[key] is not None:
                 d[key] = [float(v) for v in d[key]]
+        d["cut"] = ",".join(self.cut) if self.cut else None
+        for key in _TELEMETRY_OPTIONAL:
+            if d[key] is None:
+                del d[key]  # absent when unknown: smaller, and what older robots sent
         return _pack({"v": SCHEMA_VERSION, **d})
+
+
+# Optional telemetry keys left out when None (DESIGN 12: bytes count on a thin link).
+_TELEMETRY_OPTIONAL: Final = (
+    "view_kbps",
+    "budget_kbps",
+    "link_kbps",
+    "tel_hz",
+    "scan_n",
+    "cam_fps",
+    "cam_kbps",
+    "cut",
+    "source",
+    "lock",
+    "source_age_ms",
+)
 
 
 REGIONS: Final = ("safe", "conditional", "unsafe")
@@ -574,9 +665,50 @@ _GOAL: Final = ((-MAX_GOAL_COORD_M, MAX_GOAL_COORD_M), (-MAX_GOAL_COORD_M, MAX_G
 _TELEMETRY_SHAPE: Final = _Shape(max_bin=MAX_SCAN_BEAMS * 8)
 
 
+_TWO_PI: Final = 2.0 * math.pi
+
+
+def _polar_scan(m: Mapping[Any, Any]) -> PolarScan | None:
+    """DESIGN 12's compact scan: ``scan_mm`` (uint16 LE millimetres, beam order), ``scan_a0`` and
+    ``scan_da`` (rad, each within one turn), ``scan_origin`` ([x, y] m in {R}, default 0, 0)."""
+    if "scan_mm" not in m:
+        return None
+    raw = _get(m, "scan_mm")
+    if not isinstance(raw, (bytes, bytearray)):
+        raise _InvalidError(RejectReason.WRONG_TYPE, "'scan_mm' must be bytes of uint16")
+    if len(raw) % 2:
+        raise _InvalidError(RejectReason.OUT_OF_RANGE, "'scan_mm' length is not a multiple of 2")
+    if len(raw) // 2 > MAX_SCAN_BEAMS:
+        raise _InvalidError(RejectReason.TOO_LARGE, f"'scan_mm' has more than {MAX_SCAN_BEAMS}")
+    origin = _opt_tuple(m, "scan_origin", 2, _CIRCLE[:2])
+    return PolarScan(
+        ranges_mm=np.frombuffer(bytes(raw), dtype="<u2").astype(np.uint16),
+        angle_min_rad=_float(m, "scan_a0", -_TWO_PI, _TWO_PI),
+        angle_increment_rad=_float(m, "scan_da", -_TWO_PI, _TWO_PI),
+        origin_xy_m=(0.0, 0.0) if origin is None else (origin[0], origin[1]),
+    )
+
+
+def _cuts(m: Mapping[Any, Any]) -> tuple[str, ...]:
+    text = _opt_str(m, "cut")
+    if text is None:
+        return ()
+    cuts = tuple(text.split(","))
+    if any(c not in BUDGET_CUTS for c in cuts) or len(set(cuts)) != len(cuts):
+        raise _InvalidError(
+            RejectReason.OUT_OF_RANGE, f"'cut' must list some of {', '.join(BUDGET_CUTS)}"
+        )
+    return cuts
+
+
 def _build_telemetry(m: Mapping[Any, Any]) -> Telemetry:
     t = object.__new__(Telemetry)
     v, w = MAX_SPEED_MPS, MAX_TURN_RADPS
+    polar = _polar_scan(m)
+    extra = _f32_array(m, "scan_xy", 2) if "scan_xy" in m else np.zeros((0, 2), np.float32)
+    scan_xy = extra if polar is None else np.concatenate((polar.points(), extra))
+    if len(scan_xy) > MAX_SCAN_BEAMS:
+        raise _InvalidError(RejectReason.TOO_LARGE, f"more than {MAX_SCAN_BEAMS} scan points")
     values: dict[str, Any] = {
         "seq": _int(m, "seq"),
         "stamp_ns": _int(m, "stamp_ns"),
@@ -594,7 +726,7 @@ def _build_telemetry(m: Mapping[Any, Any]) -> Telemetry:
         "agc": _opt_tuple(m, "agc", 3, _CIRCLE),
         "egc": _opt_tuple(m, "egc", 3, _CIRCLE),
         "r_rc": _float(m, "r_rc", 0.0, MAX_LOCAL_COORD_M) if "r_rc" in m else 0.0,
-        "scan_xy": _f32_array(m, "scan_xy", 2) if "scan_xy" in m else np.zeros((0, 2), np.float32),
+        "scan_xy": scan_xy,
         "pose": _opt_tuple(m, "pose", 3, _POSE),
         "cmd_age_ms": _opt_range(m, "cmd_age_ms", -MAX_DELAY_MS, MAX_CLOCK_MS),
         "scan_age_ms": _opt_range(m, "scan_age_ms", -MAX_RACE_MS, MAX_CLOCK_MS),
@@ -616,6 +748,18 @@ def _build_telemetry(m: Mapping[Any, Any]) -> Telemetry:
         "goal_frame": _opt_str(m, "goal_frame", GOAL_FRAMES),
         "goals_left": _int(m, "goals_left", 0, MAX_GOAL_POINTS) if "goals_left" in m else 0,
         "suggested_rad": _opt_range(m, "suggested_rad", -MAX_ANGLE_RAD, MAX_ANGLE_RAD),
+        "scan_polar": polar,
+        "view_kbps": _opt_range(m, "view_kbps", 0.0, MAX_KBPS),
+        "budget_kbps": _opt_range(m, "budget_kbps", 0.0, MAX_KBPS),
+        "link_kbps": _opt_range(m, "link_kbps", 0.0, MAX_KBPS),
+        "tel_hz": _opt_range(m, "tel_hz", 0.0, MAX_TELEMETRY_HZ),
+        "scan_n": None if m.get("scan_n") is None else _int(m, "scan_n", 0, MAX_SCAN_BEAMS),
+        "cam_fps": _opt_range(m, "cam_fps", 0.0, MAX_CAMERA_FPS),
+        "cam_kbps": _opt_range(m, "cam_kbps", 0.0, MAX_KBPS),
+        "cut": _cuts(m),
+        "source": _opt_str(m, "source"),
+        "lock": _opt_str(m, "lock"),
+        "source_age_ms": _opt_range(m, "source_age_ms", -MAX_RACE_MS, MAX_CLOCK_MS),
     }
     for key, value in values.items():
         object.__setattr__(t, key, value)
@@ -705,18 +849,37 @@ class StateMessage:
     reason: str
     operator: str | None = None
     rejected: int = 0
+    # DESIGN 14, as in the telemetry; left out when None (a robot without [[source]] tables).
+    source: str | None = None
+    lock: str | None = None
+    # The robot's pose in the map frame when its driver localises (x, y, theta): an optional
+    # key (DESIGN 7 additions) for the fleet's map (DESIGN 15), at the state's 1 Hz, so an
+    # operator sees where every robot is without taking every robot's telemetry.
+    map_pose: tuple[float, float, float] | None = None
 
     def encode(self) -> bytes:
-        return _pack({"v": SCHEMA_VERSION, **_shallow_fields(self)})
+        d = _shallow_fields(self)
+        for key in ("source", "lock"):
+            if d[key] is None:
+                del d[key]
+        if self.map_pose is None:
+            del d["map_pose"]
+        else:
+            d["map_pose"] = [float(v) for v in self.map_pose]
+        return _pack({"v": SCHEMA_VERSION, **d})
 
 
 def _build_state(m: Mapping[Any, Any]) -> StateMessage:
+    map_pose = _opt_tuple(m, "map_pose", 3, _POSE)
     return StateMessage(
         stamp_ns=_int(m, "stamp_ns"),
         state=_str(m, "state", STATES),
         reason=_str(m, "reason", max_chars=256),
         operator=_opt_str(m, "operator"),
         rejected=_int(m, "rejected") if "rejected" in m else 0,
+        source=_opt_str(m, "source"),
+        lock=_opt_str(m, "lock"),
+        map_pose=None if map_pose is None else (map_pose[0], map_pose[1], map_pose[2]),
     )
 
 

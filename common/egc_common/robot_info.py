@@ -2,8 +2,10 @@
 
 A queryable on every robot answers with one msgpack map: which robot, its profile and
 footprint, its driver, filter and camera, the software version, and (a snapshot at the time of
-the query) its state and the operator in control. ``egc-teleop robots`` lists these; an operator
-started without ``--robot`` chooses among them.
+the query) its state and the operator in control, and the map frame it localises in (``map``:
+robots that give the same id share a map frame, so an operator draws them on one map; absent
+when the driver gives no map pose). ``egc-teleop robots`` lists these; an operator started
+without ``--robot`` chooses among them.
 
 The reply is decoded like every other message from the network (DESIGN 7): bounded size, a
 flat shape, typed and ranged fields, and a counted ``Rejection`` instead of an exception.
@@ -51,11 +53,14 @@ class RobotInfo:
     version: str
     footprint_m: tuple[tuple[float, float], ...] = ()
     operator: str | None = None
+    map: str | None = None
 
     def encode(self) -> bytes:
         flat = [float(c) for point in self.footprint_m for c in point]
+        extra = {} if self.map is None else {"map": self.map}
         return _pack(
             {
+                **extra,
                 "v": SCHEMA_VERSION,
                 "robot": self.robot,
                 "state": self.state,
@@ -81,6 +86,7 @@ class RobotInfo:
             "operator": self.operator,
             "version": self.version,
             "footprint": [list(p) for p in self.footprint_m],
+            "map": self.map,
         }
 
 
@@ -105,6 +111,7 @@ def _build_info(m: Mapping[Any, Any]) -> RobotInfo:
         version=_str(m, "version"),
         footprint_m=_footprint(m),
         operator=_opt_str(m, "operator"),
+        map=_opt_str(m, "map", max_chars=256),
     )
 
 

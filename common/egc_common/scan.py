@@ -15,6 +15,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from egc_common.footprint import (
+    Footprint,
+    closest_boundary_points,
+    ray_exit_m,
+    signed_distance,
+)
+
 FloatArray = npt.NDArray[np.float64]
 
 # Coordinates beyond this magnitude (m) are treated as invalid readings: no real sensor produces
@@ -256,11 +263,12 @@ def too_close_readings(
     range_min_m: float,
     mount_x_m: float,
     mount_y_m: float,
-    footprint_half_m: tuple[float, float] | None,
+    footprint_half_m: Footprint | tuple[float, float] | None,
 ) -> tuple[FloatArray, FloatArray | None]:
     """REP 117's ``-inf`` readings (an object nearer than range_min), as every scan source of
     the robot reads them: the ranges with each ``-inf`` at range_min (DESIGN 11), and, given
-    the footprint's half length and width, the points of ``too_close_points`` (else None).
+    the footprint (the profile's shape, or a centred rectangle's half length and width), the
+    points of ``too_close_points`` (else None).
     ``ranges_m`` (float64) is changed in place and returned; ``angles_rad`` are in {R}."""
     too_close = ranges_m == -np.inf
     if not too_close.any():
@@ -282,7 +290,7 @@ def too_close_points(
     range_min_m: float,
     mount_x_m: float,
     mount_y_m: float,
-    footprint_half_m: tuple[float, float],
+    footprint_half_m: Footprint | tuple[float, float],
     gap_m: float = 0.001,
     step_m: float = 0.02,
 ) -> FloatArray:
@@ -297,8 +305,20 @@ def too_close_points(
     ``gap_m`` out of it. That stops motion towards every place the object may be, also for a
     laser mounted beyond the footprint's edge, whose beams never cross the footprint. Places
     inside the footprint (the laser seeing the robot itself) add nothing.
+
+    The footprint is the profile's shape (DESIGN 14: a polygon of any shape or a disc; an
+    obstacle in an L's notch is outside the robot) or, as before, a centred rectangle's half
+    length and width (which a centred-rectangle ``Footprint`` also takes, so its points are
+    unchanged).
     """
     a = np.asarray(angles_rad, dtype=np.float64)
+    if isinstance(footprint_half_m, Footprint):
+        box = footprint_half_m.centred_box
+        if box is None:
+            return _too_close_points_of_shape(
+                a, range_min_m, mount_x_m, mount_y_m, footprint_half_m, gap_m, step_m
+            )
+        footprint_half_m = box
     half_l, half_w = footprint_half_m
     t0 = footprint_exit_m(a, mount_x_m, mount_y_m, half_l, half_w) + gap_m
     span = np.clip(range_min_m - t0, 0.0, None)
@@ -322,6 +342,42 @@ def too_close_points(
     out[:, 0] = cx + gap_m * dx / d
     out[:, 1] = cy + gap_m * dy / d
     if out.shape[0] > 1:  # many places map onto the same bit of edge: one point per 5 mm
+        _, first = np.unique(np.round(out / 0.005), axis=0, return_index=True)
+        out = out[np.sort(first)]
+    return out
+
+
+def _too_close_points_of_shape(
+    a: FloatArray,
+    range_min_m: float,
+    mount_x_m: float,
+    mount_y_m: float,
+    fp: Footprint,
+    gap_m: float,
+    step_m: float,
+) -> FloatArray:
+    """``too_close_points`` for a footprint that is not a centred rectangle: the same places
+    along each beam, each taken to the nearest point of the real edge and ``gap_m`` out."""
+    t0 = ray_exit_m(fp, mount_x_m, mount_y_m, a) + gap_m
+    span = np.clip(range_min_m - t0, 0.0, None)
+    n = int(np.ceil(span.max() / step_m)) + 1 if span.size else 0
+    n = min(n, _MAX_TOO_CLOSE_PLACES)
+    if n == 0:
+        return np.empty((0, 2), dtype=np.float64)
+    frac = np.linspace(0.0, 1.0, n) if n > 1 else np.zeros(1)
+    t = t0[:, None] + span[:, None] * frac[None, :]
+    ok = np.broadcast_to(span[:, None] > 0.0, t.shape)
+    qx = (mount_x_m + t * np.cos(a)[:, None])[ok]
+    qy = (mount_y_m + t * np.sin(a)[:, None])[ok]
+    outside = signed_distance(fp, qx, qy) > 0.0
+    qx, qy = qx[outside], qy[outside]
+    cx, cy = closest_boundary_points(fp, qx, qy)
+    dx, dy = qx - cx, qy - cy
+    d = np.hypot(dx, dy)
+    out = np.empty((d.size, 2), dtype=np.float64)
+    out[:, 0] = cx + gap_m * dx / d
+    out[:, 1] = cy + gap_m * dy / d
+    if out.shape[0] > 1:  # one point per 5 mm of edge
         _, first = np.unique(np.round(out / 0.005), axis=0, return_index=True)
         out = out[np.sort(first)]
     return out

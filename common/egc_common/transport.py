@@ -16,11 +16,26 @@ processes and the tests agree on it:
   short-gap ``resume_window`` so that a link outage shorter than it keeps the operator's session
   and its liveliness token (a 1 s outage resumes without re-centring, DESIGN 8).
   Each side advertises its own lease, so every process of this project uses the same value.
-- QoS helpers: commands are published with priority INTERACTIVE_HIGH and express (no batching);
-  telemetry and state with congestion control DROP at DATA priority, so that they can never
-  delay or block a command. Both are **best effort**: a fresh command or telemetry message makes
-  the one before it worthless, so none is ever retransmitted or waited for (DESIGN 9).
-  Declarations, liveliness tokens and queries (the clock, the map) are Zenoh's reliable traffic.
+- Two planes (DESIGN 12). **Control** (``command_publisher``, ``control_publisher``,
+  ``CONTROL_REPLY``): commands at REAL_TIME, state, clock queries and replies at
+  INTERACTIVE_HIGH, all express (sent at once, never batched behind anything). **View**
+  (``view_publisher``): telemetry at DATA, the camera at DATA_LOW, congestion control DROP.
+  Zenoh keeps one transmission queue per priority and always sends from the highest non-empty
+  one, so view data can never hold a control message back *inside Zenoh*. Control messages are
+  published with DROP too, on purpose: the robot's control loop and Zenoh's callbacks must never
+  block on a dead link (BLOCK would stall the watchdog for up to ``wait_before_close``); their own
+  queues (``QUEUE_SIZE``: 4 batches at REAL_TIME and INTERACTIVE_HIGH, each up to 64 kB) hold
+  seconds of these small messages, so they are dropped only when the link carries nothing at all.
+  The view queues hold one batch each, so a view message that cannot go out is dropped after
+  ``wait_before_drop`` (Zenoh's 1 ms) instead of waiting: latest-only. Every data publisher is
+  **best effort**: a fresh command or telemetry message makes the one before it worthless, so
+  none is ever retransmitted or waited for (DESIGN 9). Declarations, liveliness tokens and
+  queries (the clock, the map) are Zenoh's reliable traffic.
+  What priorities cannot do: reorder bytes already handed to the kernel's socket buffer or
+  queued in a link's own buffer (a cellular uplink, ``egc-teleop link``'s ``rate=``). There,
+  keep-alives, clock replies and state wait behind whatever view data went before them; a
+  standing queue longer than the lease even closes the session. The cure is to send less view
+  data than the link carries, adaptively: the robot's downlink budget (``egc_common.view_budget``).
 - UDP (DESIGN 9 "Transport"): a ``udp/HOST:PORT`` endpoint given on the command line
   (``--connect``, ``--listen``) without ``rel=`` metadata becomes two links of one Zenoh
   transport (``transport/unicast/max_links`` 2): ``tcp/HOST:PORT`` for Zenoh's reliable traffic
@@ -75,6 +90,18 @@ KEEP_ALIVES_PER_LEASE = 4
 RECONNECT_PERIOD_MS = (250, 1000)  # first retry, longest retry
 UDP_HANDSHAKE_TIMEOUT_MS = 4000
 MAX_LINKS = 2  # a TCP and a UDP link to the same peer may form one transport (docs/transport.md)
+# Batches per priority queue (Zenoh's default is 2 each): more room for the control plane, one
+# for the view plane so that its data is dropped, not queued, when the link is busy (DESIGN 12).
+QUEUE_SIZE = {
+    "control": 2,
+    "real_time": 4,
+    "interactive_high": 4,
+    "interactive_low": 2,
+    "data_high": 2,
+    "data": 1,
+    "data_low": 1,
+    "background": 1,
+}
 
 
 @dataclass(frozen=True, slots=True)
@@ -188,6 +215,7 @@ def build_config(options: ZenohOptions) -> zenoh.Config:
         _insert(config, "transport/link/tx/lease", LEASE_MS)
         _insert(config, "transport/link/tx/keep_alive", KEEP_ALIVES_PER_LEASE)
         _insert(config, "transport/unicast/max_links", MAX_LINKS)
+        _insert(config, "transport/link/tx/queue/size", QUEUE_SIZE)
         first, longest = RECONNECT_PERIOD_MS
         _insert(
             config,
@@ -376,9 +404,22 @@ def open_session(options: ZenohOptions, give_up_s: float | None = None) -> zenoh
 
 
 def command_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
-    """Operator commands and base commands: high priority, express, best effort (a lost one is
-    never retransmitted or waited for; over UDP they take the datagram link), never queued
-    behind data."""
+    """Operator commands and base commands, control plane (DESIGN 12): REAL_TIME, express, best
+    effort (a lost one is never retransmitted or waited for; over UDP they take the datagram
+    link), never queued behind data."""
+    return session.declare_publisher(
+        key,
+        priority=zenoh.Priority.REAL_TIME,
+        express=True,
+        congestion_control=zenoh.CongestionControl.DROP,
+        reliability=zenoh.Reliability.BEST_EFFORT,
+    )
+
+
+def control_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
+    """The robot's state (on change and at 1 Hz), control plane (DESIGN 12): INTERACTIVE_HIGH,
+    express, best effort (the next one repeats it), DROP so that the control loop never blocks
+    (module docstring: its queue empties unless the link carries nothing)."""
     return session.declare_publisher(
         key,
         priority=zenoh.Priority.INTERACTIVE_HIGH,
@@ -388,9 +429,30 @@ def command_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
     )
 
 
+# Options of a reply to a control-plane query (the robot's clock): like ``control_publisher``.
+CONTROL_REPLY: dict[str, Any] = {
+    "priority": zenoh.Priority.INTERACTIVE_HIGH,
+    "express": True,
+    "congestion_control": zenoh.CongestionControl.DROP,
+}
+
+
+def view_publisher(
+    session: zenoh.Session, key: str, priority: zenoh.Priority = zenoh.Priority.DATA
+) -> zenoh.Publisher:
+    """View plane (DESIGN 12): telemetry at DATA, the camera at DATA_LOW; best effort, DROP,
+    latest-only (a message that cannot go out is dropped, the next one replaces it)."""
+    return session.declare_publisher(
+        key,
+        priority=priority,
+        congestion_control=zenoh.CongestionControl.DROP,
+        reliability=zenoh.Reliability.BEST_EFFORT,
+    )
+
+
 def data_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
-    """Telemetry, state, scans and odometry: best effort, dropped under congestion, never
-    blocking (the next message replaces a lost one; the robot repeats its state at 1 Hz)."""
+    """A remote driver's scans and odometry (robot <-> simulator): best effort, dropped under
+    congestion, never blocking (the next message replaces a lost one)."""
     return session.declare_publisher(
         key,
         priority=zenoh.Priority.DATA,

@@ -7,7 +7,7 @@
         --worlds 100 [--reuse docs/filters/runs.jsonl]
 
 Every filter runs on the same worlds, starts, goals, operators and via points, as headless
-episodes of ``egc-teleop episode`` (``egc_app.episode.run_batch``; the robot's own pipeline):
+episodes of ``egc-teleop episode`` (``episode_batch.run_batch``; the robot's own pipeline):
 
 - ``hallway``: the built-in hallway (pioneer3dx), via point at its goal;
 - ``mrpb``: the 19 start/goal tests of ``../shared/worlds/mrpb/*/tests.txt`` (pioneer3dx), via
@@ -50,7 +50,8 @@ from egc_sim.mrpb_tests import TESTS_FILE, parse_tests
 from egc_sim.route import plan_route
 from egc_sim.worlds import load_world
 
-from egc_app.episode import EpisodeSettings, run_batch, run_settings
+from egc_experiments.episode import EpisodeSettings, run_settings
+from egc_experiments.episode_batch import run_batch
 
 ROOT = Path(__file__).resolve().parents[2]
 MRPB_DIR = ROOT.parent / "shared" / "worlds" / "mrpb"
@@ -65,7 +66,10 @@ SUITE_PROFILE = {"hallway": "pioneer3dx", "mrpb": "pioneer3dx", "random": "jacka
 # episode`` itself defaults to pioneer3dx everywhere); ``--random-profile`` changes it.
 SUITE_VIA = {"hallway": "goal", "mrpb": "route", "random": "goal"}
 CODE_DIRS = ("robot/egc_robot", "sim_robot/egc_sim", "common/egc_common")
-CODE_FILES = ("egc_app/episode.py",)
+CODE_FILES = (
+    "experiments/egc_experiments/episode.py",
+    "experiments/egc_experiments/episode_batch.py",
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -198,7 +202,7 @@ def episodes(
 
 
 def code_hash(root: Path = ROOT) -> str:
-    """A hash of the sources an episode runs (robot, simulator, common, the episode wiring)."""
+    """A hash of the sources an episode runs (robot, simulator, common, the episode engine)."""
     h = hashlib.sha256()
     paths = [p for d in CODE_DIRS for p in (root / d).rglob("*.py")]
     paths += [root / f for f in CODE_FILES]
@@ -393,7 +397,7 @@ def _header(
         "```",
         "",
         f"Code: HEAD {_git_head()}, sources hash {', '.join(codes)} (`arena.code_hash`: robot, "
-        "simulator, common and the episode wiring as they were in the working tree); "
+        "simulator, common and the episode engine as they were in the working tree); "
         f"{len(records)} episodes.",
         "",
     ]

@@ -3,7 +3,7 @@
 Runs DWA, EGC and EK-EGC on the built-in world ``ek_egc_paper`` (our reconstruction of the
 paper's scene, see ``docs/ek-egc-paper.md``) with the ``goal`` operator (the stick points at the
 goal; it cannot see obstacles) in shared mode, through the robot's own command pipeline
-(``egc_app.episode.run_settings``: the filter of DESIGN 6, the no-dead-lock rule, the profile
+(``egc_experiments.episode.run_settings``: the filter of DESIGN 6, the no-dead-lock rule, the profile
 limits and the footprint sweep). DWA gets the goal as its via point (its heading target); EGC
 and EK-EGC get the same profile, hence the same radii r_min and r_max.
 
@@ -29,9 +29,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from egc_common.cli_args import PROFILE_HELP, profile_arg
 from egc_sim.episodes import EpisodeResult
 
-from egc_app.episode import EpisodeSettings, run_settings
+from egc_experiments.episode import EpisodeSettings, run_settings
 
 SCENE = "ek_egc_paper"
 PROFILE = "pioneer3dx"
@@ -293,7 +294,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--out-dir", default="docs", help="where ek-egc-paper.{md,png} go")
     parser.add_argument("--scene", default=SCENE, help=f"world (default {SCENE})")
-    parser.add_argument("--profile", default=PROFILE, help=f"robot profile (default {PROFILE})")
+    parser.add_argument(
+        "--profile", default=PROFILE, type=profile_arg, help=f"{PROFILE_HELP} (default {PROFILE})"
+    )
     parser.add_argument("--max-time", type=float, default=MAX_TIME_S, help="simulated seconds")
     parser.add_argument("--stall-time", type=float, default=STALL_TIME_S, help="seconds")
     args = parser.parse_args(argv)

@@ -378,7 +378,7 @@ def run_emulated(point: RunPoint, workdir: Path, use_netns: bool | None = None) 
     if start is None or goal is None:
         raise ValueError(f"world {point.world!r} has no start or goal: give them in the grid")
     tolerance = world.goal_tolerance_m or DEFAULT_GOAL_TOLERANCE_M
-    checker = FootprintChecker(world, profile.length_m, profile.width_m)
+    checker = FootprintChecker(world, profile.footprint)
     if use_netns is None:
         use_netns = netns.unavailable_reason() is None
     kernel_loss = point.transport == "tcp" and point.loss > 0
@@ -478,6 +478,7 @@ def run_emulated(point: RunPoint, workdir: Path, use_netns: bool | None = None) 
         "link_aware": point.link_aware,
         "latency_turn_cap": point.latency_turn_cap,
         "outages": [list(o) for o in point.outages],
+        "rate_kbps": point.rate_kbps,
         "dist": point.dist,
         "max_speed_mps": round(figures["max_speed_mps"], 4),
         "latency_limited_s": round(figures["latency_limited_s"], 3),

@@ -57,7 +57,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from egc_common.errors import UsageError
-from egc_common.profiles import PROFILES, get_profile
+from egc_common.profiles import ProfileError, load_profile
 from egc_robot.pipeline import FILTERS
 from egc_sim.operators import make_operator
 from egc_sim.simulator import Simulator
@@ -95,8 +95,10 @@ def check_point(point: RunPoint) -> None:
     map), operator."""
     if point.filter not in FILTERS:
         raise GridError(f"unknown filter {point.filter!r} (known: {', '.join(FILTERS)})")
-    if point.profile not in PROFILES:
-        raise GridError(f"unknown profile {point.profile!r} (known: {', '.join(sorted(PROFILES))})")
+    try:
+        profile = load_profile(point.profile)  # a built-in name or a FILE.toml (DESIGN 14)
+    except ProfileError as exc:
+        raise GridError(str(exc)) from None
     try:
         world = load_world(point.world, seed=point.seed)
     except WorldError as exc:
@@ -108,7 +110,6 @@ def check_point(point: RunPoint) -> None:
     outside = world.outside_message(goal, "goal", point.world)
     if outside is not None:
         raise GridError(outside)
-    profile = get_profile(point.profile)
     try:
         Simulator(world, profile, start)
     except WorldError as exc:
@@ -122,6 +123,7 @@ def check_point(point: RunPoint) -> None:
             world=world,
             start=start,
             half_width_m=0.5 * profile.width_m,
+            profile=profile,
         )
     except ValueError as exc:  # JoystickFileError and RouteError are ValueErrors
         raise GridError(f"operator {point.operator!r}: {exc}") from None

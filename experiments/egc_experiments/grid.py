@@ -54,6 +54,11 @@ Axes (every one takes a value or a list; a sweep is the product of its lists):
   both); ``dist``: ``normal`` | ``uniform`` | ``pareto``.
 - ``loss``: percent per packet, each direction; ``burst``: mean burst length (0: independent),
   ignored (0) at ``loss = 0`` so that ``loss = [0, 5]`` and ``burst = [0, 3]`` make 3 points.
+- ``rate_kbps``: a rate limit in kbit/s in each direction with a deep buffer behind it (the
+  relay's ``rate=``, DESIGN 10; 0: none), e.g. ``rate_kbps = [0, 512, 192, 128]`` for the
+  thin uplinks of DESIGN 12. The robot's downlink budget (DESIGN 12) runs in ``emulated`` mode
+  only: the ``simulated`` mode sends the telemetry of every cycle at its modelled size, with
+  no budget, so use ``--mode emulated`` for such points.
 - ``outage_s``: one outage of that many seconds in both directions (0: none), starting at
   ``outage_start_s`` (default 10 s, when the robot is well under way).
 - ``link_aware``: the robot's link-aware driving (DESIGN 8, 9) on or off.
@@ -93,6 +98,7 @@ AXES: Final = (
     "burst",
     "outage_s",
     "outage_start_s",
+    "rate_kbps",
     "link_aware",
     "latency_turn_cap",
     "seeds",
@@ -109,6 +115,7 @@ DEFAULTS: Final[dict[str, Any]] = {
     "burst": 0.0,
     "outage_s": 0.0,
     "outage_start_s": 10.0,
+    "rate_kbps": 0.0,
     "link_aware": True,
     "latency_turn_cap": True,
     "seeds": [0],
@@ -280,6 +287,7 @@ def _sweep_points(
                 loss=float(v["loss"]),
                 burst=float(v["burst"]) if v["loss"] > 0 else 0.0,
                 outages=outages,
+                rate_kbps=float(v["rate_kbps"]),
                 seed=int(v["seeds"]),
                 link_aware=bool(v["link_aware"]),
                 latency_turn_cap=bool(v["latency_turn_cap"]),

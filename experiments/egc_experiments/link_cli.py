@@ -11,14 +11,22 @@ system refused, e.g. ECONNREFUSED from a target with nothing on its UDP port, or
 ``send_errors`` at the top level by direction). Bad input, ``--stats`` included, gives one line
 on stderr and exit 2 before anything runs.
 
+The relay makes exactly one connection to the target per client connection, and none at
+start-up (``relay`` module docstring: a probe took a single-client target's one place). So a
+target that is not there is not a start-up error: the first client's connection is closed, one
+line on stderr says why (``cannot connect to ENDPOINT (Connection refused)``; printed even with
+``--quiet``, once per streak of refusals), and the stop summary and ``--stats``
+(``connect_failures``) count every connection that could not reach it. A host that does not
+resolve is still refused at start-up (exit 2).
+
 Our ``udp/`` transport is two links on one port number (``egc_common.transport``): best-effort
 datagrams on UDP and Zenoh's reliable control traffic on TCP. So a ``udp/`` relay also relays
 TCP between the same port numbers (the *companion*), with the same delay, jitter, rate and
 outages, on the same clock, but without loss or reordering (TCP retransmits what a lossy path
 drops: only the delay remains). ``--udp-only`` turns the companion off. When nothing accepts
-TCP at the target yet (a relay started before the robot), the ready line says so and the
-companion relays each TCP connection once the target accepts it (the client's earlier tries
-are closed, and Zenoh retries).
+TCP at the target yet (a relay started before the robot), the companion closes the client's
+tries (Zenoh retries; the first is one line on stderr, ``link: tcp connection N: cannot
+connect ...``) and relays each one once the target accepts it.
 """
 
 from __future__ import annotations
@@ -41,7 +49,7 @@ from egc_experiments.relay import (
     Endpoint,
     EndpointError,
     Relay,
-    check_reachable,
+    check_resolvable,
     new_event_loop,
     parse_endpoint,
 )
@@ -78,7 +86,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--stats", metavar="FILE.json", help="write the final counts as JSON")
     parser.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
-    parser.add_argument("--quiet", action="store_true", help="no per-connection log lines")
+    parser.add_argument(
+        "--quiet",
+        action="store_true",
+        help="no per-connection log lines (a target that refuses is still reported, once per "
+        "streak of refusals)",
+    )
     parser.add_argument(
         "--udp-only",
         action="store_true",
@@ -137,11 +150,10 @@ def build_relay(args: argparse.Namespace) -> Relay:
         relay = Relay(listen, connect, up, down, seed=args.seed, log=log)
     except (SpecError, EndpointError) as exc:
         raise UsageError(str(exc)) from None
-    try:
-        check_reachable(connect)
+    try:  # resolve only: no connection before a client's (module docstring)
+        check_resolvable(connect)
     except OSError as exc:
-        hint = " (is the robot side listening?)" if connect.proto == "tcp" else ""
-        raise UsageError(f"cannot reach --connect {connect}: {_reason(exc)}{hint}") from None
+        raise UsageError(f"cannot resolve --connect {connect}: {_reason(exc)}") from None
     return relay
 
 
@@ -193,14 +205,6 @@ def _companion(relay: Relay, args: argparse.Namespace, port: int) -> tuple[Relay
     if args.udp_only:
         return None, "UDP only "
     target = Endpoint("tcp", relay.connect.host, relay.connect.port)
-    note = "and tcp (control link, no loss) "
-    try:
-        check_reachable(target)
-    except OSError as exc:
-        note = (
-            f"and tcp (control link, no loss; nothing accepts TCP at {target} yet "
-            f"({_reason(exc)}): relayed once it does) "
-        )
     log = (lambda line: None) if args.quiet else None
     return Relay(
         Endpoint("tcp", relay.listen.host, port),
@@ -209,7 +213,15 @@ def _companion(relay: Relay, args: argparse.Namespace, port: int) -> tuple[Relay
         relay.down.without_loss(),
         seed=relay.seed,
         log=log,
-    ), note
+        label="tcp connection",
+    ), "and tcp (control link, no loss) "
+
+
+def _connections(relay: Relay) -> str:
+    text = f"{relay.connections} connection(s)"
+    if relay.connect_failures:
+        text += f", {relay.connect_failures} could not reach {relay.connect}"
+    return text
 
 
 def run(args: argparse.Namespace) -> int:
@@ -218,10 +230,11 @@ def run(args: argparse.Namespace) -> int:
     with asyncio.Runner(loop_factory=new_event_loop) as runner:
         elapsed = runner.run(_serve(relay, args, companions))
     stats = relay.stats()
-    lines = [f"link: stopped after {elapsed:.1f} s, {relay.connections} connection(s)"]
-    lines += [f"link: {s.line(name)}" for name, s in stats.items()]
+    lines = [f"link: stopped after {elapsed:.1f} s, {_connections(relay)}"]
+    lines += [f"link: {s.line(name, elapsed)}" for name, s in stats.items()]
     for companion in companions:
-        lines += [f"link: tcp {s.line(name)}" for name, s in companion.stats().items()]
+        lines.append(f"link: tcp: {_connections(companion)}")
+        lines += [f"link: tcp {s.line(name, elapsed)}" for name, s in companion.stats().items()]
     print("\n".join(lines), file=sys.stderr, flush=True)
     if args.stats:
         report = {
@@ -230,11 +243,16 @@ def run(args: argparse.Namespace) -> int:
             "seed": relay.seed,
             "duration_s": elapsed,
             "connections": relay.connections,
+            "connect_failures": relay.connect_failures,
             **{name: s.to_dict() for name, s in stats.items()},
             "send_errors": {name: r.send_errors for name, r in relay.recorders.items()},
         }
         for companion in companions:
-            report["tcp"] = {name: s.to_dict() for name, s in companion.stats().items()}
+            report["tcp"] = {
+                "connections": companion.connections,
+                "connect_failures": companion.connect_failures,
+                **{name: s.to_dict() for name, s in companion.stats().items()},
+            }
         try:
             Path(args.stats).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
         except OSError as exc:

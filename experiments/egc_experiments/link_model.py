@@ -701,6 +701,7 @@ class DirectionStats:
     late_max_ms: float | None = None
     send_errors: int = 0
     in_flight: int = 0
+    bytes: int = 0  # payload bytes forwarded
 
     @classmethod
     def from_samples(
@@ -711,6 +712,7 @@ class DirectionStats:
         lateness_ms: Iterable[float] = (),
         send_errors: int = 0,
         in_flight: int = 0,
+        nbytes: int = 0,
     ) -> DirectionStats:
         """Summarise the observed delays (and scheduling lateness) of one direction."""
         delays = sorted(delays_ms)
@@ -731,6 +733,7 @@ class DirectionStats:
             late_max_ms=late[-1] if late else None,
             send_errors=send_errors,
             in_flight=in_flight,
+            bytes=nbytes,
         )
 
     @property
@@ -754,18 +757,23 @@ class DirectionStats:
             "late_max_ms": self.late_max_ms,
             "send_errors": self.send_errors,
             "in_flight": self.in_flight,
+            "bytes": self.bytes,
         }
 
-    def line(self, name: str) -> str:
-        """One human line, e.g. ``up: forwarded 100, dropped 2 (2.0%), delay p50 50.1 ...``."""
+    def line(self, name: str, duration_s: float | None = None) -> str:
+        """One human line, e.g. ``up: forwarded 100, dropped 2 (2.0%), delay p50 50.1 ... ms;
+        carried 51200 bytes (40.9 kbit/s); ...``; the mean rate when ``duration_s`` is given."""
 
         def ms(v: float | None) -> str:
             return "-" if v is None else f"{v:.1f}"
 
+        rate = ""
+        if duration_s is not None and duration_s > 0:
+            rate = f" ({self.bytes * 8 / 1000 / duration_s:.1f} kbit/s)"
         text = (
             f"{name}: forwarded {self.forwarded}, dropped {self.dropped} ({self.loss_pct:.1f}%), "
             f"delay p50 {ms(self.p50_ms)} p90 {ms(self.p90_ms)} p99 {ms(self.p99_ms)} "
-            f"max {ms(self.max_ms)} ms"
+            f"max {ms(self.max_ms)} ms; carried {self.bytes} bytes{rate}"
         )
         if self.late_p99_ms is not None:
             text += f"; late p99 {self.late_p99_ms:.3f} max {ms(self.late_max_ms)} ms"

@@ -44,7 +44,7 @@ from typing import IO, Any
 
 import numpy as np
 from egc_common import keys
-from egc_common.cli_args import numbers_are_values
+from egc_common.cli_args import PROFILE_HELP, numbers_are_values
 from egc_common.clock_id import monotonic_clock_id
 from egc_common.errors import UsageError
 from egc_common.joystick_file import JoystickSample
@@ -190,7 +190,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--goal", metavar="X,Y")
     parser.add_argument("--mode", choices=("shared", "direct"), default="shared")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--profile", default="pioneer3dx")
+    parser.add_argument("--profile", default="pioneer3dx", help=PROFILE_HELP)
     parser.add_argument("--rate-hz", type=float, default=50.0)
     parser.add_argument("--intent", metavar="FILE.jsonl")
     return parser
@@ -214,6 +214,7 @@ def main(argv: list[str] | None = None) -> int:
             world=world,
             start=start,
             half_width_m=0.5 * profile.width_m,
+            profile=profile,
         )
     except (UsageError, ValueError, OSError) as exc:
         print(f"operator-model: error: {exc}", file=sys.stderr)

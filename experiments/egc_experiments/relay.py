@@ -17,6 +17,15 @@ a millisecond (the stats report the lateness measured).
 Time is ``time.monotonic()`` here at the edge; the model sees seconds since the relay started
 (the origin of outages, phases and traces). One model per direction per TCP connection or UDP
 client address (seeded by ``flow_seed``), so a rate limit applies per connection.
+
+Exactly one connection to the target per accepted client connection, and none of its own: a
+single-client target (a serial or motor bridge, a test harness) takes the first connection it
+accepts as its client, so a reachability probe at start-up took that place and every byte
+relayed after it was lost. A target that refuses (or does not answer within
+``CONNECT_TIMEOUT_S``) is found when a client arrives: that client's connection is closed, the
+first refusal of a streak is one line on stderr, and every one is counted
+(``Relay.connect_failures``). What the client sent meanwhile is held in its lane and counted in
+flight, never as forwarded.
 """
 
 from __future__ import annotations
@@ -27,6 +36,7 @@ import contextlib
 import ctypes
 import heapq
 import ipaddress
+import os
 import random
 import select
 import selectors
@@ -102,6 +112,10 @@ def parse_endpoint(text: str) -> Endpoint:
             raise EndpointError(f"endpoint {text!r} must look like {proto}/HOST:PORT")
     if not host:
         raise EndpointError(f"endpoint {text!r} has no host")
+    try:  # what resolving it would raise (a UnicodeError, not an OSError) for ``a..b``
+        host.encode("idna")
+    except UnicodeError:
+        raise EndpointError(f"endpoint {text!r}: {host!r} is not a valid host name") from None
     if not port_text.isdigit() or not 0 <= int(port_text) <= 65535:
         raise EndpointError(f"endpoint {text!r}: the port must be a number in 0..65535")
     return Endpoint(proto, host, int(port_text))
@@ -155,11 +169,12 @@ class Recorder:
     UDP socket the kernel reports an ICMP error for an earlier datagram on the next send or
     receive, so the receive side counts those for the direction that sent through that socket.
     ``in_flight``: packets still held by a lane when it closed (relay stop, connection closed),
-    never delivered.
+    never delivered. ``bytes``: payload bytes forwarded (DESIGN 12: what each direction carries).
     """
 
     def __init__(self, seed: int) -> None:
         self.forwarded = 0
+        self.bytes = 0
         self.dropped = 0
         self.send_errors = 0
         self.in_flight = 0
@@ -169,9 +184,11 @@ class Recorder:
         self.max_late_ms = 0.0
         self._rng = random.Random(seed)
 
-    def record(self, delay_s: float, late_s: float) -> None:
-        """One packet released ``delay_s`` after it was read, ``late_s`` after it was due."""
+    def record(self, delay_s: float, late_s: float, nbytes: int = 0) -> None:
+        """One packet of ``nbytes`` released ``delay_s`` after it was read, ``late_s`` after it
+        was due."""
         self.forwarded += 1
+        self.bytes += nbytes
         delay_ms, late_ms = delay_s * 1000.0, late_s * 1000.0
         self.max_delay_ms = max(self.max_delay_ms, delay_ms)
         self.max_late_ms = max(self.max_late_ms, late_ms)
@@ -193,6 +210,7 @@ class Recorder:
             self.late_ms,
             self.send_errors,
             self.in_flight,
+            self.bytes,
         )
         if not self.forwarded:
             return s
@@ -208,6 +226,7 @@ class Recorder:
             self.max_late_ms,
             self.send_errors,
             self.in_flight,
+            self.bytes,
         )
 
 
@@ -215,7 +234,9 @@ class Lane:
     """One direction of one flow: the model decides, a heap holds packets until they are due.
 
     ``send`` delivers bytes; ``None`` in the heap is a TCP end of stream, delivered in order
-    after the data before it, which calls ``on_eof``.
+    after the data before it, which calls ``on_eof``. A lane made ``held`` releases nothing
+    (packets wait in the heap, their delays running) until ``resume()``: a TCP client's bytes
+    while the connection to the target is being made.
     """
 
     def __init__(
@@ -227,6 +248,7 @@ class Lane:
         recorder: Recorder,
         on_eof: Callable[[], None] | None = None,
         on_pressure: Callable[[bool], None] | None = None,
+        held: bool = False,
     ) -> None:
         self._loop = loop
         self._model = model
@@ -241,6 +263,7 @@ class Lane:
         self._seq = 0
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at = 0.0
+        self.held = held
         self.closed = False
 
     def push(self, data: bytes, now: float) -> None:
@@ -252,9 +275,9 @@ class Lane:
             self._rec.dropped += 1
             return
         due = arrival + self._t0
-        if due <= now and not self._heap:
+        if due <= now and not self._heap and not self.held:
             if self._deliver(data):
-                self._rec.record(0.0, 0.0)
+                self._rec.record(0.0, 0.0, len(data))
             return
         self._enqueue(due, now, data)
         self.queued_bytes += len(data)
@@ -276,8 +299,14 @@ class Lane:
     def _enqueue(self, due: float, now: float, data: bytes | None) -> None:
         self._seq += 1
         heapq.heappush(self._heap, (due, self._seq, now, data))
-        if self._timer is None or due < self._timer_at:
+        if not self.held and (self._timer is None or due < self._timer_at):
             self._arm(due)
+
+    def resume(self) -> None:
+        """Stop holding: deliver, in order, what is due and schedule the rest."""
+        self.held = False
+        if self._heap and not self.closed:
+            self._release()
 
     def _arm(self, due: float) -> None:
         if self._timer is not None:
@@ -298,7 +327,7 @@ class Lane:
                 return
             self.queued_bytes -= len(data)
             if self._deliver(data):
-                self._rec.record(now - read_at, now - due)
+                self._rec.record(now - read_at, now - due, len(data))
         if self._pressed and not self._full(now, 0.5):
             self._pressed = False
             assert self._on_pressure is not None
@@ -368,9 +397,7 @@ class _TcpPipe:
         self.number = number
         self.client = _Side(self, "client")
         self.server = _Side(self, "server")
-        self._pending: list[bytes] = []
         self._closing: set[str] = set()
-        self._close_when_connected = False
         self._paused: dict[str, set[str]] = {"client": set(), "server": set()}
         loop, t0, seed = relay.loop, relay.t0, relay.seed
         self.up = Lane(
@@ -379,8 +406,9 @@ class _TcpPipe:
             t0,
             self._to_server,
             relay.recorders["up"],
-            self._up_eof,
+            self.close,
             lambda on: self.pause(self.client, "link queue", on),
+            held=True,  # until the connection to the target is made
         )
         self.down = Lane(
             loop,
@@ -418,40 +446,34 @@ class _TcpPipe:
     def side_ready(self, side: _Side) -> None:
         if side is self.client:
             self.relay.loop.create_task(self._connect())
-        else:
+        elif self.closed:  # the client went (or the relay stopped) while connecting
             assert side.transport is not None
-            if self._pending:
-                side.transport.writelines(self._pending)
-                self._pending.clear()
-            if self._close_when_connected:
-                self.close()
-
-    def _up_eof(self) -> None:
-        if self.server.transport is None:  # still connecting: deliver what is pending first
-            self._close_when_connected = True
+            side.transport.close()
         else:
-            self.close()
+            self.relay.target_reached()
+            self.up.resume()
 
     async def _connect(self) -> None:
+        """The one connection to the target for this client (module docstring)."""
         target = self.relay.connect
         try:
             await asyncio.wait_for(
                 self.relay.loop.create_connection(lambda: self.server, target.host, target.port),
                 CONNECT_TIMEOUT_S,
             )
-        except (OSError, TimeoutError) as exc:
-            reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else "timed out"
-            self.relay.log(
-                f"link: connection {self.number}: cannot connect to {target} ({reason}); "
-                "closing the client connection"
-            )
+        except TimeoutError:
+            self.relay.target_failed(self.number, f"no answer in {CONNECT_TIMEOUT_S:g} s")
+            self.close()
+        except OSError as exc:
+            # asyncio's strerror is "Connect call failed (ADDR)"; the errno says why.
+            reason = os.strerror(exc.errno) if exc.errno else str(exc) or type(exc).__name__
+            self.relay.target_failed(self.number, reason)
             self.close()
 
     def _to_server(self, data: bytes) -> None:
         transport = self.server.transport
-        if transport is None:
-            self._pending.append(data)
-        elif not transport.is_closing():  # an end that went away: its bytes have nowhere to go
+        assert transport is not None  # the up lane is held until it is there
+        if not transport.is_closing():  # an end that went away: its bytes have nowhere to go
             transport.write(data)
 
     def _to_client(self, data: bytes) -> None:
@@ -545,7 +567,11 @@ class Relay:
     """The relay between ``listen`` (operator side) and ``connect`` (robot side).
 
     ``await start()`` binds and returns the endpoint actually listened on (port 0 picks one);
-    ``close()`` stops everything; ``stats()`` summarises each direction.
+    ``close()`` stops everything; ``stats()`` summarises each direction. ``connections`` counts
+    the client connections (TCP) or client addresses (UDP), ``connect_failures`` the TCP ones
+    whose connection to the target failed. ``log`` takes the per-connection lines, ``warn``
+    the first refusal of each streak (both default to stderr); ``label`` names a connection in
+    them.
     """
 
     def __init__(
@@ -556,6 +582,8 @@ class Relay:
         down: Schedule,
         seed: int = 0,
         log: Callable[[str], None] | None = None,
+        warn: Callable[[str], None] | None = None,
+        label: str = "connection",
     ) -> None:
         if listen.proto != connect.proto:
             raise EndpointError(
@@ -571,12 +599,16 @@ class Relay:
         self.up = up
         self.down = down
         self.seed = seed
-        self.log = log or (lambda line: print(line, file=sys.stderr, flush=True))
+        self.log = log or _to_stderr
+        self.warn = warn or _to_stderr
+        self.label = label
         self.recorders = {
             "up": Recorder(derive_seed(seed, "stats/up")),
             "down": Recorder(derive_seed(seed, "stats/down")),
         }
         self.connections = 0
+        self.connect_failures = 0
+        self._failing = False  # the last connection to the target failed
         self.t0 = 0.0
         self._loop: asyncio.AbstractEventLoop | None = None
         self._server: asyncio.Server | None = None
@@ -619,6 +651,23 @@ class Relay:
 
     def pipe_closed(self, pipe: _TcpPipe) -> None:
         self._pipes.discard(pipe)
+
+    def target_failed(self, number: int, reason: str) -> None:
+        """Connection ``number`` could not reach the target: counted; the first of a streak is
+        a warning, the rest (a client retrying every second) per-connection lines."""
+        self.connect_failures += 1
+        line = (
+            f"link: {self.label} {number}: cannot connect to {self.connect} ({reason}); "
+            "closing the client connection"
+        )
+        if self._failing:
+            self.log(line)
+        else:
+            self._failing = True
+            self.warn(line)
+
+    def target_reached(self) -> None:
+        self._failing = False
 
     def _udp_readable(self) -> None:
         sock = self.udp_sock
@@ -666,11 +715,12 @@ class Relay:
         return {name: rec.stats() for name, rec in self.recorders.items()}
 
 
-def check_reachable(target: Endpoint, timeout_s: float = 2.0) -> None:
-    """TCP: connect to the target once and close (``OSError`` when refused or unreachable).
-    UDP: only resolves the host (there is nothing to connect to)."""
-    if target.proto == "tcp":
-        with socket.create_connection((target.host, target.port), timeout=timeout_s):
-            pass
-    else:
-        socket.getaddrinfo(target.host, target.port, type=socket.SOCK_DGRAM)
+def check_resolvable(target: Endpoint) -> None:
+    """Resolve the target's host (``OSError`` when it cannot be); never connects to it (module
+    docstring: a probe would take a single-client target's one place)."""
+    kind = socket.SOCK_STREAM if target.proto == "tcp" else socket.SOCK_DGRAM
+    socket.getaddrinfo(target.host, target.port, type=kind)
+
+
+def _to_stderr(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)

@@ -51,6 +51,8 @@ class RunPoint:
     ``link_aware`` switches the robot's link-aware driving (DESIGN 8 resume, DESIGN 9 governor,
     per-mode command age) on or off, so that the sweep can compare both;
     ``latency_turn_cap`` false leaves the governor's turn-rate cap out (the speed cap alone).
+    ``rate_kbps``: the link's rate limit in each direction, kbit/s, with the relay's deep
+    buffer behind it (DESIGN 10 ``rate=``, 12); 0: none.
     """
 
     world: str
@@ -64,6 +66,7 @@ class RunPoint:
     loss: float = 0.0
     burst: float = 0.0
     outages: tuple[tuple[float, float], ...] = ()
+    rate_kbps: float = 0.0
     seed: int = 0
     link_aware: bool = True
     latency_turn_cap: bool = True
@@ -81,7 +84,15 @@ class RunPoint:
             raise ValueError(
                 f"transport must be one of {', '.join(TRANSPORTS)}, got {self.transport!r}"
             )
-        for name in ("delay_ms", "jitter_ms", "loss", "burst", "max_time_s", "stall_time_s"):
+        for name in (
+            "delay_ms",
+            "jitter_ms",
+            "loss",
+            "burst",
+            "rate_kbps",
+            "max_time_s",
+            "stall_time_s",
+        ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
@@ -94,6 +105,8 @@ class RunPoint:
         d.pop("extra")
         if d["latency_turn_cap"]:  # the default: keys of runs made before it existed still match
             d.pop("latency_turn_cap")
+        if not d["rate_kbps"]:  # likewise
+            d.pop("rate_kbps")
         return repr(sorted(d.items()))
 
     def identity(self) -> dict[str, Any]:
@@ -120,5 +133,7 @@ class RunPoint:
             parts.append(f"loss={self.loss:g}")
             if self.burst > 1:
                 parts.append(f"burst={self.burst:g}")
+        if self.rate_kbps:
+            parts.append(f"rate={self.rate_kbps:g}")
         parts += [f"outage={s:g}+{d:g}" for s, d in self.outages]
         return ",".join(parts)

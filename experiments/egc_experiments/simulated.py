@@ -211,6 +211,7 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
         world=world,
         start=start,
         half_width_m=0.5 * profile.width_m,
+        profile=profile,
     )
     operator = OperatorSide(model, point.mode, start)
     spec = parse_spec(point.link_spec())
@@ -359,6 +360,7 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
         "link_aware": point.link_aware,
         "latency_turn_cap": point.latency_turn_cap,
         "outages": [list(o) for o in point.outages],
+        "rate_kbps": point.rate_kbps,
         "dist": point.dist,
         "max_speed_mps": round(max_speed, 4),
         "contact_speed_mps": round(abs(contact[0]), 4) if outcome == "collided" else None,

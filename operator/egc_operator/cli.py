@@ -16,12 +16,19 @@ Via points (DESIGN 7, ``egc_operator.via_route``): ``--goal X,Y`` (repeatable, i
 ``--goal-frame odom|map`` (default odom); the gamepad's buttons skip the active one or clear
 them all.
 
+Fleets (DESIGN 15, ``egc_operator.fleet_session``): without ``--robot`` the operator lists the
+robots it sees and drives the first listed (``--first ID``: that one), and switches at run time:
+the gamepad's switch buttons (the D-pad left/right, ``robot_next`` / ``robot_prev``), a joystick
+file's ``robot_next`` / ``robot_prev`` columns, or a line typed on the terminal (``robot NAME``,
+``robot N``, ``next``, ``prev``, ``list``). The old robot is released and holds; the new one
+needs a centred stick. With ``--robot ID`` it drives that robot only, as before.
+
 Configuration: ``--config FILE`` (TOML) and ``--set key=value``, tables
 
     [operator]  rate_hz, deadzone, gamepad ("xbox" | "ps" | "generic")
     [joystick]  forward_axis, forward_invert, turn_axis, turn_invert, deadman, mode_toggle,
-                estop, reset, filter_cycle, via_next, via_clear
-                (evdev code names such as "BTN_TL", or numbers)
+                estop, reset, filter_cycle, via_next, via_clear, robot_next, robot_prev,
+                robot_axis (evdev code names such as "BTN_TL", or numbers)
 """
 
 from __future__ import annotations
@@ -58,9 +65,11 @@ from egc_operator.command_source import (
     load_script,
     script_names,
 )
+from egc_operator.fleet_session import FleetSession, SessionStatus
 from egc_operator.joystick_evdev import PRESETS, ButtonMap, EvdevJoystick, open_device
 from egc_operator.operator_node import OperatorNode, View
-from egc_operator.status_line import StatusLine
+from egc_operator.status_line import FleetLine, StatusLine
+from egc_operator.terminal_input import TerminalInput
 from egc_operator.via_route import Route, RouteError, route_from_options
 
 log = logging.getLogger("egc.operator")
@@ -80,9 +89,17 @@ def default_operator_id() -> str:
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--robot",
-        default=keys.DEFAULT_ROBOT_ID,
+        default=None,
         metavar="ID",
-        help=f"robot to drive (default: {keys.DEFAULT_ROBOT_ID})",
+        help="drive this robot only (default: list the robots seen, drive one, switch at run "
+        "time with the gamepad's D-pad or typed commands)",
+    )
+    parser.add_argument(
+        "--first",
+        default=None,
+        metavar="ID",
+        help="without --robot: the robot to drive first, once it is seen (default: the first "
+        "listed)",
     )
     parser.add_argument(
         "--operator-id", metavar="ID", help="this operator's id (default: HOST-PID)"
@@ -228,12 +245,15 @@ def run(args: argparse.Namespace) -> int:
         print("\n".join(script_names()))
         return 0
     try:
-        robot_id = keys.validate_id(args.robot)
+        robot_id = None if args.robot is None else keys.validate_id(args.robot)
+        first = None if args.first is None else keys.validate_id(args.first, "--first robot id")
         operator_id = keys.validate_id(args.operator_id or default_operator_id(), "operator id")
         cfg = config_mod.load(args.config, args.set, ("operator", "joystick"))
         op_cfg = config_mod.section(cfg, "operator", OPERATOR_KEYS)
     except ValueError as exc:  # includes ConfigError
         raise UsageError(str(exc)) from None
+    if robot_id is not None and first is not None:
+        raise UsageError("--first is for an operator without --robot (which drives one robot)")
     rate_hz = args.rate_hz if args.rate_hz is not None else _number(op_cfg, "rate_hz", 50.0)
     if not 1.0 <= rate_hz <= 1000.0:
         raise UsageError("--rate-hz must be within [1, 1000]")
@@ -251,11 +271,19 @@ def run(args: argparse.Namespace) -> int:
             "mode button (a joystick file's mode column); --filter picks shared mode's filter"
         )
     route = _route(args)
+    if robot_id is None and route is not None:
+        raise UsageError(
+            "--goal and --route need --robot: via points belong to one robot, and an operator "
+            "without --robot may switch between several"
+        )
     source = _open_source(args, cfg)
     # The view first: a --save file that cannot be written or a --serve-web port in use is a
     # usage error (exit 2) before anything connects or drives.
     try:
-        view: View = view_mod.open_view(args, robot_id)
+        if robot_id is None:
+            view: View = view_mod.open_view(args, "fleet", fleet=True)
+        else:
+            view = view_mod.open_view(args, robot_id)
     except BaseException:
         source.close()
         raise
@@ -273,14 +301,23 @@ def run(args: argparse.Namespace) -> int:
         timer.daemon = True
         timer.start()
     offset_ns = round(args.clock_offset_s * 1e9)
+
+    def local_clock() -> int:
+        return time.monotonic_ns() + offset_ns
+
+    clock_id = monotonic_clock_id() if offset_ns == 0 else None
+    if robot_id is None:
+        return _run_fleet(
+            args, session, source, view, stop, operator_id, first, rate_hz, local_clock, clock_id
+        )
     node = OperatorNode(
         session,
         robot_id,
         operator_id,
         source,
         rate_hz=rate_hz,
-        local_clock=lambda: time.monotonic_ns() + offset_ns,
-        clock_id=monotonic_clock_id() if offset_ns == 0 else None,
+        local_clock=local_clock,
+        clock_id=clock_id,
         view=view,
         status=None if args.no_status else StatusLine(sys.stdout),
         route=route,
@@ -296,4 +333,76 @@ def run(args: argparse.Namespace) -> int:
         source.close()
         session.close()
         log.info("stopped after %d commands", node.published)
+    return 0
+
+
+def _run_fleet(
+    args: argparse.Namespace,
+    session: Any,
+    source: CommandSource,
+    view: View,
+    stop: threading.Event,
+    operator_id: str,
+    first: str | None,
+    rate_hz: float,
+    local_clock: Any,
+    clock_id: str | None,
+) -> int:
+    """Without --robot: the fleet session (DESIGN 15, ``egc_operator.fleet_session``)."""
+    fleet_line: list[Any] = []  # the session's, once it exists (the status line asks for it)
+
+    def line() -> FleetLine | None:
+        return fleet_line[0]() if fleet_line else None
+
+    status = None if args.no_status else SessionStatus(sys.stdout, fleet=line)
+
+    def make_node(robot: str, node_source: CommandSource, robot_view: View | None) -> OperatorNode:
+        return OperatorNode(
+            session,
+            robot,
+            operator_id,
+            node_source,
+            rate_hz=rate_hz,
+            local_clock=local_clock,
+            clock_id=clock_id,
+            view=robot_view,
+            status=status,
+            filter_default=args.filter,
+        )
+
+    fleet = FleetSession(
+        session,
+        operator_id,
+        source,
+        make_node,
+        clock=local_clock,
+        status=status,
+        view=view,  # type: ignore[arg-type]
+        first=first,
+    )
+    fleet_line.append(fleet.fleet_line)
+    log.info("operator %r: looking for robots (%.0f Hz)", operator_id, rate_hz)
+    typing = None
+    if TerminalInput.wanted(sys.stdin):
+        typing = TerminalInput(sys.stdin, fleet.typed)
+        typing.start()
+    try:
+        fleet.run(stop)
+    finally:
+        if typing is not None:
+            typing.stop()
+        if status is not None:
+            status.finish()
+        view.close()
+        source.close()
+        session.close()
+        if fleet.switches:
+            ms = sorted(s.ms for s in fleet.switches)
+            log.info(
+                "switches: %d, press to first accepted command p50 %.1f ms, max %.1f ms",
+                len(ms),
+                ms[len(ms) // 2],
+                ms[-1],
+            )
+        log.info("stopped after %d commands", fleet.published)
     return 0

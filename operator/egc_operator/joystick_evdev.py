@@ -21,11 +21,15 @@
                                 dwa, then egc again); in direct mode it switches to shared
   via next      BTN_TR          RB / R1: skip the active via point
   via clear     BTN_WEST        X / Square: clear all via points
+  next robot    ABS_HAT0X +1    D-pad right (DESIGN 15: the operator drives the next robot)
+                BTN_DPAD_RIGHT  (the same, for drivers that report the D-pad as buttons)
+  prev. robot   ABS_HAT0X -1    D-pad left; BTN_DPAD_LEFT
   ============  ==============  =========================================================
 
   The ``generic`` preset is for USB joysticks with BTN_TRIGGER-style buttons (trigger is the
   deadman, thumb the e-stop, thumb 2 cycles the filter, top skips a via point, top 2 clears
-  them, base 3 and base 4 toggle the mode and reset). Some drivers report the Xbox X and Y
+  them, base 3 and base 4 toggle the mode and reset, base 5 and base 6 or the hat switch the
+robot). Some drivers report the Xbox X and Y
   buttons the other way round (``evtest`` shows the codes): swap ``filter_cycle`` and
   ``via_clear`` in the ``[joystick]`` table then.
 - E-stop and reset are sent for at least ``latch_s`` after a press, so a tap survives a lost
@@ -34,6 +38,8 @@
   press unless a default is given: the robot's own default runs). ``via_next`` and
   ``via_clear`` read true while the button is held, and at least once after a press however
   short, so a tap between two samples is not lost; the operator node acts on the press edge.
+  ``robot_next`` and ``robot_prev`` likewise (``robot_axis``, a hat, counts as pressed while it
+  is pushed to that side).
 - A device that disappears (unplugged: ``OSError``) reads as a centred stick with the deadman
   released, and the source tries to reopen it once a second.
 
@@ -64,6 +70,7 @@ CODES: dict[str, int] = {
     "ABS_RX": 0x03,
     "ABS_RY": 0x04,
     "ABS_RZ": 0x05,
+    "ABS_HAT0X": 0x10,
     "BTN_TRIGGER": 0x120,
     "BTN_THUMB": 0x121,
     "BTN_THUMB2": 0x122,
@@ -72,6 +79,8 @@ CODES: dict[str, int] = {
     "BTN_PINKIE": 0x125,
     "BTN_BASE3": 0x128,
     "BTN_BASE4": 0x129,
+    "BTN_BASE5": 0x12A,
+    "BTN_BASE6": 0x12B,
     "BTN_SOUTH": 0x130,
     "BTN_EAST": 0x131,
     "BTN_NORTH": 0x133,
@@ -81,6 +90,8 @@ CODES: dict[str, int] = {
     "BTN_SELECT": 0x13A,
     "BTN_START": 0x13B,
     "BTN_MODE": 0x13C,
+    "BTN_DPAD_LEFT": 0x222,
+    "BTN_DPAD_RIGHT": 0x223,
 }
 
 
@@ -117,6 +128,9 @@ class ButtonMap:
     filter_cycle: int = CODES["BTN_NORTH"]
     via_next: int = CODES["BTN_TR"]
     via_clear: int = CODES["BTN_WEST"]
+    robot_next: int = CODES["BTN_DPAD_RIGHT"]
+    robot_prev: int = CODES["BTN_DPAD_LEFT"]
+    robot_axis: int = CODES["ABS_HAT0X"]  # a hat: +1 next robot, -1 previous
 
     @staticmethod
     def from_table(table: Mapping[str, Any], base: ButtonMap | None = None) -> ButtonMap:
@@ -145,6 +159,8 @@ PRESETS: dict[str, ButtonMap] = {
         filter_cycle=CODES["BTN_THUMB2"],
         via_next=CODES["BTN_TOP"],
         via_clear=CODES["BTN_TOP2"],
+        robot_next=CODES["BTN_BASE6"],
+        robot_prev=CODES["BTN_BASE5"],
     ),
 }
 
@@ -192,6 +208,8 @@ class EvdevJoystick:
         self._filter = filter
         self._via_next_pending = False
         self._via_clear_pending = False
+        self._robot_pending = {"next": False, "prev": False}
+        self._hat = 0  # the robot_axis hat's position: -1, 0, +1
         self._deadzone = deadzone
         self._latch_s = latch_s
         self._reopen = reopen
@@ -211,6 +229,7 @@ class EvdevJoystick:
         }
         self._raw = {axis: float(device.absinfo(axis).value) for axis in self._cal}
         self._pressed.clear()
+        self._hat = 0
         self._device = device
 
     @property
@@ -231,6 +250,8 @@ class EvdevJoystick:
         m = self._mapping
         if self._device is None:
             self._via_next_pending = self._via_clear_pending = False
+            self._robot_pending = {"next": False, "prev": False}
+            self._hat = 0
             return JoystickSample(
                 t_s, 0.0, 0.0, deadman=False, mode=self._mode, filter=self._filter
             )
@@ -239,6 +260,9 @@ class EvdevJoystick:
         via_next = self._via_next_pending or m.via_next in self._pressed
         via_clear = self._via_clear_pending or m.via_clear in self._pressed
         self._via_next_pending = self._via_clear_pending = False
+        robot_next = self._robot_pending["next"] or self._hat > 0 or m.robot_next in self._pressed
+        robot_prev = self._robot_pending["prev"] or self._hat < 0 or m.robot_prev in self._pressed
+        self._robot_pending = {"next": False, "prev": False}
         return JoystickSample(
             t_s,
             -x if m.forward_invert else x,
@@ -250,6 +274,8 @@ class EvdevJoystick:
             filter=self._filter,
             via_next=via_next,
             via_clear=via_clear,
+            robot_next=robot_next,
+            robot_prev=robot_prev,
         )
 
     def _drain(self, t_s: float) -> None:
@@ -258,6 +284,11 @@ class EvdevJoystick:
         while (event := self._device.read_one()) is not None:
             if event.type == EV_ABS and event.code in self._raw:
                 self._raw[event.code] = float(event.value)
+            elif event.type == EV_ABS and event.code == m.robot_axis:
+                hat = (event.value > 0) - (event.value < 0)
+                if hat and hat != self._hat:  # pushed to a side: a press, however short
+                    self._robot_pending["next" if hat > 0 else "prev"] = True
+                self._hat = hat
             elif event.type == EV_KEY:
                 if event.value == 0:
                     self._pressed.discard(event.code)
@@ -278,6 +309,10 @@ class EvdevJoystick:
                     self._via_next_pending = True
                 elif event.code == m.via_clear:
                     self._via_clear_pending = True
+                elif event.code == m.robot_next:
+                    self._robot_pending["next"] = True
+                elif event.code == m.robot_prev:
+                    self._robot_pending["prev"] = True
 
     def _cycle_filter(self) -> None:
         """The next filter of shared mode; from direct mode, shared mode with the current pick."""

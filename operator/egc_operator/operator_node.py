@@ -18,6 +18,17 @@
   changes) and the robot's own telemetry decides whose clock the stamps follow.
 - Sends ``view_age_ms`` with every command (DESIGN 7, 9): the age, on the robot's clock, of the
   newest telemetry received (and handed to the view), once the clock is synchronised.
+- Subscribes to the robot's camera (DESIGN 12, ``egc_operator.camera_view.CameraFeed``): frames
+  decoded in their own thread and shown in the view with their age (``robot_clock``: the clock
+  sync's estimate and its error, which also bounds how far ahead a frame's stamp may be);
+  ``camera.shown_stamp_ns()`` is the newest shown frame's capture stamp, read without a lock.
+- Sends ``rx_kbps`` with every command once view data came (DESIGN 12): the view plane's payload
+  bytes received over the last second (telemetry, and camera samples counted through
+  ``count_view_bytes``), in kbit/s, the robot's downlink budget's measure of what the link
+  delivers; and ``camera_age_ms`` when there is a camera view (``CameraAge``), like
+  ``view_age_ms`` for the newest frame shown, on the same reading of the robot's clock as the
+  command's stamp (the robot tells the frame shown from the two). The status line says what
+  the link carries.
 - Keeps a bounded history of the commands it sent (robot-clock stamps) and hands it to the view
   after every command, for the predictive display (DESIGN 9, ``egc_operator.prediction``).
 - Sends ``filter`` with every command (DESIGN 6): the source's pick (a gamepad button, a file's
@@ -62,7 +73,9 @@ from egc_common.messages import (
     decode_telemetry,
 )
 from egc_common.transport import command_publisher, payload_bytes
+from egc_common.view_budget import RateMeter
 
+from egc_operator.camera_view import CameraFeed, CameraView, RobotClock
 from egc_operator.clock_sync import ClockSync
 from egc_operator.command_source import CommandSource
 from egc_operator.prediction import CommandHistory, SentCommand
@@ -76,6 +89,7 @@ _STATUS_PERIOD_NS = 200_000_000
 # Via points sent this long without the robot echoing one of them: say so on the status line.
 VIA_UNTAKEN_NS = 3_000_000_000
 _RELEASE_AFTER_END_NS = 300_000_000
+_RELEASE_FLUSH_S = 0.1
 _CLOCK_TIMEOUT_S = 3.0  # above the round trip of a satellite link (2 x 500 ms + jitter)
 _START_WAIT_NS = 10 * NS_PER_S  # a script starts when the robot is seen, or after this
 # The map is one large reply (a 500 x 500 grid is ~30 kB): over a 500 ms +- 100 ms link it
@@ -91,13 +105,24 @@ _REPLIERS_LOG_NS = 30 * NS_PER_S  # "more than one peer answers the clock query"
 
 def goal_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
     """Via points: rare and must not be lost, so reliable and blocking under congestion (unlike
-    the best-effort command and data publishers); the goal thread is the only one it blocks."""
+    the best-effort command and data publishers); the goal thread is the only one it blocks.
+    Control plane (DESIGN 12): INTERACTIVE_HIGH, express."""
     return session.declare_publisher(
         key,
-        priority=zenoh.Priority.INTERACTIVE_LOW,
+        priority=zenoh.Priority.INTERACTIVE_HIGH,
+        express=True,
         congestion_control=zenoh.CongestionControl.BLOCK,
         reliability=zenoh.Reliability.RELIABLE,
     )
+
+
+class CameraAge(Protocol):
+    """The camera decoder's report (``egc_operator.camera_view``, DESIGN 12): the capture
+    stamp (robot clock) of the newest frame shown, None when none is shown. Read on every
+    command, so it must not wait for the decoder (no lock: a decoder thread preempted on a busy
+    machine while holding one delayed commands by hundreds of ms)."""
+
+    def shown_stamp_ns(self) -> int | None: ...
 
 
 class View(Protocol):
@@ -138,6 +163,16 @@ def view_age_ms(
     return max(0, min(MAX_VIEW_AGE_MS, age_ms))
 
 
+def _camera_stamp(camera: CameraAge) -> int | None:
+    """The capture stamp of the newest camera frame shown, None when unknown or when the
+    decoder fails (it must not stop the commands)."""
+    try:
+        return camera.shown_stamp_ns()
+    except Exception as exc:
+        log.debug("camera age unknown: %s", exc)
+        return None
+
+
 def _replier_of(reply: zenoh.Reply) -> str:
     """Who answered a query: the replier's Zenoh session id and its queryable's entity id
     (``zid/eid``), "" when the reply does not say."""
@@ -162,8 +197,11 @@ class OperatorNode:
         status: StatusLine | None = None,
         route: Route | None = None,
         filter_default: str | None = None,
+        camera: CameraAge | None = None,
     ) -> None:
         self._session = session
+        self._camera = camera
+        self._rx = RateMeter()  # view-plane payload bytes received (DESIGN 12 rx_kbps)
         self._robot = robot_id
         self._op = operator_id
         self._source = source
@@ -192,6 +230,7 @@ class OperatorNode:
         # each, and a clock reply to a query sent before one is not this robot's.
         self._robot_epoch = 0
         self._map_wake = threading.Event()
+        self._sync_wake = threading.Event()  # the clock sync's thread: ask the robot's clock now
         self.published = 0
         self._filter_default = filter_default
         self._planner = RoutePlanner(route)
@@ -205,6 +244,20 @@ class OperatorNode:
         self._route_pending_since_ns: int | None = None
         self._last_route: Route | None = None
         self.goals_published = 0
+        # The robot's camera (DESIGN 12): decoded in its own thread, shown in the view, its
+        # newest frame's age for the command (shown_stamp_ns()), refusals counted with the
+        # rest. Made before the robot's liveliness subscriber, whose callback resets it.
+        self.camera = CameraFeed(
+            session,
+            robot_id,
+            self.robot_clock,
+            view if isinstance(view, CameraView) else None,
+            local_clock,
+            on_reject=self._reject,
+            on_bytes=self.count_view_bytes,
+        )
+        if self._camera is None:  # its frames' age goes with every command (camera_age_ms)
+            self._camera = self.camera
         self._publisher = command_publisher(session, keys.cmd(robot_id))
         self._goal_publisher = goal_publisher(session, keys.goal(robot_id))
         liveliness = session.liveliness()
@@ -216,6 +269,15 @@ class OperatorNode:
                 keys.alive_robot(robot_id), self._on_robot_alive, history=True
             ),
         ]
+
+    def robot_clock(self, local_ns: int) -> RobotClock | None:
+        """The clock sync's estimate of the robot's clock at ``local_ns`` and its error (half
+        the best round trip), or None before it is synchronised."""
+        with self._lock:
+            best = self._sync.best
+            if best is None or not self._sync.synchronised:
+                return None
+            return RobotClock(self._sync.robot_now(local_ns), best.rtt_ns // 2)
 
     # -- callbacks ----------------------------------------------------------------------------
 
@@ -245,8 +307,17 @@ class OperatorNode:
         except Exception as exc:  # nothing from the network raises out of the callback
             log.warning("telemetry callback failed: %s: %s", type(exc).__name__, exc)
 
+    def count_view_bytes(self, nbytes: int) -> None:
+        """View-plane payload bytes received (telemetry here; a camera subscriber calls it for
+        its samples), for ``rx_kbps`` (DESIGN 12). Any thread."""
+        now = self._clock()
+        with self._lock:
+            self._rx.add(now, nbytes)
+
     def _telemetry_in(self, sample: zenoh.Sample) -> None:
-        t = decode_telemetry(payload_bytes(sample))
+        payload = payload_bytes(sample)
+        self.count_view_bytes(len(payload))  # refused or not, it crossed the link
+        t = decode_telemetry(payload)
         if isinstance(t, Rejection):
             self._reject("telemetry", t)
             return
@@ -302,6 +373,10 @@ class OperatorNode:
                 self._episode = Episode()
                 self._sync = ClockSync()
                 self._robot_epoch += 1
+        if changed:
+            self.camera.reset()  # the old robot's frames are not this one's
+        if changed:
+            self._sync_wake.set()
         if alive:
             self._map_wake.set()  # its map, again (a restarted robot may serve another one)
         text = "robot present" if alive else "robot gone (its liveliness token was withdrawn)"
@@ -362,9 +437,14 @@ class OperatorNode:
                 log.debug("clock query failed: %s", exc)
             with self._lock:
                 confirmed = self._sync.confirmed
+                raced = epoch != self._robot_epoch
+            if raced:  # the robot (re)appeared during the query, its reply was dropped: ask now
+                continue
             # 10 Hz until the robot's telemetry confirms the clock in use (a second replier
-            # that comes later is then seen within 0.1 s), then 1 Hz
-            stop.wait(1.0 if confirmed else 0.1)
+            # that comes later is then seen within 0.1 s), then 1 Hz; at once when the robot
+            # (re)appears (its clock was forgotten: a new operator session waits for it)
+            self._sync_wake.wait(1.0 if confirmed else 0.1)
+            self._sync_wake.clear()
 
     def _say_repliers(self) -> None:
         """More than one peer answers the clock query: name them in the log (at once when the
@@ -479,6 +559,7 @@ class OperatorNode:
         next_status = opened
         ended_at: int | None = None
         seq = 0
+        last: OperatorCommand | None = None
         while not stop.is_set():
             stop.wait(max(0, deadline - self._clock()) / NS_PER_S)
             now = self._clock()
@@ -502,12 +583,18 @@ class OperatorNode:
                     self._goal_wake.set()
                 pressed[action] = held
             seq += 1
+            frame_ns = None if self._camera is None else _camera_stamp(self._camera)
             with self._lock:
                 stamp = self._sync.robot_now(now)
                 shown = self._telemetry
-                age = view_age_ms(
-                    stamp, self._sync.synchronised, None if shown is None else shown.stamp_ns
-                )
+                synchronised = self._sync.synchronised
+                age = view_age_ms(stamp, synchronised, None if shown is None else shown.stamp_ns)
+                rx = round(self._rx.kbps(now)) if self._rx.total_bytes else None
+            # The camera's age on the same reading of the robot's clock as the stamp: the robot
+            # finds the frame shown from the two (egc_common.view_budget).
+            camera_age = None
+            if frame_ns is not None and age is not None:
+                camera_age = view_age_ms(stamp, synchronised, frame_ns)
             command = OperatorCommand(
                 seq=seq,
                 stamp_ns=stamp,
@@ -520,6 +607,8 @@ class OperatorNode:
                 op=self._op,
                 view_age_ms=age,
                 filter=sample.filter if sample.filter is not None else self._filter_default,
+                rx_kbps=rx,
+                camera_age_ms=camera_age,
             )
             self._publisher.put(command.encode())
             self.published += 1
@@ -531,16 +620,40 @@ class OperatorNode:
                 )
                 if self._view is not None:
                     self._view.on_commands(self.history, stamp)
-            if self._status is not None and now >= next_status:
-                self._status.show(self._status_of(command), now / NS_PER_S)
+            if now >= next_status:
+                if self._status is not None:
+                    self._status.show(self._status_of(command), now / NS_PER_S)
+                self.camera.tick()  # the camera's age line, and its stale mark
                 next_status = now + _STATUS_PERIOD_NS
             deadline += self._period_ns
             if deadline <= now:
                 deadline = now + self._period_ns
+            last = command
+        if last is not None and last.deadman:
+            self._release_on_exit(last)
         stop.set()
         self._goal_wake.set()
+        self._sync_wake.set()
         sync_thread.join(timeout=2 * _CLOCK_TIMEOUT_S)
         goal_thread.join(timeout=2 * _CLOCK_TIMEOUT_S)
+
+    def _release_on_exit(self, last: OperatorCommand) -> None:
+        """Stopped (a --duration, a signal) with the deadman held: one last command releases it,
+        so the robot holds because the operator let go, before the liveliness token goes (it
+        would otherwise see an operator lost while driving)."""
+        with self._lock:
+            stamp = self._sync.robot_now(self._clock())
+        try:
+            release = replace(
+                last, seq=last.seq + 1, stamp_ns=stamp, x=0.0, y=0.0, deadman=False, estop=False
+            )
+            self._publisher.put(release.encode())
+            self.published += 1
+            # Closing the session right away can close the transport before the release has
+            # left the transmission queue; the robot then sees the token go first.
+            time.sleep(_RELEASE_FLUSH_S)
+        except Exception as exc:  # a closing session: the token's withdrawal stops it anyway
+            log.debug("release on exit not sent: %s", exc)
 
     # -- via points thread ------------------------------------------------------------------------
 
@@ -629,6 +742,7 @@ class OperatorNode:
                 state_age_s=state_age_s,
                 rejections=self.rejections.recent(now),
                 clock_note=self._sync.note(),
+                rx_kbps=command.rx_kbps,
             )
         pending = self._route_pending_since_ns
         if (
@@ -641,6 +755,7 @@ class OperatorNode:
         return status
 
     def close(self) -> None:
+        self.camera.close()
         for entity in self._entities:
             entity.undeclare()
         self._token.undeclare()

@@ -6,6 +6,12 @@ keep the stick, it resumes`` or ``SLOWED: link delay 1.3 s -> speed capped at 0.
 the link figures (``link_figures``: clock-sync round trip, the robot's command age p50/p90, the
 largest gap between commands, the loss), then w_SI, rejections, mode with the filter that runs
 (``shared (ek-egc)``, from telemetry ``filter``), the via points, deadman and control.
+The view plane (DESIGN 12, ``view_plane_text``) says what the link carries and what the robot's
+downlink budget cut: ``camera 2 fps, scan 90 beams: the link carries 190 kbit/s``.
+A robot with command sources (DESIGN 14) says which one drives and which lock holds
+(``source nav``, ``LOCKED by pause (true)``), and an operator whose control another operator of
+higher priority took is told who (``TAKEN OVER: supervisor took control``; ``Episode`` keeps the
+robot's last handover of control).
 Every telemetry figure may be unknown (None: an older robot, or none measured yet); unknown
 figures are left out.
 
@@ -20,12 +26,18 @@ On a terminal the line is redrawn in place a few times a second, cut to the term
 so that it never wraps. When stdout is not a TTY (a log file, a pipe, CI) the same text is
 printed as plain lines, only when the robot's state or reason, the latency cap or the control
 situation changes and otherwise at most every ``plain_period_s``, so logs stay readable.
+
+An operator driving a fleet (DESIGN 15) gives the line its ``fleet`` part: the driven robot
+first, in brackets, and the others with their state at the end (``[r2] ... | fleet: r1 HOLD,
+r3 IDLE``); a change there (a switch, another robot's state) prints a plain line too.
+``say`` prints a line of its own (a robot listing) without garbling the redrawn one.
 """
 
 from __future__ import annotations
 
 import shutil
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TextIO
 
@@ -164,6 +176,13 @@ class Status:
     refused: RecentRejections | None = None
     # What the clock sync says besides the round trip (several repliers, disagreement).
     clock_note: str | None = None
+    # The view plane (DESIGN 12): ``view_plane_text`` of the newest telemetry and rx_kbps.
+    view_plane: str | None = None
+    # Command sources (DESIGN 14): the source that drives and the lock that holds (None: none,
+    # or a robot without sources), and the operator that took control from this one.
+    source: str | None = None
+    lock: str | None = None
+    taken_by: str | None = None
 
 
 def _seconds(ms: float) -> str:
@@ -214,6 +233,9 @@ def _hold(s: Status, reason: str) -> str:
         return "HOLD: e-stop reset - centre the stick to drive"
     if "resum" in r:
         return "HOLD: resuming after a link gap - keep the stick"
+    if r.startswith("lock "):
+        name, _, why = reason[len("lock ") :].partition(": ")
+        return f"LOCKED by {name} ({why}) - nothing drives until it releases"
     if r.startswith("operator ") and r.endswith((" lost", " silent")):
         return f"HOLD: {reason} - stopping; hold the deadman, stick centred, to take control"
     return f"HOLD: {reason}"
@@ -271,12 +293,17 @@ def situation(s: Status) -> str:
         return "robot: no telemetry"
     if s.in_control is False and s.controller is not None and state in ("HOLD", "DRIVING"):
         who = s.controller
+        if s.taken_by == who:
+            return f"TAKEN OVER: {who} took control - you can take over once it quits or is lost"
         return f"WATCHING: {who} is in control - you can take over once it quits or is lost"
     reason = s.reason or ""
     if state == "ESTOP":
         return "ESTOP: latched - release the e-stop, centre the stick, hold the deadman, reset"
     if state == "DRIVING":
-        return _driving(s, reason)
+        text = _driving(s, reason)
+        if s.source is not None and reason == f"source {s.source}":
+            return f"{text} - source {s.source} drives"
+        return text
     if state == "IDLE":
         why = reason or "no operator"
         return f"IDLE: {why} - hold the deadman with the stick centred to take control"
@@ -306,6 +333,32 @@ def link_figures(s: Status) -> str:
     return ", ".join(parts)
 
 
+def view_plane_text(t: Telemetry | None, rx_kbps: float | None = None) -> str | None:
+    """What the view plane carries and what the robot's downlink budget cut (DESIGN 12), e.g.
+    ``camera 2 fps, scan 90 beams: the link carries 190 kbit/s`` (after a cut, with the robot's
+    estimate of the link) or ``scan 180 beams: view 175 kbit/s`` (nothing cut: what this
+    operator receives, else what the robot sent). None when nothing is known (an older robot
+    and nothing counted)."""
+    rate = rx_kbps if rx_kbps is not None else (None if t is None else t.view_kbps)
+    if t is None or t.tel_hz is None:
+        return None if rate is None else f"view {rate:.0f} kbit/s"
+    parts = []
+    if t.cam_fps is not None:
+        parts.append("camera off" if t.cam_fps <= 0 else f"camera {t.cam_fps:.0f} fps")
+    if t.scan_n is not None:
+        parts.append(f"scan {t.scan_n} beams")
+    if "rate" in t.cut:
+        parts.append(f"telemetry {t.tel_hz:.0f} Hz")
+    if t.cut and t.link_kbps is not None:
+        carries = f"the link carries {t.link_kbps:.0f} kbit/s"
+    elif rate is not None:
+        carries = f"view {rate:.0f} kbit/s"
+    else:
+        carries = ""
+    head = ", ".join(parts)
+    return f"{head}: {carries}" if head and carries else head or carries or None
+
+
 def format_status(s: Status) -> str:
     w_si = "w_SI  --" if s.w_si is None else f"w_SI {s.w_si:4.2f}"
     rejected = "rejected --" if s.rejected is None else f"rejected {s.rejected}"
@@ -324,10 +377,22 @@ def format_status(s: Status) -> str:
             f" | REFUSED {s.refused.count} robot msgs in {REJECTIONS_SHOWN_S:.0f} s"
             f" ({s.refused.what}; {s.refused.total} in all)"
         )
+    view = "" if s.view_plane is None else f" | {s.view_plane}"
+    sources = "" if s.source is None else f" | source {s.source}"
+    if s.lock is not None:
+        sources += f" | lock {s.lock}"
     return (
-        f"{situation(s)} | {link_figures(s)} | {w_si} | {rejected}{refused} | {mode}{via} | "
-        f"{deadman}{control}"
+        f"{situation(s)} | {link_figures(s)}{view} | {w_si} | {rejected}{refused} | {mode}{via}"
+        f"{sources} | {deadman}{control}"
     )
+
+
+@dataclass(frozen=True, slots=True)
+class FleetLine:
+    """The fleet's part of the line (DESIGN 15): the driven robot, and the others' states."""
+
+    driven: str
+    others: str
 
 
 class StatusLine:
@@ -337,16 +402,26 @@ class StatusLine:
         tty: bool | None = None,
         plain_period_s: float = 5.0,
         width: int | None = None,
+        fleet: Callable[[], FleetLine | None] | None = None,
     ):
         self._stream = stream
         self._tty = stream.isatty() if tty is None else tty
         self._plain_period_s = plain_period_s
         self._width = width  # None: the terminal's, asked at every redraw
+        self._fleet = fleet
         self._last_key: tuple[object, ...] | None = None
         self._last_plain_s = -1e9
 
+    def say(self, text: str) -> None:
+        """A line of its own (on a terminal, above the redrawn status line)."""
+        self._stream.write(("\r\x1b[2K" if self._tty else "") + text + "\n")
+        self._stream.flush()
+
     def show(self, status: Status, now_s: float) -> None:
         text = format_status(status)
+        fleet = None if self._fleet is None else self._fleet()
+        if fleet is not None:
+            text = f"[{fleet.driven}] {text} | fleet: {fleet.others}"
         if self._tty:
             width = self._width or shutil.get_terminal_size(fallback=(200, 24)).columns
             if len(text) > width - 1:  # a wrapped line cannot be redrawn in place
@@ -365,6 +440,9 @@ class StatusLine:
             status.no_telemetry_yet,
             status.refused is not None,  # the robot's messages began or stopped being refused
             status.clock_note,
+            status.source,  # DESIGN 14: another source drives, a lock engaged
+            status.lock,
+            fleet,  # a switch, or another robot's state changed
         )
         if key != self._last_key or now_s - self._last_plain_s >= self._plain_period_s:
             self._stream.write(text + "\n")
@@ -393,10 +471,16 @@ class Episode:
         self.newest_ns = 0
         self.gap_ms: float | None = None
         self.reached_ref = False  # the speed reached its reference since the key changed
+        # DESIGN 14: the operator in control, and the last handover seen: (from, to).
+        self.operator: str | None = None
+        self.handover: tuple[str | None, str | None] | None = None
 
     def update(self, t: Telemetry) -> None:
         if self.newest_ns - EPISODE_CLOCK_JUMP_NS <= t.stamp_ns < self.newest_ns:
             return  # an older cycle that came late (far older: the robot's clock jumped)
+        if t.operator != self.operator:
+            self.handover = (self.operator, t.operator)
+            self.operator = t.operator
         key = (t.state, t.reason)
         if key != self.key:
             self.key, self.since_ns, self.gap_ms = key, t.stamp_ns, None
@@ -430,6 +514,7 @@ def status_of(
     state_age_s: float | None = None,
     rejections: RecentRejections | None = None,
     clock_note: str | None = None,
+    rx_kbps: float | None = None,
 ) -> Status:
     """The status line's inputs from the newest messages (robot gone: none of its state, figures
     or round trip; telemetry older than TELEMETRY_STALE_S, or none since the robot appeared:
@@ -457,6 +542,11 @@ def status_of(
         rejected = t.rejected if rejected is None else max(rejected, t.rejected)
     in_control = None if robot_state is None else controller == command.op
     gap_ms, episode_s = (None, None) if episode is None else episode.of(robot_state, reason)
+    taken_by = None
+    if episode is not None and episode.handover is not None:
+        before, after = episode.handover
+        if before == command.op and after is not None and after == controller:
+            taken_by = after  # straight from this operator to another: it took control
     return Status(
         # a silent robot's round trip is as old as its silence: left out like its figures
         rtt_ms=rtt_ms if robot_alive and not stale else None,
@@ -491,6 +581,10 @@ def status_of(
         no_telemetry_yet=no_telemetry_yet,
         refused=rejections,
         clock_note=clock_note,
+        view_plane=view_plane_text(t, rx_kbps) if robot_alive else None,
+        source=None if t is None else t.source,
+        lock=None if t is None else t.lock,
+        taken_by=taken_by,
     )
 
 

@@ -18,6 +18,12 @@ The operator process also hands over its via points (``on_route``): the world fr
 them with the robot's echo of the active one (telemetry ``goal``, ``goals_left``), and the
 robot frame the direction the filter suggests (``suggested_rad``), see ``view_scene.via_scene``.
 
+An operator driving a fleet (DESIGN 15) opens one view with the fleet layout (``fleet=True``)
+and gives each driven robot its own ``for_robot`` view on that recording (a robot's telemetry,
+clock and trajectory are its own; closing it leaves the recording open); ``on_fleet`` draws
+the fleet panel (``view_blueprint.FLEET_TABLE``) and the robots that share the driven robot's
+map frame at their map poses (``FLEET_POSES``).
+
 Every method is thread-safe (Zenoh delivers on its own threads) and never raises on a message:
 a view must not take the operator process down.
 """
@@ -45,6 +51,8 @@ from egc_common.errors import UsageError
 from egc_common.messages import StateMessage, Telemetry
 
 from egc_operator import view_blueprint as paths
+from egc_operator.camera_view import ShownFrame
+from egc_operator.fleet_table import FleetRow, fleet_markdown, on_shared_map
 from egc_operator.prediction import (
     CommandHistory,
     Prediction,
@@ -69,6 +77,8 @@ from egc_operator.view_scene import (
     VIA_ORANGE,
     WORLD_TO_SCREEN,
     footprint_half_size,
+    footprint_is_box,
+    footprint_outline,
     ghost_scene,
     is_stale,
     link_text,
@@ -105,6 +115,10 @@ PREDICTION_PERIOD_NS = 50_000_000  # the ghost is redrawn at most this often (ro
 # A recording that failed with less free space than this beside it: "the disk is full".
 FULL_DISK_BYTES = 1024 * 1024
 DOWNLINK_SAMPLES = 20  # telemetry arrivals in the downlink median
+CAMERA_STALE_OPACITY = 0.3  # a camera frame older than camera_view.STALE_AFTER_MS is dimmed
+CAMERA_LABEL_AT = (6.0, 6.0)  # the age line's anchor, in the picture's pixels
+CAMERA_FRESH_INK = (40, 160, 40)
+CAMERA_STALE_INK = (200, 40, 40)
 TEXT_LEVELS = {
     "trace": "TRACE",
     "debug": "DEBUG",
@@ -115,6 +129,27 @@ TEXT_LEVELS = {
     "critical": "CRITICAL",
 }
 STATE_LEVELS = {"IDLE": "INFO", "DRIVING": "INFO", "HOLD": "WARN", "ESTOP": "ERROR"}
+# The fleet's robots on the map, by state (DESIGN 15).
+FLEET_STATE_COLOURS = {
+    "IDLE": (120, 120, 120),
+    "DRIVING": (30, 150, 60),
+    "HOLD": (220, 150, 0),
+    "ESTOP": (210, 30, 30),
+}
+FLEET_MARK_RADIUS_M = 0.25
+# What a fleet's driven robot draws, cleared when the operator switches to another one.
+_DRIVEN_PATHS = (
+    paths.SCAN,
+    paths.STATUS,
+    paths.CIRCLES,
+    paths.TRAJECTORY,
+    paths.ROBOT_POSE,
+    paths.PREDICTED,
+    paths.VIA,
+    paths.CAMERA_IMAGE,
+    paths.CAMERA_AGE,
+    paths.LINK_TEXT,
+)
 # (series path under plots/, legend name, colour): the paper's Fig. 11 has the operator's
 # reference in blue and the modified command in red.
 SERIES_STYLE = (
@@ -179,8 +214,10 @@ def open_view(
     *,
     application_id: str = "egc-teleop",
     recording_name: str | None = None,
+    fleet: bool = False,
 ) -> OperatorView:
-    """The operator view at the target chosen by ``add_view_arguments``' options.
+    """The operator view at the target chosen by ``add_view_arguments``' options (``fleet``:
+    the layout of an operator driving a fleet, DESIGN 15).
 
     Prints one line on stderr saying where the view is. Raises ``UsageError`` for a bad
     combination of options, a malformed URL, a file that cannot be written or a web port in use
@@ -199,7 +236,7 @@ def open_view(
         stamp=stamp,
     )
     check_target(target)
-    view = _open(target, robot_id, application_id, recording_name)
+    view = _open(target, robot_id, application_id, recording_name, fleet=fleet)
     address = viewer_address(target)
     if target.kind == "spawn" and address is not None:
         why = reachable(address)
@@ -210,7 +247,7 @@ def open_view(
                 "save", path=default_save_path(robot_id, stamp), viewer_failed=True
             )
             check_target(fallback)
-            view = _open(fallback, robot_id, application_id, recording_name)
+            view = _open(fallback, robot_id, application_id, recording_name, fleet=fleet)
             assert fallback.path is not None
             view.flush()
             if fallback.path.exists():
@@ -257,13 +294,15 @@ def _open(
     application_id: str,
     recording_name: str | None,
     world_bounds_m: tuple[float, float, float, float] | None = None,
+    fleet: bool = False,
 ) -> OperatorView:
     if target.kind == "none":
         return OperatorView(None, robot_id, where="operator view disabled (--no-view)")
     batcher = FILE_BATCHER if target.kind == "save" else None
     rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4(), batcher_config=batcher)
+    blueprint = operator_blueprint(robot_id, world_bounds_m=world_bounds_m, fleet=fleet)
     try:
-        where = attach(rec, target, operator_blueprint(robot_id, world_bounds_m=world_bounds_m))
+        where = attach(rec, target, blueprint)
     except (RuntimeError, OSError) as exc:  # e.g. the file or port was taken since the check
         option = {"save": "--save", "serve_web": "--serve-web", "connect": "--connect"}
         raise UsageError(f"{option.get(target.kind, 'view')}: {exc}") from None
@@ -281,16 +320,22 @@ class OperatorView:
     """
 
     def __init__(
-        self, recording: rr.RecordingStream | None, robot_id: str, where: str = ""
+        self,
+        recording: rr.RecordingStream | None,
+        robot_id: str,
+        where: str = "",
+        owns_recording: bool = True,
     ) -> None:
         self.robot_id = robot_id
         self.where = where
         self._rec = recording
+        self._owns_recording = owns_recording  # False: a ``for_robot`` view of a fleet
+        self._fleet_drawn = False
         self._lock = threading.Lock()
         self._last: Telemetry | None = None
         self._world_profile: str | None = None
         self._trajectory_end: tuple[float, float] | None = None
-        self._state_key: tuple[str, str, str | None] | None = None
+        self._state_key: tuple[str, str, str | None, str | None, str | None] | None = None
         self._rejected_seen = 0
         self._offset_ns: int | None = None
         self._robot_ns: int | None = None  # the latest robot stamp seen
@@ -310,12 +355,54 @@ class OperatorView:
         self._present = True  # the robot's liveliness token (``on_robot_presence``)
         self._stale_drawn: tuple[str, str] | None = None  # the stale texts last drawn
         self._viewer_missing: str | None = None  # why the viewer cannot be reached, if not
+        self._camera_ns: int | None = None  # robot time of the camera's newest row
+        self._camera_stale = False
         self._watch_stop = threading.Event()
         self.save_path: Path | None = None  # the recording file, when the view is saved to one
         if recording is not None:
             self._log_static(recording)
 
     # -- public API ------------------------------------------------------------------------------
+
+    def for_robot(self, robot_id: str) -> OperatorView:
+        """A view of one driven robot on this view's recording (DESIGN 15): its telemetry,
+        clock, trajectory and camera are its own; ``close`` leaves the recording open (this
+        view's ``close`` closes it)."""
+        with self._lock:
+            rec = self._rec
+        view = OperatorView(rec, robot_id, where=self.where, owns_recording=False)
+        view.clock = self.clock
+        return view
+
+    def on_fleet(self, rows: list[FleetRow], me: str, robot_now_ns: int | None) -> None:
+        """The fleet panel and the robots sharing the driven robot's map (DESIGN 15), at the
+        driven robot's time now (``robot_now_ns``; None: its clock is not known yet, the
+        panel waits)."""
+        with self._lock:
+            rec = self._rec
+            if rec is None or robot_now_ns is None or robot_now_ns <= 0:
+                return
+            _set_time(rec, robot_now_ns, self._cycle)
+            rec.log(
+                paths.FLEET_TABLE,
+                rr.TextDocument(fleet_markdown(rows, me), media_type="text/markdown"),
+            )
+            shown = [row for row in on_shared_map(rows) if not row.driven]
+            if not shown and not self._fleet_drawn:
+                return
+            poses = [row.map_pose for row in shown if row.map_pose is not None]
+            rec.log(
+                paths.FLEET_POSES,
+                rr.Points2D(
+                    [(p[0], p[1]) for p in poses],
+                    radii=FLEET_MARK_RADIUS_M,
+                    colors=[FLEET_STATE_COLOURS.get(row.state or "", STALE_GREY) for row in shown],
+                    labels=[f"{row.robot} {row.state or '?'}" for row in shown],
+                    show_labels=True,
+                    draw_order=20.0,
+                ),
+            )
+            self._fleet_drawn = bool(shown)
 
     def on_telemetry(self, t: Telemetry, received_ns: int | None = None) -> None:
         """One control cycle: robot-frame view, time series, status lanes, world frame (pose).
@@ -354,9 +441,13 @@ class OperatorView:
             self._robot_ns = s.stamp_ns
             self._log_pending_text(rec)
             _set_time(rec, s.stamp_ns, self._cycle)
-            key = (s.state, s.reason, s.operator)
+            key = (s.state, s.reason, s.operator, s.source, s.lock)
             if key != self._state_key:
                 who = f" (operator {s.operator})" if s.operator else ""
+                if s.source is not None:
+                    who += f" (source {s.source})"
+                if s.lock is not None:
+                    who += f" (lock {s.lock})"
                 text = f"robot state {s.state}: {s.reason}{who}"
                 rec.log(paths.TEXT_LOG, rr.TextLog(text, level=STATE_LEVELS.get(s.state, "INFO")))
                 self._state_key = key
@@ -449,6 +540,48 @@ class OperatorView:
             )
             rec.log(paths.LINK_TEXT, rr.TextDocument(text))
 
+    def on_camera(self, frame: ShownFrame, text: str, robot_now_ns: int | None) -> None:
+        """The robot's camera (DESIGN 12): the newest frame and its age line, logged at the
+        robot's time now (when it is shown; its capture time is in the line) and never before
+        the camera's previous row, so that the latest row is always the newest frame."""
+        with self._lock:
+            rec = self._rec
+            if rec is None:
+                return
+            self._set_camera_time(rec, robot_now_ns or frame.stamp_ns)
+            rec.log(
+                paths.CAMERA_IMAGE,
+                rr.EncodedImage(contents=frame.jpeg(), media_type="image/jpeg", opacity=1.0),
+            )
+            self._camera_stale = False
+            self._log_camera_text(rec, text, stale=False)
+
+    def on_camera_text(self, text: str, stale: bool, robot_now_ns: int | None) -> None:
+        """The age line again, as the shown frame grows older; ``stale``: dim the frame."""
+        with self._lock:
+            rec = self._rec
+            now = robot_now_ns or self._robot_now()
+            if rec is None or now is None or self._camera_ns is None:
+                return
+            self._set_camera_time(rec, now)
+            if stale != self._camera_stale:
+                opacity = CAMERA_STALE_OPACITY if stale else 1.0
+                rec.log(paths.CAMERA_IMAGE, rr.EncodedImage.from_fields(opacity=opacity))
+                self._camera_stale = stale
+            self._log_camera_text(rec, text, stale)
+
+    def _set_camera_time(self, rec: rr.RecordingStream, robot_ns: int) -> None:
+        self._camera_ns = max(robot_ns, self._camera_ns or 0)
+        _set_time(rec, self._camera_ns, self._cycle)
+
+    @staticmethod
+    def _log_camera_text(rec: rr.RecordingStream, text: str, stale: bool) -> None:
+        ink = CAMERA_STALE_INK if stale else CAMERA_FRESH_INK
+        rec.log(
+            paths.CAMERA_AGE,
+            rr.Points2D([CAMERA_LABEL_AT], radii=2.0, colors=ink, labels=[text], show_labels=True),
+        )
+
     def on_route(self, points: tuple[tuple[float, float], ...], frame: str) -> None:
         """The operator's via points (in order, in ``frame``); empty: none or cleared."""
         with self._lock:
@@ -503,6 +636,16 @@ class OperatorView:
             rec, self._rec = self._rec, None
             if rec is not None:
                 self._log_pending_text(rec, at_ns=self._robot_now() or 0)
+        if rec is not None and not self._owns_recording:
+            # A fleet's robot no longer driven: its drawings go at its last time, so the next
+            # robot's are not shown mixed with them.
+            with self._lock:
+                now = self._robot_now()
+                if now is not None:
+                    _set_time(rec, now, self._cycle)
+                    for path in _DRIVEN_PATHS:
+                        rec.log(path, rr.Clear(recursive=True))
+            return
         if rec is None:
             return
         # A viewer that went away must not end the run with a traceback: the driving is done.
@@ -657,8 +800,11 @@ class OperatorView:
         scene = robot_frame_scene(t)
         colour = _colour_array(scene.region_colour)
         rec.log(paths.SCAN, rr.Points2D(scene.scan_xy))
-        half = [] if scene.footprint_half_size is None else [scene.footprint_half_size]
-        rec.log(paths.FOOTPRINT, rr.Boxes2D(half_sizes=half, colors=colour))
+        if scene.footprint_outline is not None:  # a polygon or a disc, as given (DESIGN 14)
+            rec.log(paths.FOOTPRINT, rr.LineStrips2D([scene.footprint_outline], colors=colour))
+        else:
+            half = [] if scene.footprint_half_size is None else [scene.footprint_half_size]
+            rec.log(paths.FOOTPRINT, rr.Boxes2D(half_sizes=half, colors=colour))
         rec.log(
             paths.STATUS, rr.Points2D([scene.status_anchor], colors=colour, labels=[scene.status])
         )
@@ -730,11 +876,18 @@ class OperatorView:
         )
         profile = profile_named(t.profile)
         if profile is not None and t.profile != self._world_profile:
-            rec.log(
-                paths.POSE_FOOTPRINT,
+            shape: Any = (
                 rr.Boxes2D(
                     half_sizes=[footprint_half_size(profile)], colors=SCAN_INK, radii=THICK_LINE
-                ),
+                )
+                if footprint_is_box(profile)
+                else rr.LineStrips2D(
+                    [footprint_outline(profile)], colors=SCAN_INK, radii=THICK_LINE
+                )
+            )
+            rec.log(
+                paths.POSE_FOOTPRINT,
+                shape,
                 rr.Arrows2D(
                     origins=[(0.0, 0.0)], vectors=[(profile.length_m, 0.0)], colors=SCAN_INK
                 ),

@@ -3,7 +3,9 @@
 Layout (paper Fig. 8 as a Rerun blueprint)::
 
     +---------------------------+----------------------+------------------+
-    | robot frame {R}           | world frame          | v: ref vs sent   |
+    |                           | camera, its age      | v: ref vs sent   |
+    | robot frame {R}           +----------------------+                  |
+    |                           | world frame          |                  |
     | scan, footprint, circles, | map, trajectory,     | w: ref vs sent   |
     | command arrows, suggested | goal, via points,    | w_SI             |
     | direction, status         | robot, ghost         |                  |
@@ -12,6 +14,11 @@ Layout (paper Fig. 8 as a Rerun blueprint)::
     | limiter / region lanes    +----------------------+                  |
     |                           | text log             |                  |
     +---------------------------+----------------------+------------------+
+
+An operator driving a fleet (DESIGN 15, ``fleet=True``) gets a fleet panel beside the driven
+robot's view, under the world frame: every robot's state, who controls it and its link figures
+(``FLEET_TABLE``); the robots that share the driven robot's map frame are drawn in the world
+frame at their map poses (``FLEET_POSES``, from their state messages at 1 Hz).
 
 The world frame shows the newest state of everything (latest-at) except the trajectory, which
 shows its whole history up to the time cursor; the ghost (the predictive display, DESIGN 9) is
@@ -58,6 +65,15 @@ PREDICTED_FOOTPRINT = "world/predicted/footprint"
 PREDICTED_HEADING = "world/predicted/heading"
 PREDICTED_PATH = "world/predicted/path"
 LINK_TEXT = "link"  # TextDocument: the link figures in plain numbers
+# The robot's camera (DESIGN 12): the newest frame (JPEG) and its age, in image pixels.
+CAMERA = "camera"
+CAMERA_IMAGE = "camera/image"
+CAMERA_AGE = "camera/age"
+
+# The fleet (DESIGN 15): a table of every robot, and the others' poses on the driven one's map.
+FLEET = "fleet"
+FLEET_TABLE = "fleet/table"
+FLEET_POSES = "world/fleet"
 
 PLOTS = "plots"  # + /v/ref, /v/cmd, /w/ref, /w/cmd, /w_si, /latency/...
 LINK_RTT = "plots/latency/link_rtt_ms"
@@ -93,11 +109,13 @@ def operator_blueprint(
     robot_id: str,
     view_radius_m: float = 3.0,
     world_bounds_m: tuple[float, float, float, float] | None = None,
+    fleet: bool = False,
 ) -> rrb.Blueprint:
     """The default layout; ``view_radius_m`` frames the robot-frame view (forward is up).
 
     ``world_bounds_m`` (x_min, x_max, y_min, y_max in the world frame) frames the world view;
-    by default it shows everything logged there (the whole map).
+    by default it shows everything logged there (the whole map). ``fleet``: the layout of an
+    operator driving a fleet (the fleet panel; the robot frame is the driven robot's).
     """
     r = view_radius_m
     world_bounds = None
@@ -105,8 +123,9 @@ def operator_blueprint(
         x0, x1, y0, y1 = world_bounds_m
         # Screen coordinates: x = x_W, y = -y_W (north up).
         world_bounds = rrb.VisualBounds2D(x_range=[x0, x1], y_range=[-y1, -y0])
+    who = "driven robot" if fleet else robot_id
     robot_view = rrb.Spatial2DView(
-        name=f"{robot_id}: robot frame, forward up (blue: operator, initial GC; red: sent, expanded GC)",
+        name=f"{who}: robot frame, forward up (blue: operator, initial GC; red: sent, expanded GC)",
         origin="/",
         contents=f"{ROBOT}/**",
         # Screen coordinates: x = -y_R, y = -x_R; show more ahead than behind.
@@ -138,10 +157,18 @@ def operator_blueprint(
                 row_shares=[3, 1],
             ),
             rrb.Vertical(
+                rrb.Spatial2DView(
+                    name="camera (newest frame, age on the robot's clock)", origin=CAMERA
+                ),
                 world_view,
+                *(
+                    [rrb.TextDocumentView(name="fleet: every robot seen", origin=FLEET_TABLE)]
+                    if fleet
+                    else []
+                ),
                 rrb.TextDocumentView(name="link (plain numbers)", origin=LINK_TEXT),
                 rrb.TextLogView(name="log: state changes, rejections, link", origin=TEXT_LOG),
-                row_shares=[6, 2, 2],
+                row_shares=[4, 4, 2, 2, 2] if fleet else [4, 4, 2, 2],
             ),
             plots,
             column_shares=[4, 3, 3],

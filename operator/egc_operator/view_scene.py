@@ -26,7 +26,12 @@ from egc_common.messages import Circle, Telemetry
 from egc_common.profiles import PROFILES, RobotProfile
 
 from egc_operator.prediction import Prediction
-from egc_operator.status_line import TELEMETRY_STALE_S, held_still, latency_cap_text
+from egc_operator.status_line import (
+    TELEMETRY_STALE_S,
+    held_still,
+    latency_cap_text,
+    view_plane_text,
+)
 from egc_operator.via_route import Route, active_index
 
 F32 = npt.NDArray[np.float32]
@@ -109,8 +114,19 @@ def drawable_circle(circle: Circle | None) -> Circle | None:
 
 
 def footprint_half_size(profile: RobotProfile) -> tuple[float, float]:
-    """Half length and half width of the footprint rectangle, centred on the origin of {R}."""
+    """Half length and half width of the box centred on the origin of {R} that holds the
+    footprint (the footprint itself for a centred rectangle)."""
     return profile.half_size_m
+
+
+def footprint_outline(profile: RobotProfile) -> list[Point]:
+    """The footprint as given (DESIGN 14: any polygon, or a disc), closed, in {R}."""
+    return profile.footprint.outline()
+
+
+def footprint_is_box(profile: RobotProfile) -> bool:
+    """Whether the footprint is a rectangle centred on {R}'s origin (drawn as a box)."""
+    return profile.footprint.centred_box is not None
 
 
 def command_vector(v_mps: float, w_radps: float, horizon_s: float) -> tuple[float, float]:
@@ -130,6 +146,8 @@ def status_text(t: Telemetry) -> str:
     A robot that is not driving says why (``HOLD (command timeout) · ...``); the latency limiter
     says its cap (``limit: latency <= 0.10 m/s``). The filter that runs follows the mode
     (``shared (ek-egc)``), and the active via point comes last (``via 2.0,1.0 +1 more``).
+    A robot with command sources (DESIGN 14) says which drives and which lock holds
+    (``source nav · lock pause``).
     """
     limiter = LIMITER_TEXT.get(t.limiter, t.limiter)
     if t.limiter == "latency" and t.v_lim_latency is not None:
@@ -144,6 +162,10 @@ def status_text(t: Telemetry) -> str:
     if t.goal is not None:
         more = f" +{t.goals_left} more" if t.goals_left else ""
         text += f" · via {t.goal[0]:.1f},{t.goal[1]:.1f}{more}"
+    if t.source is not None:
+        text += f" · source {t.source}"
+    if t.lock is not None:
+        text += f" · lock {t.lock}"
     return text
 
 
@@ -159,6 +181,9 @@ class RobotFrameScene:
     sent_vector: tuple[float, float]
     status: str
     status_anchor: tuple[float, float]  # just behind the robot
+    # The footprint's outline (closed) when it is not a centred rectangle (then a box is drawn
+    # from ``footprint_half_size``); None for a box or an unknown profile.
+    footprint_outline: list[Point] | None = None
 
 
 def robot_frame_scene(t: Telemetry) -> RobotFrameScene:
@@ -175,7 +200,8 @@ def robot_frame_scene(t: Telemetry) -> RobotFrameScene:
         "agc": drawable_circle(t.agc),
         "egc": drawable_circle(t.egc),
     }
-    back = -(0.5 * profile.length_m + 0.15) if profile else -0.4
+    back = profile.footprint.bounds[0] - 0.15 if profile else -0.4
+    outline = footprint_outline(profile) if profile and not footprint_is_box(profile) else None
     return RobotFrameScene(
         scan_xy=np.ascontiguousarray(t.scan_xy, dtype=np.float32).reshape(-1, 2),
         footprint_half_size=footprint_half_size(profile) if profile else None,
@@ -185,6 +211,7 @@ def robot_frame_scene(t: Telemetry) -> RobotFrameScene:
         sent_vector=command_vector(t.v_cmd, t.w_cmd, horizon),
         status=status_text(t),
         status_anchor=(back, 0.0),
+        footprint_outline=outline,
     )
 
 
@@ -424,12 +451,11 @@ def dashed(points: list[Point], dash_m: float = DASH_M, gap_m: float = GAP_M) ->
 
 
 def footprint_corners(pose: tuple[float, float, float], profile: RobotProfile) -> list[Point]:
-    """The footprint rectangle at ``pose`` in the world frame, closed (5 points, front first)."""
+    """The footprint at ``pose`` in the world frame, closed (a rectangle: 5 points, front-left
+    first; any polygon or disc: its outline)."""
     x, y, th = pose
-    hl, hw = footprint_half_size(profile)
     c, s = math.cos(th), math.sin(th)
-    local = ((hl, hw), (-hl, hw), (-hl, -hw), (hl, -hw), (hl, hw))
-    return [(x + c * px - s * py, y + s * px + c * py) for px, py in local]
+    return [(x + c * px - s * py, y + s * px + c * py) for px, py in footprint_outline(profile)]
 
 
 @dataclass(frozen=True, slots=True)
@@ -450,9 +476,9 @@ def ghost_scene(prediction: Prediction, profile: RobotProfile) -> GhostScene:
     return GhostScene(
         footprint=dashed(footprint_corners(prediction.pose, profile)),
         heading_origin=(x, y),
-        heading_vector=(
-            0.5 * profile.length_m * math.cos(th),
-            0.5 * profile.length_m * math.sin(th),
+        heading_vector=(  # to the front of the footprint
+            profile.footprint.bounds[1] * math.cos(th),
+            profile.footprint.bounds[1] * math.sin(th),
         ),
         path=dashed([(px, py) for px, py, _ in prediction.path]),
         label=f"{PREDICTED_LABEL}, +{ahead:.2f} s",
@@ -528,6 +554,9 @@ def link_text(
     if t is not None and t.limiter == "latency":
         cap = latency_cap_text(t.v_lim_latency, t.w_lim_latency)
         lines.append(f"limit: latency - speed capped{cap}")
+    view_plane = view_plane_text(t)  # DESIGN 12: the same text as the status line's
+    if view_plane is not None:
+        lines.append(f"view plane: {view_plane}")
     if prediction is None:
         lines.append("ghost: no prediction (no pose, unknown profile or clock not synced)")
     else:

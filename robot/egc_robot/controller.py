@@ -32,6 +32,26 @@ another of the family (OperatorCommand ``filter``, DESIGN 6); a filter that keep
 (``assist``) starts afresh whenever the filter changes or the robot stops driving. Via points
 (``egc/<robot>/goal``, DESIGN 7) are accepted from the operator in control only, and the active
 one goes to the filter in {R}.
+
+Operators among themselves (DESIGN 14, ``[[operator]]`` tables): an operator of higher priority
+than the one in control takes control with its first deadman-held command (a supervisor);
+equal priorities keep first come. Unlisted operators have priority 0.
+
+Command sources (DESIGN 14, ``ControllerConfig.sources``; None without ``[[source]]`` tables,
+and then nothing below applies): besides the operators (the ``operator`` source, which asks to
+drive with each deadman-held command of the operator in control), ``zenoh`` sources
+(``on_source``: ``egc/<robot>/source/<name>``) and ``ros2`` sources (``on_source_velocity``,
+from the ROS 2 driver) give (v, w) directly, with no eq. 4 mapping; locks arrive through
+``on_lock`` / ``on_lock_value``. Each cycle ``source_mux.arbitrate`` says which source drives.
+A source's velocity goes through the same pipeline after the mapping (``filter_velocity``: the
+robot's filter of shared mode, limits, footprint sweep), the latency governor (its tau from that
+source's own command ages; unknown ages count as ``command_timeout``, with no human reaction
+time and no view) and the state machine (``state_machine``: no deadman or stick for a source;
+the scan must be fresh; e-stop latches everything). When no source may drive, the base gets zero
+at once. Switching sources ramps at the profile's limits (the pipeline's acceleration limits
+start from what the base had). A ``zenoh`` source's ``seq`` must increase (a source silent past
+its ``timeout_s`` starts a new session) and a ``stamp_ns`` older than ``max_command_age`` of a
+filtered mode is stale, as an operator's; rejections are counted as ``source_<reason>``.
 """
 
 from __future__ import annotations
@@ -45,6 +65,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from egc_common.messages import (
+    MAX_SPEED_MPS,
+    MAX_TURN_RADPS,
     BaseCommand,
     GoalMessage,
     Odometry,
@@ -57,11 +79,22 @@ from egc_common.messages import (
     decode_goal,
 )
 from egc_common.scan import ObstaclePoints, Scan
+from egc_common.scan_compact import PolarScan, compact
+from egc_common.source_msg import decode_lock, decode_source_command
 
 from egc_robot.latency_governor import govern, latency_speed_limit, latency_turn_limit
 from egc_robot.link_stats import LinkStats
-from egc_robot.pipeline import FILTERS, MODES, Limiter, PipelineConfig, PipelineResult, step_command
+from egc_robot.pipeline import (
+    FILTERS,
+    MODES,
+    Limiter,
+    PipelineConfig,
+    PipelineResult,
+    filter_velocity,
+    step_command,
+)
 from egc_robot.safety import decelerate
+from egc_robot.source_mux import LockFeed, MuxConfig, SourceSpec, Verdict, arbitrate, lock_state
 from egc_robot.state_machine import (
     COMMAND_TIMEOUT,
     LINK_REASONS,
@@ -113,6 +146,10 @@ class ControllerConfig:
     # HOLD and IDLE decelerate at the profile's limit (DESIGN 8); False: zero at once, for a
     # base that brakes at its own limits (DESIGN 11: a zero twist in HOLD on ROS 2).
     hold_ramp: bool = True
+    # DESIGN 14: command sources and locks (None: one operator source, as without [[source]]
+    # tables) and the operators' priorities ([[operator]]; an unlisted operator has 0).
+    sources: MuxConfig | None = None
+    operator_priorities: tuple[tuple[str, int], ...] = ()
 
     def __post_init__(self) -> None:
         for name in (
@@ -161,6 +198,20 @@ class CommandVerdict:
     rejection: Rejection | None
     took_control: bool = False
     latency_ns: int | None = None  # arrival minus stamp, when the operator is synchronised
+    took_from: str | None = None  # the operator of lower priority it took control from
+
+    @property
+    def accepted(self) -> bool:
+        return self.rejection is None
+
+
+@dataclass(frozen=True, slots=True)
+class InputVerdict:
+    """What happened to one source command or lock value (DESIGN 14). ``urgent``: it may change
+    what drives or it comes from the source that drives, so run a cycle on it now."""
+
+    rejection: Rejection | None
+    urgent: bool = False
 
     @property
     def accepted(self) -> bool:
@@ -197,6 +248,31 @@ class CycleOutput:
 class _OperatorTrack:
     last_seq: int
     last_rx_ns: int
+
+
+@dataclass(slots=True)
+class _SourceFeed:
+    """A ``zenoh`` or ``ros2`` source's newest accepted command and its link statistics."""
+
+    v_mps: float
+    w_radps: float
+    rx_ns: int
+    stamp_ns: int  # 0: not stamped (ros2) or not synchronised
+    seq: int | None  # None: the kind has none (ros2)
+    link: LinkStats
+
+
+@dataclass(frozen=True, slots=True)
+class _SourceReport:
+    """What the telemetry says about sources (DESIGN 14), fixed at the cycle."""
+
+    source: str | None
+    lock: str | None
+    source_age_ms: float | None
+    # When a source other than the operator drives: its command's seq (0: none) and the time
+    # its command age counts from (stamp, or arrival when not stamped); None otherwise.
+    seq: int | None
+    since_ns: int | None
 
 
 @dataclass(slots=True)
@@ -239,6 +315,9 @@ class RobotController:
         self._estop_pending = False
         self._scan: _Scan | None = None
         self._telemetry_xy: npt.NDArray[np.float32] | None = None  # of ``_scan``, when asked for
+        self._telemetry_polar: PolarScan | None = None  # ... its compact beams (DESIGN 12)
+        self._raw_scan: Scan | None = None  # the newest scan as it came, for the compact scan
+        self._telemetry_beams: int | None = None  # the downlink budget's scan beams (None: all)
         self._pose: tuple[float, float, float] | None = None
         self._map_pose: tuple[float, float, float] | None = None
         self._route = NO_ROUTE
@@ -264,6 +343,14 @@ class RobotController:
         self._scan_timeout_ns = config.scan_timeout_s * NS_PER_S
         self._resume_window_ns = config.resume_window_s * NS_PER_S
         self._unreported: CycleOutput | None = None  # the last cycle, telemetry not built yet
+        # DESIGN 14 (all unused without sources)
+        self._mux = config.sources
+        self._op_priority = dict(config.operator_priorities)
+        self._feeds: dict[str, _SourceFeed] = {}
+        self._lock_feeds: dict[str, LockFeed] = {}
+        self._op_claim_ns: int | None = None  # newest deadman-held command of the one in control
+        self._verdict: Verdict | None = None  # the last cycle's
+        self._verdict_changed = False
 
     # -- inputs -------------------------------------------------------------------------------
 
@@ -334,7 +421,9 @@ class RobotController:
         else:
             self._track(op, seq, now_ns)
         took_control = False
-        if self._controller_op is None and cmd.deadman:
+        took_from: str | None = None
+        holder = self._controller_op
+        if cmd.deadman and op != holder and (holder is None or self._outranks(op, holder)):
             if op in self._departed:
                 return self._reject(
                     cmd,
@@ -344,6 +433,11 @@ class RobotController:
                     ),
                     now_ns,
                 )
+            if holder is not None:  # a supervisor takes over (DESIGN 14)
+                took_from = holder
+                self._route = NO_ROUTE  # via points belong to the operator who set them
+                self._goal_seq = None
+                self._stale_rx_ns = None
             self._controller_op = op
             self._control_epoch += 1
             self._link.reset()
@@ -360,7 +454,113 @@ class RobotController:
         self._command_rx_ns = now_ns
         self._link.on_accepted(latency_ns, cmd.view_age_ms, now_ns)
         self.counters.accepted += 1
-        return CommandVerdict(cmd, None, took_control, latency_ns)
+        if cmd.deadman:
+            self._op_claim_ns = now_ns  # the operator source asks to drive (DESIGN 14)
+        return CommandVerdict(cmd, None, took_control, latency_ns, took_from)
+
+    def _outranks(self, op: str, holder: str) -> bool:
+        """``op`` has a higher ``[[operator]]`` priority than ``holder`` (DESIGN 14)."""
+        priority = self._op_priority
+        return priority.get(op, 0) > priority.get(holder, 0)
+
+    # -- command sources and locks (DESIGN 14) --------------------------------------------------
+
+    def on_source(self, name: str, payload: object, now_ns: int) -> InputVerdict:
+        """One payload from ``egc/<robot>/source/<name>`` (a ``zenoh`` source); never raises."""
+        decoded = decode_source_command(payload)
+        if isinstance(decoded, Rejection):
+            return self._reject_input(decoded)
+        return self._on_velocity(
+            name, "zenoh", decoded.v_mps, decoded.w_radps, now_ns, decoded.seq, decoded.stamp_ns
+        )
+
+    def on_source_velocity(
+        self, name: str, v_mps: float, w_radps: float, now_ns: int
+    ) -> InputVerdict:
+        """One velocity from a ``ros2`` source's topic (checked here, as from the network)."""
+        if not (
+            isinstance(v_mps, float)
+            and isinstance(w_radps, float)
+            and abs(v_mps) <= MAX_SPEED_MPS  # also false for NaN
+            and abs(w_radps) <= MAX_TURN_RADPS
+        ):
+            return self._reject_input(
+                Rejection(RejectReason.OUT_OF_RANGE, f"velocity {v_mps!r}, {w_radps!r}")
+            )
+        return self._on_velocity(name, "ros2", v_mps, w_radps, now_ns, None, 0)
+
+    def on_lock(self, name: str, payload: object, now_ns: int) -> InputVerdict:
+        """One payload from ``egc/<robot>/lock/<name>`` (a msgpack bool); never raises."""
+        decoded = decode_lock(payload)
+        if isinstance(decoded, Rejection):
+            return self._reject_input(decoded, "lock")
+        return self.on_lock_value(name, decoded, now_ns, ros2=False)
+
+    def on_lock_value(self, name: str, value: bool, now_ns: int, ros2: bool = True) -> InputVerdict:
+        """A lock's value (from ``on_lock`` or a ROS 2 ``std_msgs/Bool`` topic)."""
+        if self._unreported is not None:
+            self._report()
+        spec = next((lk for lk in self._mux.locks if lk.name == name), None) if self._mux else None
+        if spec is None or (spec.topic is not None) != ros2:
+            return self._reject_input(
+                Rejection(RejectReason.NOT_IN_CONTROL, f"no such lock {name!r} of this feed"),
+                "lock",
+            )
+        before = lock_state(spec, self._lock_feeds.get(name), now_ns) is not None
+        feed = LockFeed(bool(value), now_ns)
+        self._lock_feeds[name] = feed
+        return InputVerdict(None, urgent=before != (lock_state(spec, feed, now_ns) is not None))
+
+    def _on_velocity(
+        self,
+        name: str,
+        kind: str,
+        v_mps: float,
+        w_radps: float,
+        now_ns: int,
+        seq: int | None,
+        stamp_ns: int,
+    ) -> InputVerdict:
+        if self._unreported is not None:
+            self._report()
+        mux = self._mux
+        spec = None if mux is None else mux.source(name)
+        if mux is None or spec is None or spec.kind != kind:
+            return self._reject_input(
+                Rejection(RejectReason.NOT_IN_CONTROL, f"no {kind} source named {name!r}")
+            )
+        age_ns: int | None = None
+        if stamp_ns:
+            age_ns = now_ns - stamp_ns
+            max_age_ns = self._max_age_ns["shared"]
+            if abs(age_ns) > max_age_ns:
+                what = f"{age_ns / 1e6:.0f} ms old" if age_ns > 0 else "stamped ahead"
+                return self._reject_input(Rejection(RejectReason.STALE, f"{name}: {what}"))
+        feed = self._feeds.get(name)
+        session = feed is not None and now_ns - feed.rx_ns <= spec.timeout_ns
+        last_seq = None if feed is None or not session else feed.seq
+        if seq is not None and last_seq is not None and seq <= last_seq:
+            reason = RejectReason.DUPLICATE_SEQ if seq == last_seq else RejectReason.OUT_OF_ORDER
+            return self._reject_input(Rejection(reason, f"{name}: seq {seq} after {last_seq}"))
+        if feed is None:
+            link = LinkStats(reaction_time_s=0.0, unknown_part_s=self.config.command_timeout_s)
+            feed = self._feeds[name] = _SourceFeed(v_mps, w_radps, now_ns, stamp_ns, seq, link)
+        else:
+            if not session:
+                feed.link.reset()  # a new session of that source
+            feed.v_mps, feed.w_radps, feed.rx_ns = v_mps, w_radps, now_ns
+            feed.stamp_ns, feed.seq = stamp_ns, seq
+        feed.link.on_arrival(seq if seq is not None else feed.link.received_total + 1, now_ns)
+        # An autonomy stack sees its own sensors: no view delay, no human reaction time.
+        feed.link.on_accepted(age_ns, 0, now_ns)
+        driving = self._verdict.source if self._verdict is not None else None
+        current = mux.source(driving)
+        urgent = driving == name or current is None or spec.priority > current.priority
+        return InputVerdict(None, urgent)
+
+    def _reject_input(self, rejection: Rejection, what: str = "source") -> InputVerdict:
+        self.counters.rejected[f"{what}_{rejection.reason.value}"] += 1
+        return InputVerdict(rejection)
 
     @property
     def route(self) -> ViaPoints:
@@ -422,7 +622,30 @@ class RobotController:
         if self._unreported is not None:
             self._report()
         self._scan = _Scan(scan.obstacles(), now_ns, scan.no_return_is_free)
+        self._raw_scan = scan
         self._telemetry_xy = None  # decimated for the telemetry when it is built
+        self._telemetry_polar = None
+
+    @property
+    def scan_beams_max(self) -> int | None:
+        """The most beams the telemetry's scan can have (the newest scan's beams over
+        ``telemetry_scan_decimation``), None before the first scan."""
+        raw = self._raw_scan
+        if raw is None:
+            return None
+        return max(1, -(-raw.ranges_m.size // self.config.telemetry_scan_decimation))
+
+    def set_telemetry_beams(self, beams: int | None) -> None:
+        """The most scan beams the telemetry may carry (the downlink budget's plan, DESIGN 12;
+        None: every beam the ``telemetry_scan_decimation`` leaves)."""
+        if beams is not None and beams < 1:
+            raise ValueError("beams must be >= 1")
+        if beams != self._telemetry_beams:
+            if self._unreported is not None:
+                self._report()  # the last cycle's telemetry keeps the scan it had
+            self._telemetry_beams = beams
+            self._telemetry_xy = None
+            self._telemetry_polar = None
 
     def on_odometry(self, odometry: Odometry) -> None:
         if self._unreported is not None:
@@ -480,6 +703,9 @@ class RobotController:
         if self._controller_op is not None and silent_ns > self._release_after_ns:
             self._release(f"operator {self._controller_op} silent")
             cmd = None
+        # DESIGN 14: which source drives, decided before the operator's snapshot, as a change
+        # of source is control changing hands.
+        verdict = None if self._mux is None else self._arbitrate(now_ns)
         timeout_ns = self._timeout_ns
         timed_out = silent_ns > timeout_ns
         fresh = (
@@ -507,29 +733,64 @@ class RobotController:
             session_kept=session_kept,
             resume_allowed=session_kept and now_ns - self._last_drive_ns <= self._resume_window_ns,
         )
+        feed: _SourceFeed | None = None  # the source that drives when not the operator
+        if verdict is not None:
+            inputs, feed = self._source_inputs(verdict, inputs, fresh)
         self._estop_pending = False
         before = self._transition
         self._transition = next_state(before, inputs)
         changed = self._transition is not before
         if changed:
             self._state_since_ns = now_ns
+        if verdict is not None and self._verdict_changed:
+            changed = True  # the state message says which source drives and which lock holds
 
         result: PipelineResult | None = None
         state = self._transition.state
         self._driving_epoch = self._control_epoch if state is State.DRIVING else -1
         v_lim: float | None = None
         w_lim: float | None = None
+        tau_s: float | None = None  # unknown without link awareness: cbf takes its default
         if cfg.link_aware:
             profile = cfg.pipeline.profile
-            tau_s = self._link.loop_delay_s(now_ns)
-            blind_s = self._blind_time_s[cmd.mode if cmd is not None else "shared"]
+            if feed is None:
+                tau_s = self._link.loop_delay_s(now_ns)
+                blind_s = self._blind_time_s[cmd.mode if cmd is not None else "shared"]
+            else:
+                tau_s = feed.link.loop_delay_s(now_ns)
+                blind_s = self._blind_time_s["shared"]
             v_lim = latency_speed_limit(tau_s, profile.v_max_mps, profile.decel_max_mps2, blind_s)
             if cfg.latency_turn_cap:
                 w_lim = latency_turn_limit(
                     tau_s, profile.w_max_radps, profile.angular_accel_max_radps2, blind_s
                 )
-        filter_name = self._filter_for(cmd)
-        if state is State.DRIVING and cmd is not None and scan is not None:
+        filter_name = self._filter_for(cmd) if feed is None else cfg.pipeline.filter
+        if state is State.DRIVING and feed is not None and scan is not None:
+            if filter_name != self._memory_filter:
+                self._filter_memory, self._memory_filter = None, filter_name
+            pipeline = cfg.pipeline
+            if scan.no_return_is_free and cfg.pipeline_if_free is not None:
+                pipeline = cfg.pipeline_if_free
+            # The source's velocity as it is (no eq. 4), through the same filter and sweep.
+            result = filter_velocity(
+                pipeline,
+                feed.v_mps,
+                feed.w_radps,
+                "shared",
+                scan.points,
+                self._previous,
+                dt_s,
+                filter_name=filter_name,
+                now_ns=now_ns,
+                memory=self._filter_memory,
+            )
+            self._filter_memory = result.memory
+            v, w, limiter = result.v_cmd_mps, result.w_cmd_radps, result.limiter
+            if v_lim is not None:
+                v, w, capped = govern(v, w, v_lim, math.inf if w_lim is None else w_lim)
+                if capped:
+                    limiter = Limiter.LATENCY
+        elif state is State.DRIVING and cmd is not None and scan is not None:
             self._last_drive_epoch = self._control_epoch
             self._last_drive_ns = self._command_rx_ns  # the gap is timed from this command
             if filter_name != self._memory_filter:
@@ -549,6 +810,7 @@ class RobotController:
                 goal_xy_m=None if self._route.active is None else self._goal_in_robot_frame(),
                 now_ns=now_ns,
                 memory=self._filter_memory,
+                loop_delay_s=tau_s,
             )
             self._filter_memory = result.memory
             v, w, limiter = result.v_cmd_mps, result.w_cmd_radps, result.limiter
@@ -561,22 +823,24 @@ class RobotController:
             v, w, limiter = 0.0, 0.0, Limiter.ESTOP
         else:
             self._filter_memory = None
-            v, w = (
-                decelerate(self._previous, dt_s, cfg.pipeline.profile)
-                if cfg.hold_ramp
-                else (0.0, 0.0)
-            )
+            # DESIGN 14: when no source may drive, zero at once (a base keeps its last command).
+            ramp = cfg.hold_ramp and (verdict is None or verdict.source is not None)
+            v, w = decelerate(self._previous, dt_s, cfg.pipeline.profile) if ramp else (0.0, 0.0)
             limiter = Limiter.WATCHDOG if self.reason in LINK_REASONS else Limiter.HOLD
         self._previous = (v, w)
 
         base = BaseCommand(stamp_ns=now_ns, seq=self.counters.cycles, linear_mps=v, angular_radps=w)
-        shown_filter = filter_name if cmd is not None and cmd.mode == "shared" else "none"
+        if feed is not None:
+            shown_filter = filter_name
+        else:
+            shown_filter = filter_name if cmd is not None and cmd.mode == "shared" else "none"
+        report = None if verdict is None else self._source_report(verdict, feed, now_ns)
         out = CycleOutput(
             base,
             self.state_message(now_ns) if changed else None,
             result,
             self._telemetry,
-            (now_ns, cmd, fresh, v, w, limiter, result, v_lim, w_lim, shown_filter),
+            (now_ns, cmd, fresh, v, w, limiter, result, v_lim, w_lim, shown_filter, report),
         )
         # Nothing the telemetry reports changes before it is built: every input and the next
         # cycle build it first (``_report``) when nobody has asked for it.
@@ -584,13 +848,101 @@ class RobotController:
         return out
 
     def state_message(self, now_ns: int) -> StateMessage:
+        verdict = self._verdict
         return StateMessage(
             stamp_ns=now_ns,
             state=self.state.value,
             reason=self.reason,
             operator=self._controller_op,
             rejected=self.counters.rejected_total,
+            source=None if verdict is None else verdict.source,
+            lock=None if verdict is None else verdict.lock,
+            map_pose=self._map_pose,
         )
+
+    @property
+    def verdict(self) -> Verdict | None:
+        """The last cycle's arbitration (DESIGN 14); None without sources or before a cycle."""
+        return self._verdict
+
+    # -- command sources in the cycle (DESIGN 14) -----------------------------------------------
+
+    def _arbitrate(self, now_ns: int) -> Verdict:
+        """Which source drives this cycle; a change of source is control changing hands."""
+        mux = self._mux
+        assert mux is not None
+        claims = {name: feed.rx_ns for name, feed in self._feeds.items()}
+        op_source = mux.operator_source
+        claim = self._op_claim_ns  # None once the operator in control is released
+        if op_source is not None and claim is not None:
+            claims[op_source.name] = claim
+        verdict = arbitrate(mux, claims, self._lock_feeds, now_ns)
+        previous = self._verdict
+        self._verdict = verdict
+        self._verdict_changed = previous is None or (previous.source, previous.lock) != (
+            verdict.source,
+            verdict.lock,
+        )
+        if previous is None or previous.source != verdict.source:
+            self._control_epoch += 1  # nothing inherits DRIVING; no short-gap resume across
+            self._filter_memory = None
+        return verdict
+
+    def _source_inputs(
+        self, verdict: Verdict, operator: Inputs, operator_fresh: bool
+    ) -> tuple[Inputs, _SourceFeed | None]:
+        """The state machine's snapshot for the source that drives (state_machine docstring),
+        and that source's feed when it is not the operator."""
+        assert self._mux is not None
+        spec: SourceSpec | None = self._mux.source(verdict.source)
+        if spec is not None and spec.kind == "operator":
+            return operator, None
+        if spec is None:
+            locked = verdict.reason if verdict.lock is not None else None
+            return (
+                Inputs(
+                    operator_present=False,
+                    command_fresh=False,
+                    deadman=False,
+                    centred=False,
+                    scan_fresh=operator.scan_fresh,
+                    estop=operator.estop,
+                    reset=False,
+                    base_stopped=operator.base_stopped,
+                    no_operator_reason=verdict.reason,
+                    lock_reason=locked,
+                ),
+                None,
+            )
+        # Only the operator in control leaves an e-stop, with a fresh, deadman-held, centred
+        # reset, whatever source drives.
+        reset = operator_fresh and operator.reset and operator.deadman and operator.centred
+        inputs = Inputs(
+            operator_present=True,
+            command_fresh=True,
+            deadman=True,
+            centred=True,
+            scan_fresh=operator.scan_fresh,
+            estop=operator.estop,
+            reset=reset,
+            base_stopped=operator.base_stopped,
+            same_control=operator.same_control,
+            source=spec.name,
+        )
+        return inputs, self._feeds[spec.name]
+
+    def _source_report(
+        self, verdict: Verdict, feed: _SourceFeed | None, now_ns: int
+    ) -> _SourceReport:
+        if feed is not None:
+            since = feed.stamp_ns or feed.rx_ns
+            return _SourceReport(
+                verdict.source, verdict.lock, (now_ns - feed.rx_ns) / 1e6, feed.seq or 0, since
+            )
+        age = None
+        if verdict.source is not None and self._command is not None:
+            age = (now_ns - self._command_rx_ns) / 1e6
+        return _SourceReport(verdict.source, verdict.lock, age, None, None)
 
     # -- helpers ------------------------------------------------------------------------------
 
@@ -627,6 +979,7 @@ class RobotController:
         v_lim: float | None,
         w_lim: float | None,
         shown_filter: str,
+        report: _SourceReport | None,
     ) -> Telemetry:
         """The telemetry of the cycle at ``now_ns``, from the state that cycle left (which stays
         as it is until the telemetry is built, see ``step``)."""
@@ -635,25 +988,28 @@ class RobotController:
         scan = self._scan
         scan_xy = self._telemetry_xy
         if scan_xy is None:
-            if scan is None:
-                scan_xy = np.zeros((0, 2), np.float32)
-            else:
-                step = self.config.telemetry_scan_decimation
-                scan_xy = np.ascontiguousarray(scan.points.xy[::step], dtype=np.float32)
-                self._telemetry_xy = scan_xy
+            scan_xy, self._telemetry_polar = self._telemetry_scan()
+            self._telemetry_xy = scan_xy
         route = self._route
         # Guide circles for the view only from egc: ek-egc's live in the EK space, not in {R}.
         filtered = result.filtered if result is not None and result.filter_name == "egc" else None
-        if cmd is None:
+        seq = cmd.seq if cmd is not None else 0
+        if report is not None and report.since_ns is not None:  # a source, not the operator
+            cmd_age_ms: float | None = (now_ns - report.since_ns) / 1e6
+            seq = report.seq or 0
+            mode = "shared"
+        elif cmd is None:
             cmd_age_ms = None
+            mode = "shared"
         else:
             since = cmd.stamp_ns if cmd.stamp_ns else self._command_rx_ns
             cmd_age_ms = (now_ns - since) / 1e6
+            mode = cmd.mode
         return Telemetry(
-            seq=cmd.seq if cmd is not None else 0,
+            seq=seq,
             stamp_ns=now_ns,
             state=self.state.value,
-            mode=cmd.mode if cmd is not None else "shared",
+            mode=mode,
             v_ref=result.v_ref_mps if result is not None else 0.0,
             w_ref=result.w_ref_radps if result is not None else 0.0,
             v_cmd=v,
@@ -696,7 +1052,32 @@ class RobotController:
             suggested_rad=None
             if result is None or result.family is None
             else result.family.suggested_rad,
+            scan_polar=self._telemetry_polar,
+            source=None if report is None else report.source,
+            lock=None if report is None else report.lock,
+            source_age_ms=None if report is None else report.source_age_ms,
         )
+
+    def _telemetry_scan(self) -> tuple[npt.NDArray[np.float32], PolarScan | None]:
+        """The newest scan for the telemetry: its beams compact (DESIGN 12) when they are evenly
+        spaced, then the points no beam holds; else its points as before. At most
+        ``n / telemetry_scan_decimation`` beams, fewer when the budget says so."""
+        raw, scan = self._raw_scan, self._scan
+        if raw is None or scan is None:
+            return np.zeros((0, 2), np.float32), None
+        beams = self.scan_beams_max or 1
+        if self._telemetry_beams is not None:
+            beams = min(beams, self._telemetry_beams)
+        polar = compact(raw, beams) if raw.ranges_m.size else None
+        if polar is None:
+            points = scan.points.xy
+            step = max(self.config.telemetry_scan_decimation, -(-len(points) // beams))
+            return np.ascontiguousarray(points[::step], dtype=np.float32), None
+        extra = raw.extra_xy_m
+        xy = polar.points()
+        if extra is not None and len(extra):
+            xy = np.concatenate((xy, np.asarray(extra, np.float32).reshape(-1, 2)))
+        return xy, polar
 
     def _reject(
         self, cmd: OperatorCommand | None, rejection: Rejection, now_ns: int
@@ -716,6 +1097,7 @@ class RobotController:
 
     def _release(self, reason: str) -> None:
         self._controller_op = None
+        self._op_claim_ns = None
         self._control_epoch += 1
         self._link.reset()
         self._command = None

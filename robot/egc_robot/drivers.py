@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+from egc_common.footprint import Footprint
 from egc_common.messages import BaseCommand, Odometry, Rejection, RejectReason, ScanMessage
 from egc_common.scan import Scan, carries_information, too_close_readings
 
@@ -41,7 +42,7 @@ class Driver(Protocol):
 
 
 def scan_from_message(
-    message: ScanMessage, footprint_half_m: tuple[float, float] | None = None
+    message: ScanMessage, footprint_half_m: Footprint | tuple[float, float] | None = None
 ) -> Scan | Rejection:
     """A decoded ``egc/<robot>/scan`` message as a Scan in {R}.
 

@@ -20,6 +20,7 @@ from egc_common.profiles import RobotProfile
 from egc_common.scan import ObstaclePoints, obstacle_points
 
 from egc_robot.filters.assist import AssistParams
+from egc_robot.filters.cbf import CbfParams
 from egc_robot.filters.dwa import DwaParams
 from egc_robot.filters.egc import EgcParams, EgcResult, Region, Side
 from egc_robot.filters.family import (
@@ -57,6 +58,7 @@ class Limiter(enum.Enum):
     EK_EGC = "ek-egc"
     ASSIST = "assist"
     DWA = "dwa"
+    CBF = "cbf"
     SWEEP = "sweep"
     LIMITS = "limits"
     LATENCY = "latency"  # the latency governor (DESIGN 9) capped the speed
@@ -68,7 +70,14 @@ class Limiter(enum.Enum):
 _LIMITER_OF_FILTER = {limiter.value: limiter for limiter in Limiter}
 
 # Limiters that mean "the shared-autonomy layer changed the operator's command" (an intervention).
-INTERVENING = (Limiter.EGC, Limiter.EK_EGC, Limiter.ASSIST, Limiter.DWA, Limiter.SWEEP)
+INTERVENING = (
+    Limiter.EGC,
+    Limiter.EK_EGC,
+    Limiter.ASSIST,
+    Limiter.DWA,
+    Limiter.CBF,
+    Limiter.SWEEP,
+)
 INTERVENING_NAMES = tuple(limiter.value for limiter in INTERVENING)
 
 
@@ -87,6 +96,7 @@ class PipelineConfig:
     sweep: SweepParams = field(default_factory=SweepParams)
     dwa: DwaParams | None = None  # None: from the profile
     assist: AssistParams | None = None
+    cbf: CbfParams | None = None
     egc_params: EgcParams = field(init=False, repr=False, compare=False)  # derived, once
     settings: FilterSettings = field(init=False, repr=False, compare=False)
 
@@ -101,7 +111,9 @@ class PipelineConfig:
         if self.no_return_is_free:
             params = EgcParams(params.r_min_m, params.r_max_m, params.horizon_s, True)
         object.__setattr__(self, "egc_params", params)
-        object.__setattr__(self, "settings", FilterSettings(p, params, self.dwa, self.assist))
+        object.__setattr__(
+            self, "settings", FilterSettings(p, params, self.dwa, self.assist, self.cbf)
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -155,13 +167,15 @@ def filter_velocity(
     goal_xy_m: tuple[float, float] | None = None,
     now_ns: int = 0,
     memory: object | None = None,
+    loop_delay_s: float | None = None,
 ) -> PipelineResult:
     """One cycle from a velocity reference (after eq. 4) to the command for the base.
 
     ``previous_cmd`` is what the base was last sent (None skips the acceleration limits, for
     stateless tools such as ``egc-teleop filter``). ``filter_name`` overrides the configured
     filter of shared mode (the operator's choice); ``goal_xy_m`` is the active via point in {R};
-    ``memory`` is the previous cycle's ``PipelineResult.memory`` for the same filter.
+    ``memory`` is the previous cycle's ``PipelineResult.memory`` for the same filter;
+    ``loop_delay_s`` the loop delay tau of DESIGN 9 when known (``cbf``'s margin grows with it).
     """
     profile = config.profile
     obstacles = obstacle_points(points)
@@ -176,7 +190,9 @@ def filter_velocity(
             family = run_egc(v_ref_mps, w_ref_radps, obstacles, config.settings)
         else:
             state = RobotState(*previous_cmd) if previous_cmd is not None else RobotState()
-            inp = FilterInput(v_ref_mps, w_ref_radps, obstacles, state, goal_xy_m, now_ns)
+            inp = FilterInput(
+                v_ref_mps, w_ref_radps, obstacles, state, goal_xy_m, now_ns, loop_delay_s
+            )
             family = run_filter(name, inp, config.settings, memory)
         v, w = family.v_mps, family.w_radps
         if family.stopped_near_obstacle and increases_clearance(
@@ -229,6 +245,7 @@ def step_command(
     goal_xy_m: tuple[float, float] | None = None,
     now_ns: int = 0,
     memory: object | None = None,
+    loop_delay_s: float | None = None,
 ) -> PipelineResult:
     """One cycle from normalised stick deflection (x_o forward, y_o left) to the base command."""
     p = config.profile
@@ -245,4 +262,5 @@ def step_command(
         goal_xy_m=goal_xy_m,
         now_ns=now_ns,
         memory=memory,
+        loop_delay_s=loop_delay_s,
     )

@@ -1,10 +1,11 @@
 """Replay of a recorded robot log through a filter of the family, as pure functions (DESIGN 11).
 
-``egc-teleop replay`` (``egc_app.replay_cmd``) reads the log and hands this module plain values:
-scans (``LogScan``), the commanded velocity (``VelocitySample``, from a Twist topic or derived
-here from odometry poses with ``velocities_from_poses``) and gets back, per scan, what the
-robot's own pipeline (``egc_robot.pipeline``) would have sent (``ScanVerdict``), and for the
-whole log the summary (``ReplaySummary``). No files, no clocks, no Rerun here.
+``egc-teleop replay`` (its engine ``egc_experiments.log_replay``) reads the log and hands this
+module plain values: scans (``LogScan``), the commanded velocity (``VelocitySample``, from a
+Twist topic or derived here from odometry poses with ``velocities_from_poses``) and gets back,
+per scan, what the robot's own pipeline (``egc_robot.pipeline``) would have sent
+(``ScanVerdict``), and for the whole log the summary (``ReplaySummary``). No files, no clocks,
+no Rerun here.
 
 Times. A log has two clocks: the recorder's receive time (``log_ns``, one clock for every
 topic) and each message's header stamp (``stamp_ns``, the sensor's or the driver's clock).
@@ -39,6 +40,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from egc_common.footprint import Footprint
 from egc_common.profiles import RobotProfile
 from egc_common.scan import (
     ObstaclePoints,
@@ -156,6 +158,8 @@ class ReplaySummary:
     changed: int
     max_cut_mps: float  # largest |v_ref - v_cmd|
     max_cut_radps: float  # largest |w_ref - w_cmd|
+    # DESIGN 13: mean over commands of |dv| / v_max + |dw| / w_max (None: limits not given)
+    mean_cut: float | None
     hold_s: float  # log time during which the filter would have stopped a moving command
     holds: int  # separate stretches of holding
     closest_m: float | None  # nearest valid reading over the whole log
@@ -164,13 +168,21 @@ class ReplaySummary:
     limiters: dict[str, int] = field(default_factory=dict)  # what limited each command
     extra: dict[str, Any] = field(default_factory=dict)  # log facts from the IO layer
 
+    @property
+    def changed_share(self) -> float:
+        """DESIGN 13: changed / commands (0 without commands)."""
+        return self.changed / self.commands if self.commands else 0.0
+
     def as_dict(self) -> dict[str, Any]:
-        """JSON-ready: the pinned keys (``scans``, ``commands``, ``changed``, ``max_cut_mps``,
-        ``hold_s``, ``closest_m``, ``filter``, ``profile``) and a few more."""
+        """JSON-ready: the pinned keys (DESIGN 11: ``scans``, ``commands``, ``changed``,
+        ``max_cut_mps``, ``hold_s``, ``closest_m``, ``filter``, ``profile``; DESIGN 13:
+        ``changed_share``, ``mean_cut``) and a few more."""
         out: dict[str, Any] = {
             "scans": self.scans,
             "commands": self.commands,
             "changed": self.changed,
+            "changed_share": round(self.changed_share, 6),
+            "mean_cut": None if self.mean_cut is None else round(self.mean_cut, 6),
             "max_cut_mps": round(self.max_cut_mps, 6),
             "hold_s": round(self.hold_s, 6),
             "closest_m": None if self.closest_m is None else round(self.closest_m, 6),
@@ -196,7 +208,9 @@ def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
-def scan_points(scan: LogScan, footprint_half_m: tuple[float, float] | None = None) -> ScanPoints:
+def scan_points(
+    scan: LogScan, footprint_half_m: Footprint | tuple[float, float] | None = None
+) -> ScanPoints:
     """REP 117 ranges to points in {R}: finite readings within [range_min, range_max], plus
     ``-inf`` readings as obstacles at range_min (and, given the footprint's half length and
     width, just outside the footprint: ``egc_common.scan.too_close_points``); ``+inf``, ``NaN``
@@ -454,8 +468,10 @@ def summarize(
     filter_name: str,
     profile_name: str,
     extra: dict[str, Any] | None = None,
+    limits: tuple[float, float] | None = None,
 ) -> ReplaySummary:
-    """The replay's summary over every scan's verdict, in log order."""
+    """The replay's summary over every scan's verdict, in log order. ``limits``: the
+    profile's (v_max, w_max), which scale ``mean_cut`` (DESIGN 13)."""
     durations = scan_durations_s(verdicts)
     with_cmd = [v for v in verdicts if v.has_command]
     hold_s = 0.0
@@ -472,6 +488,14 @@ def summarize(
             holds += 0 if holding else 1
         holding = verdict.held
     closest = [v.closest_m for v in verdicts if v.closest_m is not None]
+    mean_cut = None
+    if limits is not None:
+        v_max, w_max = limits
+        cuts = [
+            abs(v.v_ref_mps - v.v_cmd_mps) / v_max + abs(v.w_ref_radps - v.w_cmd_radps) / w_max
+            for v in with_cmd
+        ]
+        mean_cut = float(sum(cuts) / len(cuts)) if cuts else 0.0
     return ReplaySummary(
         filter=filter_name,
         profile=profile_name,
@@ -480,6 +504,7 @@ def summarize(
         changed=sum(1 for v in with_cmd if v.changed),
         max_cut_mps=max((abs(v.v_ref_mps - v.v_cmd_mps) for v in with_cmd), default=0.0),
         max_cut_radps=max((abs(v.w_ref_radps - v.w_cmd_radps) for v in with_cmd), default=0.0),
+        mean_cut=mean_cut,
         hold_s=hold_s,
         holds=holds,
         closest_m=min(closest) if closest else None,

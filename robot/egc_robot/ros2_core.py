@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from egc_common.cli_args import plain_float
+from egc_common.footprint import Footprint
 from egc_common.messages import Odometry
 from egc_common.ros2_topics import (
     DEFAULT_CMD_TOPIC,
@@ -105,6 +106,11 @@ class Ros2Settings:
             raise ValueError(f"ros2 cmd_type must be one of {', '.join(CMD_TYPES)}")
         namespace = normalise_namespace(self.namespace)
         object.__setattr__(self, "namespace", namespace)
+
+
+def is_topic_name(name: str) -> bool:
+    """A valid ROS 2 topic name (absolute or relative; no ``~`` or substitutions)."""
+    return bool(_TOPIC.match(name))
 
 
 def normalise_namespace(namespace: str) -> str:
@@ -186,11 +192,11 @@ def scan_from_laser(
     range_max_m: float,
     pose: LaserPose,
     stamp_ns: int = 0,
-    footprint_half_m: tuple[float, float] | None = None,
+    footprint_half_m: Footprint | tuple[float, float] | None = None,
 ) -> Scan | Rejected:
     """A ``sensor_msgs/LaserScan``'s fields as a Scan in {R} (REP 117; see the module docstring).
 
-    With the footprint's half length and width, each ``-inf`` beam also gets a point just
+    With the footprint (the profile's shape), each ``-inf`` beam also gets a point just
     outside the footprint (``egc_common.scan.too_close_points``). Never raises on any input: a
     malformed or empty scan is a ``Rejected``.
     """

@@ -15,12 +15,20 @@ run rather than at the next deadline (up to 50 ms later at 20 Hz; bench/bench_ro
 - ``geometry_msgs/Twist`` (or ``TwistStamped``, frame ``base_link``, stamped now) on
   ``--ros-cmd`` (``/cmd_vel``), reliable, keep last 10, every control cycle; in HOLD and ESTOP the
   controller's zero (or decelerating) command goes out like any other. ``close()`` publishes one
-  last zero twist and waits (at most 1 s) for the subscribers to acknowledge it before the node
+  last zero twist and waits (at most 3.5 s) for the subscribers to acknowledge it before the node
   goes.
-- The rclpy executor spins in its own thread. ``poll`` and ``send`` never wait on it: ``poll``
-  swaps two references under a lock the callbacks hold for no longer; ``send`` publishes.
+- The rclpy executor spins in its own thread (``egc_common.executor_thread``). ``poll`` and
+  ``send`` never wait on it: ``poll`` swaps two references under a lock the callbacks hold for
+  no longer; ``send`` publishes. ``close`` destroys the node only once that thread is out.
 - Nothing received can raise out of a callback: malformed scans and odometry are counted by
   reason and logged (rate-limited).
+
+- Command sources and locks (DESIGN 14, ``_Ros2Inputs``): a ``ros2`` source's Twist or
+  TwistStamped topic (e.g. ``/cmd_vel_nav``; sensor-data QoS, which also receives reliable
+  publishers) and a lock's ``std_msgs/Bool`` topic (reliable, keep last 10: a best-effort lock
+  publisher does not match, so that lock stays silent, which locks). Each message goes to the
+  listeners the robot sets (``set_input_listeners``) with its arrival time, in the executor's
+  thread; malformed ones are counted and logged like scans.
 
 ``ROS_DOMAIN_ID``, ``RMW_IMPLEMENTATION`` and ``ROS_AUTOMATIC_DISCOVERY_RANGE`` are read by ROS 2
 itself, as ROS users expect. This module and ``egc_sim.ros2_base`` are the only ones importing
@@ -36,7 +44,11 @@ from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
 from egc_common.errors import UsageError
+from egc_common.executor_thread import ExecutorThread
+from egc_common.footprint import Footprint
 from egc_common.messages import BaseCommand, Odometry
 from egc_common.scan import Scan
 
@@ -50,6 +62,8 @@ from egc_robot.ros2_core import (
     scan_from_laser,
     unseen_directions,
 )
+from egc_robot.ros2_image import rgb_from_compressed, rgb_from_image
+from egc_robot.source_mux import LockSpec, SourceSpec
 
 log = logging.getLogger("egc.robot.ros2")
 
@@ -67,6 +81,9 @@ _ACK_TIMEOUT_S = 3.5
 _DISCOVERY_GRACE_NS = 3_000_000_000
 # Header stamps within this of our ROS clock at arrival mean the sensor's clock agrees with ours.
 _CLOCKS_AGREE_NS = 1_000_000_000
+# The executor's thread leaves within one wait (0.1 s) plus the callback in progress (a robot
+# cycle, milliseconds); past this, something is stuck in a callback and the node stays.
+_STOP_PATIENCE_S = 10.0
 
 
 def require_rclpy() -> None:
@@ -87,9 +104,15 @@ class Ros2Driver:
         self,
         settings: Ros2Settings,
         node_name: str = NODE_NAME,
-        footprint_half_m: tuple[float, float] | None = None,
+        footprint_half_m: Footprint | tuple[float, float] | None = None,
+        camera_topic: str | None = None,
+        sources: tuple[SourceSpec, ...] = (),
+        locks: tuple[LockSpec, ...] = (),
     ) -> None:
-        """``footprint_half_m``: the profile's half length and width, for ``-inf`` readings."""
+        """``footprint_half_m``: the profile's footprint (or a centred rectangle's half sizes),
+        for ``-inf`` readings; ``camera_topic``: an image topic for ``--camera ros2:TOPIC``
+        (``newest_image``); ``sources`` and ``locks``: the ``ros2`` ones of DESIGN 14
+        (``set_input_listeners``)."""
         self._footprint_half_m = footprint_half_m
         self._coverage_logged = False
         require_rclpy()
@@ -117,6 +140,8 @@ class Ros2Driver:
         self._scan_listener: Callable[[], None] | None = None
         self._cmd_warning: str | None = None
         self._started_ns = time.monotonic_ns()
+        self._camera: _Ros2Camera | None = None
+        self._inputs: _Ros2Inputs | None = None
 
         # Our own context: rclpy installs no signal handlers (the robot process owns SIGINT and
         # SIGTERM, to send the last zero twist) and nothing global is touched.
@@ -142,6 +167,10 @@ class Ros2Driver:
             node.create_subscription(
                 OdometryMsg, settings.odom_topic, self._on_odometry, qos_profile_sensor_data
             )
+            if camera_topic is not None:
+                self._camera = _Ros2Camera(node, camera_topic)
+            if sources or locks:
+                self._inputs = _Ros2Inputs(node, sources, locks)
             self._cmd_topic = node.resolve_topic_name(settings.cmd_topic)
             node.create_timer(1.0, self._check_cmd_subscribers)
             self._executor = SingleThreadedExecutor(context=self._context)
@@ -149,8 +178,8 @@ class Ros2Driver:
         except Exception:
             self._context.try_shutdown()
             raise
-        self._thread = threading.Thread(target=self._spin, name="ros2-executor", daemon=True)
-        self._thread.start()
+        self._spinner = ExecutorThread(self._executor, self._on_executor_error)
+        self._spinner.start()
         log.info(
             "ROS 2 node %s: scans %s, odometry %s, commands %s (%s); laser at %s",
             node.get_fully_qualified_name(),
@@ -163,12 +192,8 @@ class Ros2Driver:
 
     # -- the executor's thread --------------------------------------------------------------------
 
-    def _spin(self) -> None:
-        try:
-            self._executor.spin()
-        except Exception as exc:  # shutdown races end the spin with an exception; nothing to do
-            if not self._closed:
-                log.error("ROS 2 executor stopped: %s", exc)
+    def _on_executor_error(self, exc: Exception) -> None:
+        log.error("ROS 2 executor stopped: %s", exc)
 
     def _on_scan(self, msg: Any) -> None:
         rx_ns = time.monotonic_ns()
@@ -271,12 +296,27 @@ class Ros2Driver:
         with self._lock:
             self._scan_listener = listener
 
+    def set_input_listeners(
+        self,
+        on_velocity: Callable[[str, float, float, int], None],
+        on_lock: Callable[[str, bool, int], None],
+    ) -> None:
+        """DESIGN 14: ``on_velocity(source, v_mps, w_radps, rx_ns)`` for each ``ros2`` source's
+        message and ``on_lock(lock, value, rx_ns)`` for each lock's, in the executor's thread."""
+        if self._inputs is not None:
+            self._inputs.set_listeners(on_velocity, on_lock)
+
     @property
     def header_age_ms(self) -> float | None:
         """Age of the newest scan from its header stamp at arrival, when the clocks agree."""
         with self._lock:
             age = self._header_age_ns
         return None if age is None else age / 1e6
+
+    def newest_image(self) -> tuple[npt.NDArray[np.uint8], int] | None:
+        """``--camera ros2:TOPIC``: the newest image as RGB and its arrival time (the robot's
+        monotonic clock), or None (no camera topic, nothing yet, or it did not convert)."""
+        return None if self._camera is None else self._camera.newest()
 
     def poll(self, now_ns: int) -> SensorUpdate:
         with self._lock:
@@ -303,8 +343,9 @@ class Ros2Driver:
         self._publisher.publish(msg)
 
     def close(self) -> None:
-        """One last zero twist, acknowledged by the subscribers if they do so within 1 s (a
-        base that keeps its last command must not drive on), then the node goes."""
+        """One last zero twist, acknowledged by the subscribers if they do so within 3.5 s (a
+        base that keeps its last command must not drive on), then the node goes, once the
+        executor's thread is out."""
         from rclpy.duration import Duration
 
         with self._send_lock:
@@ -330,12 +371,208 @@ class Ros2Driver:
             rejected or "none",
             "unknown (the sensor's clock is not ours)" if age is None else f"{age / 1e6:.1f} ms",
         )
-        # The spinning thread must be out of the executor before the node goes: destroying a
-        # node under a running wait crashed the process (a segfault seen in a CI run).
+        # The executor's thread must be out before the node goes: destroying a node under a
+        # running wait crashed the process (issue 31). Still inside: leave it all to the exit.
+        if not self._spinner.stop(_STOP_PATIENCE_S):
+            log.error(
+                "the ROS 2 executor thread did not stop within %.0f s (a callback that does not "
+                "return); the node is left to the process's exit",
+                _STOP_PATIENCE_S,
+            )
+            return
         try:
-            self._executor.shutdown(timeout_sec=1.0)
-            self._thread.join(2.0)
+            self._executor.shutdown()
             self._node.destroy_node()  # type: ignore[no-untyped-call]
         finally:
             self._context.try_shutdown()
-            self._thread.join(2.0)
+
+
+_IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+
+
+class _Ros2Camera:
+    """``--camera ros2:TOPIC`` (DESIGN 12): the topic's type (``sensor_msgs/Image`` or
+    ``CompressedImage``) is taken from the ROS graph, looked up every 0.5 s until a publisher
+    appears, then subscribed with sensor-data QoS. The executor's thread only keeps the newest
+    message; it is converted (``egc_robot.ros2_image``) when the camera's thread asks for it,
+    so a large image never holds back a scan. Bad images are counted by reason and logged."""
+
+    def __init__(self, node: Any, topic: str) -> None:
+        from rclpy.qos import qos_profile_sensor_data
+        from sensor_msgs.msg import CompressedImage, Image
+
+        self._node = node
+        self._topic = node.resolve_topic_name(topic)
+        self._qos = qos_profile_sensor_data
+        self._classes = {_IMAGE_TYPES[0]: Image, _IMAGE_TYPES[1]: CompressedImage}
+        self._lock = threading.Lock()
+        self._latest: tuple[Any, int] | None = None
+        self._converted: tuple[Any, tuple[npt.NDArray[np.uint8], int] | None] | None = None
+        self._subscription: Any = None
+        self._wrong_type_said = False
+        self.received = 0
+        self.rejected: Counter[str] = Counter()
+        self._timer = node.create_timer(0.5, self._discover)
+        self._discover()
+
+    def _discover(self) -> None:
+        try:
+            if self._subscription is not None:
+                return
+            for name, types in self._node.get_topic_names_and_types():
+                if name != self._topic:
+                    continue
+                found = [t for t in types if t in self._classes]
+                if found:
+                    cls = self._classes[found[0]]
+                    self._subscription = self._node.create_subscription(
+                        cls, self._topic, self._on_image, self._qos
+                    )
+                    self._timer.cancel()
+                    log.info("camera: %s (%s)", self._topic, found[0])
+                elif not self._wrong_type_said:
+                    self._wrong_type_said = True
+                    log.warning(
+                        "camera topic %s is %s, not sensor_msgs/Image or CompressedImage",
+                        self._topic,
+                        ", ".join(types),
+                    )
+        except Exception as exc:  # never out of a callback
+            log.debug("camera topic lookup failed: %s", exc)
+
+    def _on_image(self, msg: Any) -> None:
+        rx_ns = time.monotonic_ns()
+        with self._lock:
+            self._latest = (msg, rx_ns)
+            self.received += 1
+
+    def newest(self) -> tuple[npt.NDArray[np.uint8], int] | None:
+        with self._lock:
+            latest = self._latest
+        if latest is None:
+            return None
+        if self._converted is not None and self._converted[0] is latest:
+            return self._converted[1]
+        msg, rx_ns = latest
+        if hasattr(msg, "format"):  # CompressedImage
+            result = rgb_from_compressed(str(msg.format), msg.data)
+        else:
+            result = rgb_from_image(
+                str(msg.encoding), msg.width, msg.height, msg.step, msg.is_bigendian, msg.data
+            )
+        out = None
+        if isinstance(result, Rejected):
+            self.rejected[result.reason] += 1
+            n = self.rejected[result.reason]
+            if n == 1 or n % 100 == 0:
+                log.warning(
+                    "dropped camera image (%s, %d so far): %s", result.reason, n, result.detail
+                )
+        else:
+            out = (result, rx_ns)
+        self._converted = (latest, out)
+        return out
+
+
+class _Ros2Inputs:
+    """The ``ros2`` command sources and ROS 2 locks of DESIGN 14 (see the module docstring).
+
+    Only what arrived, and when (the robot's monotonic clock), goes to the listeners: whether it
+    is valid and what it means is the controller's judgement. A source's message carries the
+    forward speed (``linear.x``) and the turn rate (``angular.z``) of a differential drive; the
+    other components are not ours to follow and are said once in the log when not zero."""
+
+    def __init__(
+        self, node: Any, sources: tuple[SourceSpec, ...], locks: tuple[LockSpec, ...]
+    ) -> None:
+        from geometry_msgs.msg import Twist, TwistStamped
+        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+
+        self._lock = threading.Lock()
+        self._on_velocity: Callable[[str, float, float, int], None] | None = None
+        self._on_lock: Callable[[str, bool, int], None] | None = None
+        self.rejected: Counter[str] = Counter()
+        self._said_holonomic: set[str] = set()
+        for source in sources:
+            stamped = source.cmd_type == "twist-stamped"
+            node.create_subscription(
+                TwistStamped if stamped else Twist,
+                source.topic,
+                lambda msg, n=source.name, st=stamped: self._on_twist(n, st, msg),
+                qos_profile_sensor_data,
+            )
+        if locks:
+            try:
+                from std_msgs.msg import Bool
+            except ImportError as exc:
+                raise UsageError(
+                    f"ROS 2 locks need std_msgs (pip install ros-jazzy-std-msgs): {exc}"
+                ) from None
+            reliable = QoSProfile(  # type: ignore[no-untyped-call]
+                depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE
+            )
+            for lock in locks:
+                node.create_subscription(
+                    Bool, lock.topic, lambda msg, n=lock.name: self._on_bool(n, msg), reliable
+                )
+        log.info(
+            "ROS 2 command sources %s, locks %s",
+            ", ".join(f"{s.name} {node.resolve_topic_name(s.topic)}" for s in sources) or "none",
+            ", ".join(f"{lk.name} {node.resolve_topic_name(lk.topic)}" for lk in locks) or "none",
+        )
+
+    def set_listeners(
+        self,
+        on_velocity: Callable[[str, float, float, int], None],
+        on_lock: Callable[[str, bool, int], None],
+    ) -> None:
+        with self._lock:
+            self._on_velocity, self._on_lock = on_velocity, on_lock
+
+    def _on_twist(self, name: str, stamped: bool, msg: Any) -> None:
+        rx_ns = time.monotonic_ns()
+        try:
+            twist = msg.twist if stamped else msg
+            v, w = float(twist.linear.x), float(twist.angular.z)
+            other = (twist.linear.y, twist.linear.z, twist.angular.x, twist.angular.y)
+            if any(c != 0.0 for c in other) and name not in self._said_holonomic:
+                self._said_holonomic.add(name)
+                log.warning(
+                    "source %s sends velocity components a differential drive does not take "
+                    "(linear y/z, angular x/y): only linear.x and angular.z are followed",
+                    name,
+                )
+        except Exception as exc:  # never out of a callback
+            self._count(name, repr(exc))
+            return
+        with self._lock:
+            listener = self._on_velocity
+        if listener is not None:
+            try:
+                listener(name, v, w, rx_ns)
+            except Exception as exc:
+                log.error("source listener failed: %s", exc)
+
+    def _on_bool(self, name: str, msg: Any) -> None:
+        rx_ns = time.monotonic_ns()
+        try:
+            value = msg.data
+            if not isinstance(value, bool):
+                raise TypeError(f"data is {type(value).__name__}")
+        except Exception as exc:
+            self._count(name, repr(exc))
+            return
+        with self._lock:
+            listener = self._on_lock
+        if listener is not None:
+            try:
+                listener(name, value, rx_ns)
+            except Exception as exc:
+                log.error("lock listener failed: %s", exc)
+
+    def _count(self, name: str, detail: str) -> None:
+        with self._lock:
+            self.rejected[name] += 1
+            n = self.rejected[name]
+        if n == 1 or n % 100 == 0:
+            log.warning("dropped a message of %s (%d so far): %s", name, n, detail)

@@ -10,7 +10,23 @@
 - loop delay tau and the operator's view age while driving (percentiles, DESIGN 9);
 - time by state and limiter, from the telemetry stamps (cycles are not evenly spaced: an accepted
   command also runs one): ``hold_s`` and ``hold_events`` (entries into HOLD), ``latency_limited_s``
-  (the latency governor capped the speed, DESIGN 9), ``first_drive_ns``/``last_stamp_ns``.
+  (the latency governor capped the speed, DESIGN 9), ``first_drive_ns``/``last_stamp_ns``;
+- the view plane (DESIGN 12, pinned keys): ``downlink_kbps`` ``{"p50", "max"}`` of what the robot
+  sent per second (telemetry and camera; the first second of the run left out, the sum of a
+  sliding one-second window sampled once a second), ``camera_age_ms`` like ``view_age_ms`` from
+  the operators' reports (``{"n", "p50_ms", ...}``; n 0 without a camera), ``telemetry_sent``
+  and ``telemetry_bytes_mean`` (bytes a message), ``operator_lost`` (liveliness of the operator
+  in control lost: the session was lost, DESIGN 8); ``view_timeline``: per second of the robot's
+  monotonic clock (``t_s``, the same clock as every process's on this machine), the largest
+  ``view_age_ms`` reported while driving and its median (``view_age_p50_ms``: the telemetry
+  period's sawtooth is in the largest), the view plane's kbit/s, the budget (``budget_kbps``),
+  the camera's frames sent (``cam_frames``), the smallest ``camera_age_ms`` reported (the
+  newest frame's age at best) and the largest command latency (``cmd_age_ms``) in that second
+  (at most an hour of it): how the budget followed a link that changed (DESIGN 12);
+- the fixed-rate loop's timing: ``loop_period_ms`` and ``loop_late_ms`` (percentiles of how
+  late each fixed-rate cycle started after its deadline, waiting for the node's lock
+  included), and ``loop_overrun_p99`` (``loop_late_ms`` p99 over the period: above 0.5 the
+  loop missed its period by more than half in more than 1 % of its cycles; ``bench fleet``).
 """
 
 from __future__ import annotations
@@ -25,6 +41,7 @@ from egc_common.messages import Odometry, Telemetry
 from egc_robot.pipeline import INTERVENING_NAMES
 
 _MAX_LATENCIES = 1_000_000
+_MAX_TIMELINE_S = 3600
 
 
 class RunStats:
@@ -45,6 +62,18 @@ class RunStats:
         self._previous: Telemetry | None = None
         self._loop_delay_ms: list[float] = []
         self._view_age_ms: list[float] = []
+        self._camera_age_ms: list[float] = []
+        self._downlink_kbps: list[float] = []
+        self._rate_second: int | None = None
+        self._camera_frames: int | None = None
+        self._ages_second: int | None = None
+        self._ages: list[float] = []
+        self.telemetry_sent = 0
+        self.telemetry_bytes = 0
+        self.operator_lost = 0
+        self._timeline: dict[int, dict[str, float]] = {}
+        self._loop_late_ms: list[float] = []
+        self._loop_period_ns: int | None = None
 
     def on_cycle(self, telemetry: Telemetry) -> None:
         self.cycles += 1
@@ -65,6 +94,11 @@ class RunStats:
                 self._loop_delay_ms.append(telemetry.loop_delay_ms)
             if telemetry.view_age_ms is not None:
                 self._view_age_ms.append(telemetry.view_age_ms)
+                entry = self._second(telemetry.stamp_ns)
+                if entry is not None:
+                    age = max(entry.get("view_age_ms", 0.0), telemetry.view_age_ms)
+                    entry["view_age_ms"] = age
+                    self._second_ages(telemetry.stamp_ns).append(telemetry.view_age_ms)
         limiting = telemetry.limiter in INTERVENING_NAMES
         if limiting:
             self.interventions += 1
@@ -82,11 +116,83 @@ class RunStats:
             self.collisions += 1
         self._collided = odometry.collided
 
-    def on_latency(self, latency_ns: int) -> None:
+    def on_camera_age(self, age_ms: float, now_ns: int | None = None) -> None:
+        """An accepted command's ``camera_age_ms`` (DESIGN 12), received at ``now_ns``."""
+        if len(self._camera_age_ms) < _MAX_LATENCIES:
+            self._camera_age_ms.append(float(age_ms))
+        entry = None if now_ns is None else self._second(now_ns)
+        if entry is not None:
+            entry["camera_age_ms"] = min(entry.get("camera_age_ms", math.inf), float(age_ms))
+
+    def on_view_rate(
+        self,
+        now_ns: int,
+        kbps: float,
+        budget_kbps: float | None = None,
+        camera_frames: int | None = None,
+    ) -> None:
+        """The view plane's kbit/s over the last second, sampled once a second (the first second,
+        a partial window, is left out); the budget then and the camera's frames sent so far."""
+        second = now_ns // 1_000_000_000
+        if self._rate_second is None:
+            self._rate_second = second + 1
+            self._camera_frames = camera_frames
+        elif second > self._rate_second and len(self._downlink_kbps) < _MAX_LATENCIES:
+            self._rate_second = second
+            self._downlink_kbps.append(kbps)
+            entry = self._second(now_ns)
+            if entry is not None:
+                entry["kbps"] = round(kbps, 1)
+                if budget_kbps is not None:
+                    entry["budget_kbps"] = round(budget_kbps, 1)
+                if camera_frames is not None and self._camera_frames is not None:
+                    entry["cam_frames"] = camera_frames - self._camera_frames
+            self._camera_frames = camera_frames
+
+    def _second_ages(self, now_ns: int) -> list[float]:
+        """This second's view ages; the last second's median goes to its timeline entry."""
+        second = now_ns // 1_000_000_000
+        if self._ages_second != second:
+            self._flush_ages()
+            self._ages_second = second
+        return self._ages
+
+    def _flush_ages(self) -> None:
+        entry = None if self._ages_second is None else self._timeline.get(self._ages_second)
+        if entry is not None and self._ages:
+            entry["view_age_p50_ms"] = float(np.median(self._ages))
+        self._ages = []
+
+    def _second(self, now_ns: int) -> dict[str, float] | None:
+        second = now_ns // 1_000_000_000
+        entry = self._timeline.get(second)
+        if entry is None and len(self._timeline) < _MAX_TIMELINE_S:
+            entry = self._timeline[second] = {}
+        return entry
+
+    def on_telemetry_sent(self, nbytes: int) -> None:
+        self.telemetry_sent += 1
+        self.telemetry_bytes += nbytes
+
+    def on_operator_lost(self) -> None:
+        self.operator_lost += 1
+
+    def on_loop_start(self, late_ns: int, period_ns: int) -> None:
+        """A fixed-rate cycle started ``late_ns`` after its deadline (period ``period_ns``)."""
+        self._loop_period_ns = period_ns
+        if len(self._loop_late_ms) < _MAX_LATENCIES:
+            self._loop_late_ms.append(max(0, late_ns) / 1e6)
+
+    def on_latency(self, latency_ns: int, now_ns: int | None = None) -> None:
+        """An accepted command's latency (its age on arrival), received at ``now_ns``."""
         if len(self._latencies_ms) < _MAX_LATENCIES:
             self._latencies_ms.append(latency_ns / 1e6)
+        entry = None if now_ns is None else self._second(now_ns)
+        if entry is not None:
+            entry["cmd_age_ms"] = max(entry.get("cmd_age_ms", 0.0), round(latency_ns / 1e6, 1))
 
     def summary(self) -> dict[str, Any]:
+        self._flush_ages()
         latency = _percentiles(self._latencies_ms)
         return {
             "distance_m": round(self.distance_m, 3),
@@ -102,7 +208,31 @@ class RunStats:
             "command_latency": latency,
             "loop_delay_ms": _percentiles(self._loop_delay_ms),
             "view_age_ms": _percentiles(self._view_age_ms),
+            "camera_age_ms": _percentiles(self._camera_age_ms),
+            "downlink_kbps": _rate_summary(self._downlink_kbps),
+            "telemetry_sent": self.telemetry_sent,
+            "telemetry_bytes_mean": round(self.telemetry_bytes / self.telemetry_sent, 1)
+            if self.telemetry_sent
+            else None,
+            "operator_lost": self.operator_lost,
+            **self._loop_summary(),
+            "view_timeline": [{"t_s": t, **v} for t, v in sorted(self._timeline.items())],
         }
+
+    def _loop_summary(self) -> dict[str, Any]:
+        late = _percentiles(self._loop_late_ms)
+        period_ms = None if self._loop_period_ns is None else self._loop_period_ns / 1e6
+        p99 = late["p99_ms"]
+        overrun = None if p99 is None or not period_ms else round(float(p99) / period_ms, 3)
+        return {"loop_period_ms": period_ms, "loop_late_ms": late, "loop_overrun_p99": overrun}
+
+
+def _rate_summary(values: list[float]) -> dict[str, float | None]:
+    """DESIGN 12's ``downlink_kbps``: ``{"p50", "max"}`` kbit/s (None before a whole second)."""
+    if not values:
+        return {"p50": None, "max": None}
+    arr = np.asarray(values, dtype=np.float64)
+    return {"p50": round(float(np.percentile(arr, 50)), 1), "max": round(float(arr.max()), 1)}
 
 
 def _percentiles(values: list[float]) -> dict[str, float | int | None]:

@@ -1,7 +1,8 @@
 """Beyond-the-paper safety rules (DESIGN 5.10): footprint sweep, clearance, limits.
 
 The paper's circles judge only the end point of the predicted arc. ``sweep_scale`` checks the
-whole rectangular footprint along the commanded arc over one control period plus the stopping
+whole footprint (the profile's shape as given, polygon or disc: ``egc_common.footprint``,
+DESIGN 14) along the commanded arc over one control period plus the stopping
 distance at the profile's deceleration, and scales the command down (same curvature) until the
 sweep is clear. "Clear" means the footprint's signed clearance to every point never drops below
 ``min(margin, clearance now)``: far from obstacles the margin is kept; already closer than the
@@ -22,7 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from egc_common.kinematics import arc_displacement, ramp_toward, signed_distance_to_rectangle
+from egc_common.footprint import signed_distance, swept_min_distance
+from egc_common.kinematics import arc_displacement, ramp_toward
 from egc_common.profiles import RobotProfile
 from egc_common.scan import ObstaclePoints, obstacle_points
 
@@ -51,7 +53,7 @@ class SweepParams:
 
 def _min_clearance(x_m: FloatArray, y_m: FloatArray, profile: RobotProfile) -> float:
     """Smallest signed clearance of points given in the footprint's frame."""
-    return float(signed_distance_to_rectangle(x_m, y_m, *profile.half_size_m).min())
+    return float(signed_distance(profile.footprint, x_m, y_m).min())
 
 
 def footprint_clearance(points: FloatArray, profile: RobotProfile) -> float:
@@ -74,23 +76,6 @@ def stopping_time_s(
     return params.period_s + 0.5 * t_brake
 
 
-def _sweep_poses(
-    v_mps: float, w_radps: float, t_s: float, params: SweepParams
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Poses (x, y, theta) along the arc at times in (0, t_s], in the start frame.
-
-    ``arc_displacement`` for all sample times at once: chord v t sinc(w t / 2) along w t / 2.
-    """
-    length = abs(v_mps) * t_s
-    turn = abs(w_radps) * t_s
-    k = max(1, math.ceil(max(length / params.step_m, turn / params.step_rad)))
-    ts = np.linspace(t_s / k, t_s, k)
-    theta = w_radps * ts
-    half = 0.5 * theta
-    chord = v_mps * ts * np.sinc(half / math.pi)
-    return chord * np.cos(half), chord * np.sin(half), theta
-
-
 def sweep_min_clearance(
     v_mps: float,
     w_radps: float,
@@ -99,14 +84,12 @@ def sweep_min_clearance(
     profile: RobotProfile,
     params: SweepParams,
 ) -> float:
-    """Smallest signed footprint clearance over the poses swept in (0, t_s]."""
-    if len(points) == 0 or (v_mps == 0.0 and w_radps == 0.0):
-        return math.inf
-    x, y, theta = _sweep_poses(v_mps, w_radps, t_s, params)
-    c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
-    dx = points[None, :, 0] - x[:, None]
-    dy = points[None, :, 1] - y[:, None]
-    return _min_clearance(c * dx + s * dy, -s * dx + c * dy, profile)
+    """Smallest signed footprint clearance over the poses swept in (0, t_s]
+    (``egc_common.footprint.swept_min_distance``: between samples no point of the footprint
+    moves more than 2 ``step_m``, so at most ``step_m`` closer than sampled, within the margin)."""
+    return swept_min_distance(
+        profile.footprint, points, v_mps, w_radps, t_s, params.step_m, params.step_rad
+    )
 
 
 def horizon_scale(
@@ -123,12 +106,17 @@ def horizon_scale(
     Jackal drove at 2 m/s until a wall came into view 0.35 m from its bumper, where it needs
     0.67 m to stop. Here the stopping distance in the direction of travel (one period at the
     command, then the profile's deceleration: |v| T + v^2 / (2 a)) must fit between the
-    footprint's edge (plus the margin) and the sensor's reach.
+    footprint's edge (its farthest point ahead, or behind when reversing, plus the margin) and
+    the sensor's reach.
     """
     if v_mps == 0.0:
         return 1.0
-    reach = obstacles.seen_ahead_m if v_mps > 0.0 else obstacles.seen_behind_m
-    room = reach - 0.5 * profile.length_m - params.margin_m
+    x_min, x_max, _, _ = profile.footprint.bounds
+    if v_mps > 0.0:
+        reach, edge = obstacles.seen_ahead_m, max(x_max, 0.0)
+    else:
+        reach, edge = obstacles.seen_behind_m, max(-x_min, 0.0)
+    room = reach - edge - params.margin_m
     speed, a, period = abs(v_mps), profile.decel_max_mps2, params.period_s
     if speed * period + speed * speed / (2.0 * a) <= room:
         return 1.0

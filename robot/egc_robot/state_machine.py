@@ -27,6 +27,21 @@ in control, gap shorter than ``resume_window``). Any other reason met on the way
 released, sensor stale, operator lost, e-stop, control changing hands) makes the HOLD
 non-resumable for good, and the centred-stick rule applies again.
 
+Command sources (DESIGN 14, only with ``[[source]]`` tables): the controller asks
+``egc_robot.source_mux`` which source drives and gives the machine that source's snapshot.
+
+- The ``operator`` source: the snapshot above, unchanged (deadman, centred stick, resume).
+- Another source (``source`` names it: a navigation stack, an autonomy stack) has no stick and
+  no deadman: its command is fresh by the arbitration's judgement (its ``timeout_s``), so the
+  robot enters DRIVING from IDLE or HOLD at once, reason ``source <name>``, and the pipeline
+  ramps the base from what it had at the profile's limits. The scan must still be fresh.
+  A switch of source counts as control changing hands (``same_control`` false), so an operator
+  who takes over from a source needs a centred stick, as any operator taking control does.
+- No source may drive because a lock is active (``lock_reason``): HOLD with that reason.
+  No source fresh and no lock: as "no operator" (IDLE once the base is stopped).
+- ESTOP latches everything whatever drives; only the operator in control leaves it (``reset``
+  is the controller's judgement of that operator's newest command).
+
 The function reads no clock: the controller computes the snapshot (freshness, presence) from
 monotonic times it is given.
 """
@@ -69,6 +84,10 @@ class Inputs:
     # gap is still shorter than ``resume_window``.
     session_kept: bool = False
     resume_allowed: bool = False
+    # DESIGN 14: the source that drives when it is not the operator (no deadman, no stick), and
+    # the reason when a lock keeps every source from driving.
+    source: str | None = None
+    lock_reason: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -105,6 +124,8 @@ def next_state(current: Transition, inputs: Inputs) -> Transition:
         ):
             return Transition(State.HOLD, "estop reset")
         return current
+    if inputs.lock_reason is not None:
+        return _keep(current, State.HOLD, inputs.lock_reason)
     reason = hold_reason(inputs)
     if not inputs.operator_present:
         if inputs.base_stopped:
@@ -122,6 +143,8 @@ def next_state(current: Transition, inputs: Inputs) -> Transition:
         return current
     if current.resumable and inputs.resume_allowed:
         return Transition(State.DRIVING, RESUMED)
+    if inputs.source is not None:
+        return Transition(State.DRIVING, f"source {inputs.source}")
     if inputs.centred:
         return Transition(State.DRIVING, "fresh centred command")
     return _keep(current, State.HOLD, "waiting for a centred stick")

@@ -15,6 +15,7 @@ from collections import Counter
 
 import zenoh
 from egc_common import keys
+from egc_common.footprint import Footprint
 from egc_common.messages import (
     BaseCommand,
     Odometry,
@@ -37,9 +38,9 @@ class ZenohDriver:
         self,
         session: zenoh.Session,
         robot_id: str,
-        footprint_half_m: tuple[float, float] | None = None,
+        footprint_half_m: Footprint | tuple[float, float] | None = None,
     ) -> None:
-        """``footprint_half_m``: the profile's half length and width, for ``-inf`` readings."""
+        """``footprint_half_m``: the profile's footprint (or a centred rectangle's half sizes), for ``-inf`` readings."""
         self._footprint_half_m = footprint_half_m
         self._lock = threading.Lock()
         self._scan: Scan | None = None

@@ -11,12 +11,24 @@ command, or the loop thread at each deadline. So there are
   hand-off (bench/bench_link.py measures publish-to-base latency),
 - and one whenever a driver that announces its scans (``set_scan_listener``: the ROS 2 driver)
   has a new one, in the driver's thread (bench/bench_ros2.py measures scan-to-``/cmd_vel``),
-- telemetry on every cycle (congestion DROP), state on change and at 1 Hz,
+- telemetry at ``telemetry_hz`` (DESIGN 12; default 20), from whichever cycle is due, never one
+  per accepted command (the immediate cycle on a command still runs; only its telemetry goes),
+  on the view plane (DATA, DROP); state on change and at 1 Hz on the control plane,
+- the downlink budget (DESIGN 12, ``egc_common.view_budget``): every accepted command's reports
+  (``view_age_ms``, ``rx_kbps``, ``camera_age_ms``) and the view plane's own byte count
+  (telemetry plus the camera's ``bytes_sent``) update it; each cycle its plan sets the telemetry
+  rate, the scan's beams and the camera's allotment (``CameraSink.set_allotment``), and the
+  telemetry carries the plan and the estimate, so the operator can say what the link carries,
 - the clock queryable ``egc/<robot>/clock`` answered straight from the callback,
 - the liveliness token ``egc/<robot>/alive/robot`` and a liveliness subscriber (with history)
   on ``egc/<robot>/alive/operator/*``,
 - every rejected command counted by reason (in the controller) and logged, rate-limited per
-  reason so a flood cannot flood the log.
+  reason so a flood cannot flood the log,
+- with command sources (DESIGN 14, ``ControllerConfig.sources``): a subscriber per ``zenoh``
+  source (``egc/<robot>/source/<name>``) and per Zenoh-fed lock (``egc/<robot>/lock/<name>``),
+  and the driver's ROS 2 sources and locks (``set_input_listeners``); each goes to the
+  controller under the lock, and a cycle runs at once when it may change what drives (a lock
+  that engages stops the base within one pipeline run).
 
 Nothing received from the network can raise out of a callback or the loop: the decoders are
 non-raising, and the callbacks guard the little they do. Should a cycle fail anyway (a bug),
@@ -29,6 +41,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Protocol
 
 import zenoh
@@ -36,11 +49,28 @@ from egc_common import keys
 from egc_common.event_log import EventLog
 from egc_common.messages import BaseCommand, StateMessage, encode_clock_reply
 from egc_common.scan import Scan
-from egc_common.transport import data_publisher, payload_bytes
+from egc_common.transport import (
+    CONTROL_REPLY,
+    control_publisher,
+    payload_bytes,
+    view_publisher,
+)
+from egc_common.view_budget import (
+    BudgetConfig,
+    BudgetState,
+    Plan,
+    RateMeter,
+    Report,
+    initial_state,
+    on_cycle,
+    on_report,
+    plan,
+)
 
-from egc_robot.controller import CommandVerdict, RobotController
+from egc_robot.controller import CommandVerdict, CycleOutput, InputVerdict, RobotController
 from egc_robot.drivers import Driver
 from egc_robot.run_stats import RunStats
+from egc_robot.state_machine import LINK_REASONS, State
 
 log = logging.getLogger("egc.robot")
 
@@ -57,6 +87,25 @@ class Recorder(Protocol):
     def on_scan(self, scan: Scan, now_ns: int) -> None: ...
     def on_state(self, state: StateMessage) -> None: ...
     def close(self) -> None: ...
+
+
+class CameraSink(Protocol):
+    """What the budget needs of a camera streamer (``egc_robot.camera_stream``, DESIGN 12): an
+    allotment it keeps to (frames/s and kbit/s; 0 fps: off), settable from any thread, and the
+    bytes and frames it has sent so far (the view plane's count; the summary's timeline)."""
+
+    def set_allotment(self, fps: float, kbps: float) -> None: ...
+    @property
+    def bytes_sent(self) -> int: ...
+    @property
+    def frames_sent(self) -> int: ...
+
+
+# A telemetry message is due when the cycle is at most this early (cycles jitter by a little;
+# the next one may be a whole period later).
+_TELEMETRY_SLACK_NS = 5_000_000
+# Telemetry overhead (every key but the scan's beams) the plan assumes before it measured one.
+_TELEMETRY_OVERHEAD_BYTES = 700.0
 
 
 class RejectionLog:
@@ -95,6 +144,8 @@ class RobotNode:
         stats: RunStats | None = None,
         clock: Callable[[], int] = time.monotonic_ns,
         clock_id: str | None = None,
+        budget: BudgetConfig | None = None,
+        camera: CameraSink | None = None,
     ) -> None:
         self._controller = controller
         self._driver = driver
@@ -109,8 +160,20 @@ class RobotNode:
         self._shut_down = False  # set under the lock: the zero command sent last stays last
         self._rejections = RejectionLog()
         self._events = EventLog()
-        self._telemetry = data_publisher(session, keys.telemetry(robot_id))
-        self._state = data_publisher(session, keys.state(robot_id))
+        self._budget_cfg = budget if budget is not None else BudgetConfig()
+        if camera is not None and not self._budget_cfg.camera:
+            self._budget_cfg = replace(self._budget_cfg, camera=True)
+        self._budget: BudgetState = initial_state(self._budget_cfg)
+        self._camera = camera
+        self._camera_bytes = 0 if camera is None else camera.bytes_sent
+        self._view_sent = RateMeter()  # the view plane's bytes, for the budget and telemetry
+        self._overhead_bytes = _TELEMETRY_OVERHEAD_BYTES
+        self._plan: Plan = plan(self._budget, self._budget_cfg, self._overhead_bytes)
+        self._allotment: tuple[float, float] | None = None
+        self._next_telemetry_ns: int | None = None
+        self.telemetry_sent = 0
+        self._telemetry = view_publisher(session, keys.telemetry(robot_id))
+        self._state = control_publisher(session, keys.state(robot_id))
         liveliness = session.liveliness()
         self._token = liveliness.declare_token(keys.alive_robot(robot_id))
         self._entities = [
@@ -128,6 +191,7 @@ class RobotNode:
         attach = getattr(driver, "set_scan_listener", None)
         if callable(attach):
             attach(self._on_fresh_scan)
+        self._entities += self._declare_source_inputs(session, robot_id, driver)
 
     @property
     def controller(self) -> RobotController:
@@ -144,11 +208,12 @@ class RobotNode:
             try:
                 verdict = self._handle_command(payload, rx_ns)
                 if verdict.accepted:
+                    self._on_report(verdict, rx_ns)
                     now = self._clock()
                     self._poll_driver(now)
                     self._cycle(now)
                     if verdict.latency_ns is not None and self._stats is not None:
-                        self._stats.on_latency(verdict.latency_ns)  # after the base command
+                        self._stats.on_latency(verdict.latency_ns, rx_ns)  # after the base command
             except Exception as exc:
                 self._fail_safe(exc)
 
@@ -204,7 +269,14 @@ class RobotNode:
         alive = sample.kind == zenoh.SampleKind.PUT
         with self._lock:
             in_control = self._controller.operator
+            # Lost while it drove (or held on the link alone): not an operator that released
+            # the deadman and closed, as a finished script does.
+            driving = self._controller.state is State.DRIVING or self._controller.reason in (
+                LINK_REASONS
+            )
             self._controller.on_operator_alive(operator_id, alive)
+            if not alive and operator_id == in_control and driving and self._stats is not None:
+                self._stats.on_operator_lost()
         # The operator in control always gets its line; others at most one a second.
         held = 0 if operator_id == in_control else self._events.allow("alive", self._clock())
         if held is not None:
@@ -243,9 +315,94 @@ class RobotNode:
 
     def _on_clock_query(self, query: zenoh.Query) -> None:
         try:
-            query.reply(query.key_expr, encode_clock_reply(self._clock(), self._clock_id))
+            reply = encode_clock_reply(self._clock(), self._clock_id)
+            query.reply(query.key_expr, reply, **CONTROL_REPLY)  # control plane (DESIGN 12)
         except Exception as exc:  # a querier that went away must not kill the callback
             log.debug("clock reply failed: %s", exc)
+
+    # -- command sources and locks (DESIGN 14) -------------------------------------------------
+
+    def _declare_source_inputs(
+        self, session: zenoh.Session, robot_id: str, driver: Driver
+    ) -> list[zenoh.Subscriber[None]]:
+        """Subscribers for the ``zenoh`` sources and Zenoh-fed locks; the driver's ROS 2 ones
+        report through ``set_input_listeners`` (none without ``[[source]]`` tables)."""
+        mux = self._controller.config.sources
+        if mux is None:
+            return []
+        subscribers = []
+        for source in mux.sources:
+            if source.kind == "zenoh":
+                key = keys.source(robot_id, source.name)
+                subscribers.append(
+                    session.declare_subscriber(
+                        key, lambda s, n=source.name: self._on_source_sample(n, s)
+                    )
+                )
+        for lock in mux.locks:
+            if lock.topic is None:
+                key = keys.lock(robot_id, lock.name)
+                subscribers.append(
+                    session.declare_subscriber(
+                        key, lambda s, n=lock.name: self._on_lock_sample(n, s)
+                    )
+                )
+        attach = getattr(driver, "set_input_listeners", None)
+        if callable(attach):
+            attach(self._on_ros_velocity, self._on_ros_lock)
+        return subscribers
+
+    def _on_source_sample(self, name: str, sample: zenoh.Sample) -> None:
+        rx_ns = self._clock()
+        payload = payload_bytes(sample)
+        self._source_input(
+            f"source {name}", lambda: self._controller.on_source(name, payload, rx_ns)
+        )
+
+    def _on_lock_sample(self, name: str, sample: zenoh.Sample) -> None:
+        rx_ns = self._clock()
+        payload = payload_bytes(sample)
+        self._source_input(f"lock {name}", lambda: self._controller.on_lock(name, payload, rx_ns))
+
+    def _on_ros_velocity(self, name: str, v_mps: float, w_radps: float, rx_ns: int) -> None:
+        """A ``ros2`` source's Twist (the driver's executor thread)."""
+        self._source_input(
+            f"source {name}",
+            lambda: self._controller.on_source_velocity(name, v_mps, w_radps, rx_ns),
+        )
+
+    def _on_ros_lock(self, name: str, value: bool, rx_ns: int) -> None:
+        """A ROS 2 lock's ``std_msgs/Bool`` (the driver's executor thread)."""
+        self._source_input(
+            f"lock {name}", lambda: self._controller.on_lock_value(name, value, rx_ns)
+        )
+
+    def _source_input(self, what: str, apply: Callable[[], InputVerdict]) -> None:
+        """Hand one source command or lock value to the controller; run a cycle on it now when
+        it may change what drives. Never raises (a Zenoh or rclpy callback)."""
+        with self._lock:
+            if self._shut_down:
+                return
+            try:
+                verdict = apply()
+                if verdict.urgent:
+                    now = self._clock()
+                    self._poll_driver(now)
+                    self._cycle(now)
+            except Exception as exc:
+                self._fail_safe(exc)
+                return
+        rejection = verdict.rejection
+        if rejection is not None:
+            held = self._events.allow(f"{what} {rejection.reason.value}", self._clock())
+            if held is not None:  # a flood must not flood the log
+                log.warning(
+                    "rejected %s (%s): %s%s",
+                    what,
+                    rejection.reason.value,
+                    rejection.detail,
+                    f" (+{held} more since the last line)" if held else "",
+                )
 
     # -- the fixed-rate loop ------------------------------------------------------------------
 
@@ -255,6 +412,8 @@ class RobotNode:
         while not stop.wait(max(0, deadline - self._clock()) / 1e9):
             now = self._clock()
             with self._lock:
+                if self._stats is not None:  # how late the cycle starts (the lock included)
+                    self._stats.on_loop_start(self._clock() - deadline, period)
                 try:
                     self._poll_driver(now)
                     self._cycle(now)
@@ -329,6 +488,12 @@ class RobotNode:
             self._recorder.on_command(payload, verdict.accepted, reason, rx_ns)
         if verdict.rejection is not None:
             self._rejections.log(verdict, controller.counters.rejected_total, rx_ns)
+        elif verdict.took_from is not None:
+            log.info(
+                "operator %s took control from %s (higher priority)",
+                controller.operator,
+                verdict.took_from,
+            )
         elif verdict.took_control:
             log.info("operator %s took control", controller.operator)
         return verdict
@@ -344,20 +509,116 @@ class RobotNode:
             if self._stats is not None:
                 self._stats.on_odometry(update.odometry)
 
+    @property
+    def plan(self) -> Plan:
+        """The downlink budget's current plan (DESIGN 12)."""
+        return self._plan
+
+    def _on_report(self, verdict: CommandVerdict, rx_ns: int) -> None:
+        """An accepted command's reports go to the downlink budget (DESIGN 12)."""
+        cmd = verdict.command
+        if cmd is None:
+            return
+        if self._stats is not None and cmd.camera_age_ms is not None:
+            self._stats.on_camera_age(cmd.camera_age_ms, rx_ns)
+        report = Report(
+            view_age_ms=None if cmd.view_age_ms is None else float(cmd.view_age_ms),
+            rx_kbps=None if cmd.rx_kbps is None else float(cmd.rx_kbps),
+            camera_age_ms=None if cmd.camera_age_ms is None else float(cmd.camera_age_ms),
+            stamp_ns=cmd.stamp_ns if cmd.stamp_ns > 0 else None,
+        )
+        before = self._budget
+        self._budget = after = on_report(
+            before,
+            self._budget_cfg,
+            report,
+            rx_ns,
+            self._plan,
+        )
+        if after.cuts > before.cuts and (held := self._events.allow("cut", rx_ns)) is not None:
+            camera = after.camera_queue_ms
+            log.info(
+                "downlink budget cut %.0f -> %.0f kbit/s: a queue of %.0f ms (camera's %s), "
+                "the operator received %s kbit/s%s",
+                before.budget_kbps,
+                after.budget_kbps,
+                after.queue_ms or 0.0,
+                "--" if camera is None else f"{camera:.0f} ms",
+                "--" if report.rx_kbps is None else f"{report.rx_kbps:.0f}",
+                f" (+{held} more cuts since the last line)" if held else "",
+            )
+
+    def _replan(self, now: int) -> None:
+        """Count the camera's bytes, let the budget probe, and apply its plan."""
+        camera = self._camera
+        if camera is not None:
+            sent = camera.bytes_sent
+            self._view_sent.add(now, sent - self._camera_bytes)
+            self._camera_bytes = sent
+        sent_kbps = self._view_sent.kbps(now)
+        if self._stats is not None:
+            frames = None if camera is None else camera.frames_sent
+            self._stats.on_view_rate(now, sent_kbps, self._budget.budget_kbps, frames)
+        cfg = self._budget_cfg
+        beams_max = self._controller.scan_beams_max
+        if beams_max is not None and beams_max != cfg.max_beams:
+            cfg = self._budget_cfg = replace(cfg, max_beams=beams_max)
+        self._budget = on_cycle(self._budget, cfg, now, sent_kbps)
+        self._plan = plan(self._budget, cfg, self._overhead_bytes)
+        self._controller.set_telemetry_beams(self._plan.scan_beams)
+        allotment = (self._plan.camera_fps, self._plan.camera_kbps)
+        if camera is not None and allotment != self._allotment:
+            camera.set_allotment(*allotment)
+            self._allotment = allotment
+
+    def _publish_telemetry(self, out: CycleOutput, now: int) -> None:
+        """The cycle's telemetry, if one is due (``telemetry_hz`` as the plan says)."""
+        due = self._next_telemetry_ns
+        if due is not None and now < due - _TELEMETRY_SLACK_NS:
+            return
+        p = self._plan
+        state = self._budget
+        t = replace(
+            out.telemetry,
+            view_kbps=round(self._view_sent.kbps(now), 1),
+            budget_kbps=round(p.budget_kbps, 1),
+            link_kbps=None if state.link_kbps is None else round(state.link_kbps, 1),
+            tel_hz=round(p.telemetry_hz, 2),
+            scan_n=p.scan_beams,
+            cam_fps=round(p.camera_fps, 2) if self._camera is not None else None,
+            cam_kbps=round(p.camera_kbps, 1) if self._camera is not None else None,
+            cut=p.cut,
+        )
+        payload = t.encode()
+        self._telemetry.put(payload)
+        self.telemetry_sent += 1
+        if self._stats is not None:
+            self._stats.on_telemetry_sent(len(payload))
+        self._view_sent.add(now, len(payload))
+        polar = t.scan_polar
+        scan_bytes = 2 * polar.beams if polar is not None else 8 * len(t.scan_xy)
+        self._overhead_bytes += 0.1 * (len(payload) - scan_bytes - self._overhead_bytes)
+        period = round(1e9 / p.telemetry_hz)
+        self._next_telemetry_ns = max((now if due is None else due) + period, now + period // 2)
+
     def _cycle(self, now: int) -> None:
         out = self._controller.step(now)
         self._driver.send(out.base)
-        self._telemetry.put(out.telemetry.encode())
+        self._replan(now)
+        self._publish_telemetry(out, now)
         if self._recorder is not None:
             self._recorder.on_base_command(out.base)
         if self._stats is not None:
             self._stats.on_cycle(out.telemetry)
         if out.state_changed is not None:
+            changed = out.state_changed
             log.info(
-                "state %s (%s)%s",
-                out.state_changed.state,
-                out.state_changed.reason,
-                f", operator {out.state_changed.operator}" if out.state_changed.operator else "",
+                "state %s (%s)%s%s%s",
+                changed.state,
+                changed.reason,
+                f", operator {changed.operator}" if changed.operator else "",
+                f", source {changed.source}" if changed.source else "",
+                f", lock {changed.lock}" if changed.lock else "",
             )
             if self._recorder is not None:
                 self._recorder.on_state(out.state_changed)

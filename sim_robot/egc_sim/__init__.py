@@ -6,7 +6,7 @@
 - ``simulator.Simulator``: the robot in a world; ``lidar``, ``drive`` and ``collision`` hold
   its sensor, its base and its footprint test.
 - ``operators``: scripted sticks; ``episodes.run_episode``: the headless loop, with the robot's
-  controller passed in (the entry point ``egc_app.episode`` wires the robot's pipeline).
+  controller passed in (the episode engine ``egc_experiments.episode`` wires the robot's pipeline).
 
 Depends on ``egc_common`` only (DESIGN 2); time is passed in, never read.
 """

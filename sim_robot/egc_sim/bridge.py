@@ -21,7 +21,7 @@ import time
 from typing import Any
 
 from egc_common import keys
-from egc_common.cli_args import plain_float
+from egc_common.cli_args import PROFILE_HELP, plain_float
 from egc_common.errors import UsageError
 from egc_common.messages import (
     Odometry,
@@ -29,7 +29,7 @@ from egc_common.messages import (
     ScanMessage,
     decode_base_command,
 )
-from egc_common.profiles import PROFILES, RobotProfile, get_profile
+from egc_common.profiles import RobotProfile, get_profile
 from egc_common.scan import Scan
 from egc_common.transport import (
     DEFAULT_ENDPOINT,
@@ -170,8 +170,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--profile",
         default="pioneer3dx",
-        metavar="NAME",
-        help=f"{', '.join(sorted(PROFILES))} (default: pioneer3dx)",
+        metavar="NAME|FILE",
+        help=f"{PROFILE_HELP} (default: pioneer3dx)",
     )
     parser.add_argument("--start", metavar="X,Y,YAW", help="start pose (default: the world's)")
     parser.add_argument(

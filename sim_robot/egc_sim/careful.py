@@ -305,7 +305,9 @@ def fit_footprint(
     xy = np.asarray(path, dtype=np.float64).copy()
     if len(xy) < 3:
         return xy
-    gy, gx = np.gradient(distance)
+    grad = np.gradient(distance)
+    gy: FloatArray = np.asarray(grad[0], dtype=np.float64)
+    gx: FloatArray = np.asarray(grad[1], dtype=np.float64)
     half = max(1, round(_BEND_M / STEP_M))
     window = 1.0 - np.abs(np.arange(-half, half + 1)) / (half + 1)
     s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
@@ -342,8 +344,8 @@ def plan_careful_path(
     """
     occupancy, resolution_m, origin = world.occupancy, world.resolution_m, world.origin
     if checker is None:
-        checker = FootprintChecker(world, profile.length_m, profile.width_m)
-    half_width = 0.5 * profile.width_m
+        checker = FootprintChecker(world, profile.footprint)
+    half_width = profile.half_size_m[1]  # the footprint's reach sideways
     distance = wall_distance_m(occupancy, resolution_m)
     hard = half_width + params.clearance_m
     comfort = profile.half_diagonal_m + params.clearance_m + params.comfort_m
@@ -432,7 +434,7 @@ class CarefulOperator:
     ) -> CarefulOperator:
         """Plan on ``world``'s map from ``start`` to ``goal`` and drive it."""
         p = (params or CarefulParams()).resolved(profile)
-        checker = FootprintChecker(world, profile.length_m, profile.width_m)
+        checker = FootprintChecker(world, profile.footprint)
         path = plan_careful_path(world, (start[0], start[1]), goal, profile, p, checker)
         return cls(path, checker, profile, mode, p)
 

@@ -1,18 +1,21 @@
-"""The robot's rectangular footprint against the blocked cells: exact clearance and contact.
+"""The robot's footprint against the blocked cells: exact clearance and contact (DESIGN 14).
 
-The clearance of the footprint rectangle R (the profile's length x width, centred on the robot,
-long side along x of {R}) to the union U of blocked cell squares is the distance between two
-sets of convex polygons. For disjoint convex polygons the distance is reached between a vertex
-of one and the other polygon, so
+The footprint F is the profile's shape as given: a simple polygon in {R} (a rectangle, a
+pentagon, an L) or a disc. Blocked cells are squares; U is their union.
 
-    clearance = min( min over corners v of blocked cells: dist(v, R),
-                     min over the 4 corners c of R:       dist(c, U) )
+Polygon. For disjoint polygons the distance is reached between a vertex of one and an edge of
+the other (the distance between two segments is reached at an endpoint of one of them), so
 
-which is exact. Where R overlaps a cell the first term is negative (minus the depth of the
-deepest cell corner inside R) or the second is 0, so ``clearance <= 0`` is contact. This needs
-no edge-crossing test because a cell is smaller than the footprint: a cell can only overlap R
-with one of its corners inside R or one of R's corners inside it (``FootprintChecker`` checks
-that the footprint is wider than a cell's diagonal).
+    clearance = min( min over corners v of blocked cells: signed_distance(v, F),
+                     min over the vertices c of F:        dist(c, U) )
+
+is exact when F and U do not overlap. They overlap when a cell corner lies inside F (the first
+term is negative: minus the depth of the deepest corner), a vertex of F inside a cell (the second
+is 0), or, with neither, when an edge of F crosses a cell (a thin part of F across a square): an
+explicit segment-square test (``segments_cross_boxes``) reports that as 0. So ``clearance <= 0``
+is contact, for every simple polygon and every cell size.
+
+Disc of radius r about the origin: clearance = dist(centre, U) - r, exact (negative inside).
 
 A Euclidean distance transform of the grid bounds the distance from the robot's centre to the
 nearest blocked cell, so only the cells that can be nearest are examined (none at all in open
@@ -25,7 +28,7 @@ import math
 
 import numpy as np
 import numpy.typing as npt
-from egc_common.kinematics import signed_distance_to_rectangle
+from egc_common.footprint import Footprint, contains, segments_cross_boxes, signed_distance
 from scipy import ndimage
 
 from egc_sim.grid_world import World
@@ -34,25 +37,20 @@ FloatArray = npt.NDArray[np.float64]
 
 
 class FootprintChecker:
-    """Clearance of a ``length_m`` x ``width_m`` rectangle at any pose in a world."""
+    """Clearance of a ``footprint`` (polygon or disc, {R}) at any pose in a world."""
 
-    def __init__(
-        self, world: World, length_m: float, width_m: float, clearance_cap_m: float = 1.0
-    ) -> None:
+    def __init__(self, world: World, footprint: Footprint, clearance_cap_m: float = 1.0) -> None:
         res = world.resolution_m
-        if not (length_m > 0 and width_m > 0):
-            raise ValueError("footprint length and width must be positive")
-        if min(length_m, width_m) <= res * math.sqrt(2.0):
-            raise ValueError(
-                f"footprint {length_m} x {width_m} m must be wider than a cell's diagonal "
-                f"({res * math.sqrt(2.0):.3f} m) for exact contact tests"
-            )
+        if not isinstance(footprint, Footprint):
+            raise TypeError("footprint must be an egc_common.footprint.Footprint")
         if not clearance_cap_m > 0:
             raise ValueError("clearance cap must be positive")
         self.world = world
-        self.half_length_m = 0.5 * length_m
-        self.half_width_m = 0.5 * width_m
-        self.half_diagonal_m = math.hypot(self.half_length_m, self.half_width_m)
+        self.footprint = footprint
+        # The radius of the circle that holds the footprint at any yaw (its reach from {R}).
+        self.half_diagonal_m = footprint.reach_m
+        self._vertices = footprint.vertices
+        self._holds_centre = bool(contains(footprint, 0.0, 0.0))
         self.clearance_cap_m = clearance_cap_m
         # Pad with blocked cells (outside the grid blocks) wide enough for any window.
         self._pad = math.ceil((clearance_cap_m + self.half_diagonal_m) / res) + 2
@@ -92,10 +90,12 @@ class FootprintChecker:
             return self.clearance_cap_m
         if lower > below:
             return lower
-        # Only squares within D of the rectangle can matter: d(rect, U) <= edt + res / sqrt(2),
-        # clearances beyond the cap are not reported and beyond ``below`` are not needed. Such a
-        # square has its centre within D + half_diagonal + res / sqrt(2) of the robot's centre.
-        reach = min(edt + res / math.sqrt(2.0), self.clearance_cap_m, below) + self.half_diagonal_m
+        # Only squares within D of the footprint can matter: d(F, U) <= edt + res / sqrt(2)
+        # (when F holds the centre), clearances beyond the cap are not reported and beyond
+        # ``below`` are not needed. Such a square has its centre within
+        # D + half_diagonal + res / sqrt(2) of the robot's centre.
+        near = edt + res / math.sqrt(2.0) if self._holds_centre else math.inf
+        reach = min(near, self.clearance_cap_m, below) + self.half_diagonal_m
         k = math.ceil(reach / res + 0.5 * math.sqrt(2.0)) + 1
         r0, r1 = max(row - k, 0), min(row + k + 1, n_rows)
         c0, c1 = max(col - k, 0), min(col + k + 1, n_cols)
@@ -104,24 +104,36 @@ class FootprintChecker:
             return self.clearance_cap_m
         ox = w.origin_x_m - self._pad * res
         oy = w.origin_y_m - self._pad * res
+        sx = ox + (cells_c + c0 + 0.5) * res
+        sy = oy + (cells_r + r0 + 0.5) * res
+        half = 0.5 * res
+        fp = self.footprint
+        if fp.is_disc:  # distance from the centre to the nearest square, minus the radius
+            gx = np.maximum(np.abs(sx - x_m) - half, 0.0)
+            gy = np.maximum(np.abs(sy - y_m) - half, 0.0)
+            return min(
+                float(np.sqrt((gx * gx + gy * gy).min())) - fp.radius_m, self.clearance_cap_m
+            )
         cos_t, sin_t = math.cos(yaw_rad), math.sin(yaw_rad)
-        hl, hw = self.half_length_m, self.half_width_m
 
-        # Corners of blocked cells against the rectangle (in the robot frame).
+        # Corners of blocked cells against the footprint (in the robot frame).
         vr, vc = np.nonzero(self._corner[r0 : r1 + 1, c0 : c1 + 1])
         px = ox + (vc + c0) * res - x_m
         py = oy + (vr + r0) * res - y_m
         local_x, local_y = cos_t * px + sin_t * py, -sin_t * px + cos_t * py
-        best = float(signed_distance_to_rectangle(local_x, local_y, hl, hw).min())
+        best = float(signed_distance(fp, local_x, local_y).min())
 
-        # The rectangle's corners against the blocked squares (world frame).
-        sx = ox + (cells_c + c0 + 0.5) * res
-        sy = oy + (cells_r + r0 + 0.5) * res
-        half = 0.5 * res
-        for u, v in ((hl, hw), (hl, -hw), (-hl, hw), (-hl, -hw)):
-            cx = x_m + cos_t * u - sin_t * v
-            cy = y_m + sin_t * u + cos_t * v
-            gx = np.maximum(np.abs(sx - cx) - half, 0.0)
-            gy = np.maximum(np.abs(sy - cy) - half, 0.0)
-            best = min(best, float(np.sqrt((gx * gx + gy * gy).min())))
+        # The footprint's vertices against the blocked squares (world frame), all at once.
+        u, v = self._vertices[:, 0], self._vertices[:, 1]
+        cx = x_m + cos_t * u - sin_t * v
+        cy = y_m + sin_t * u + cos_t * v
+        gx = np.maximum(np.abs(sx[None, :] - cx[:, None]) - half, 0.0)
+        gy = np.maximum(np.abs(sy[None, :] - cy[:, None]) - half, 0.0)
+        best = min(best, float(np.sqrt((gx * gx + gy * gy).min())))
+        if best > 0.0:
+            # Neither holds a vertex of the other; an edge across a square is still contact.
+            a = np.stack([cx, cy], axis=1)
+            centres = np.stack([sx, sy], axis=1)
+            if bool(segments_cross_boxes(a, np.roll(a, -1, axis=0), centres, half).any()):
+                return 0.0
         return min(best, self.clearance_cap_m)

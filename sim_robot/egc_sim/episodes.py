@@ -14,7 +14,7 @@ The loop is fixed-rate (``dt_s``, 20 Hz by default), in simulated time. Each con
    runs out; the option saves that time in large batches. Off by default.
 
 The controller is the robot's side and is *passed in*: sim_robot does not depend on the robot
-package (DESIGN 2). The episode entry point (``egc_app.episode``) wires in the robot's own
+package (DESIGN 2). The episode engine (``egc_experiments.episode``) wires in the robot's own
 command pipeline. A controller reports whether it ``intervened`` (changed the operator's
 command for safety) so that the episode can count interventions without knowing how.
 """

@@ -12,6 +12,7 @@ success in places nobody has seen. Everything outside the grid counts as unknown
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -165,3 +166,16 @@ def map_message(world: World, stamp_ns: int = 0) -> MapMessage:
         blocked=np.flipud(world.occupancy),
         goal=world.goal,
     )
+
+
+def world_id(world: World) -> str:
+    """An id of the world's map frame (DESIGN 15 ``map`` in ``egc/<robot>/info``): the digest
+    of its grid, resolution and origin. Simulated robots in the same world share a map frame
+    and give the same id, whatever the file was called or where it was loaded from."""
+    digest = hashlib.sha256()
+    grid = np.ascontiguousarray(world.occupancy, dtype=np.bool_)
+    digest.update(
+        repr((grid.shape, world.resolution_m, world.origin_x_m, world.origin_y_m)).encode()
+    )
+    digest.update(grid.tobytes())
+    return f"grid:{digest.hexdigest()[:16]}"

@@ -28,6 +28,7 @@ import time
 from typing import Any
 
 from egc_common.errors import UsageError
+from egc_common.executor_thread import ExecutorThread
 from egc_common.ros2_topics import (
     DEFAULT_CMD_TOPIC,
     DEFAULT_ODOM_TOPIC,
@@ -41,6 +42,9 @@ from egc_sim.simulator import Simulator
 log = logging.getLogger("egc.sim.ros2")
 
 NS_PER_S = 1_000_000_000
+# The executor's thread leaves within one wait (0.1 s) plus the callback in progress; past this,
+# a callback is stuck and the node is left to the process's exit (never destroyed under it).
+_STOP_PATIENCE_S = 10.0
 NODE_NAME = "egc_sim"
 CMD_TYPES = ("twist", "twist-stamped")
 MISSING_RCLPY = (
@@ -89,7 +93,8 @@ def command_in_effect(
 
 
 class Ros2Base:
-    """The simulator's ROS 2 face: a node with its own context and executor thread."""
+    """The simulator's ROS 2 face: a node with its own context and executor thread
+    (``egc_common.executor_thread``: ``close`` destroys the node only once it is out)."""
 
     def __init__(self, sim: Simulator, args: argparse.Namespace) -> None:
         require_rclpy()
@@ -131,14 +136,11 @@ class Ros2Base:
         except Exception:
             self._context.try_shutdown()
             raise
-        self._thread = threading.Thread(target=self._spin, name="ros2-executor", daemon=True)
-        self._thread.start()
+        self._spinner = ExecutorThread(self._executor, self._on_executor_error)
+        self._spinner.start()
 
-    def _spin(self) -> None:
-        try:
-            self._executor.spin()
-        except Exception as exc:
-            log.debug("executor stopped: %s", exc)
+    def _on_executor_error(self, exc: Exception) -> None:
+        log.error("ROS 2 executor stopped: %s", exc)
 
     def _on_cmd(self, msg: Any) -> None:
         now = time.monotonic_ns()
@@ -188,15 +190,20 @@ class Ros2Base:
         self._odom_pub.publish(msg)
 
     def close(self) -> None:
-        # The spinning thread must be out of the executor before the node goes: destroying a
-        # node under a running wait crashed the process (a segfault seen in a CI run).
+        # The executor's thread must be out before the node goes: destroying a node under a
+        # running wait crashed the process (issue 31).
+        if not self._spinner.stop(_STOP_PATIENCE_S):
+            log.error(
+                "the ROS 2 executor thread did not stop within %.0f s; the node is left to the "
+                "process's exit",
+                _STOP_PATIENCE_S,
+            )
+            return
         try:
-            self._executor.shutdown(timeout_sec=1.0)
-            self._thread.join(2.0)
+            self._executor.shutdown()
             self._node.destroy_node()  # type: ignore[no-untyped-call]
         finally:
             self._context.try_shutdown()
-            self._thread.join(2.0)
 
 
 def resolve_topics(args: argparse.Namespace) -> None:

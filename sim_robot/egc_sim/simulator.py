@@ -57,9 +57,7 @@ class Simulator:
         self.lidar_config = lidar or LidarConfig()
         self.odometry_noise = odometry_noise or OdometryNoise()
         self._lidar = Lidar(world, self.lidar_config)
-        self._footprint = FootprintChecker(
-            world, profile.length_m, profile.width_m, clearance_cap_m
-        )
+        self._footprint = FootprintChecker(world, profile.footprint, clearance_cap_m)
         self._rng = np.random.default_rng(seed)
         self._pose: Pose = (x, y, wrap_angle(yaw))
         clearance = self._footprint.clearance(*self._pose)

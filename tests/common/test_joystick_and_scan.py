@@ -27,7 +27,7 @@ def test_pinned_profiles_match_design_3():
     j = get_profile("jackal")
     assert (j.length_m, j.width_m, j.v_max_mps, j.w_max_radps) == (0.508, 0.430, 2.0, 2.0)
     assert (j.r_min_m, j.r_max_m) == pytest.approx((0.508, 2.508))
-    with pytest.raises(ValueError, match="known: jackal, pioneer3dx"):
+    with pytest.raises(ValueError, match="known: husky, jackal, pioneer3dx, turtlebot4"):
         get_profile("roomba")
     with pytest.raises(ValueError, match="v_max_mps"):
         PIONEER3DX.with_overrides(v_max_mps=math.nan)

@@ -350,3 +350,16 @@ def test_clock_reply_names_its_clock_optionally():
     assert decode_clock_id(b"\xc1garbage") is None
     clock = monotonic_clock_id()
     assert clock is None or clock.startswith("linux-boot:")
+
+
+def test_a_state_message_may_carry_the_map_pose_for_the_fleet_map():
+    """DESIGN 15: the state (1 Hz) gives where the robot is in its map frame; the key is
+    optional (older robots leave it out) and checked like every other."""
+    s = StateMessage(stamp_ns=5, state="HOLD", reason="x", map_pose=(1.5, -2.0, 0.3))
+    assert decode_state(s.encode()) == s
+    assert "map_pose" not in msgpack.unpackb(StateMessage(5, "IDLE", "x").encode())
+    raw = msgpack.unpackb(s.encode())
+    raw["map_pose"] = [1.0, float("nan"), 0.0]
+    assert isinstance(decode_state(msgpack.packb(raw)), Rejection)
+    raw["map_pose"] = [1.0, 2.0]
+    assert decode_state(msgpack.packb(raw)).reason is RejectReason.WRONG_TYPE

@@ -57,3 +57,14 @@ def test_garbage_and_huge_payloads_are_refused():
     assert isinstance(decode_info(b"\xc1\xff"), Rejection)
     assert decode_info(b"\x00" * 100_000).reason == RejectReason.TOO_LARGE
     assert decode_info(None).reason == RejectReason.WRONG_TYPE
+
+
+def test_the_map_frame_id_is_optional_and_round_trips():
+    """DESIGN 15: robots giving the same ``map`` id share a map frame (the fleet's map)."""
+    from dataclasses import replace
+
+    with_map = replace(INFO, map="grid:0123456789abcdef")
+    assert decode_info(with_map.encode()) == with_map
+    assert with_map.as_json()["map"] == "grid:0123456789abcdef"
+    assert "map" not in msgpack.unpackb(INFO.encode(), raw=False)
+    assert decode_info(INFO.encode()).map is None

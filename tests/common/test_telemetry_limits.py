@@ -48,13 +48,20 @@ def bomb(message: dict[str, object], limit: int, element: object) -> bytes:
     return payload
 
 
-def timed(decode, payload: bytes) -> tuple[object, float]:
-    best = math.inf
-    for _ in range(3):  # the best of three: a loaded machine must not fail the test
+FAST_S = 0.005  # a refusal at the header: measured 0.01-0.14 ms; a full decode: 70 ms and up
+
+
+def timed(decode, payload: bytes, budget_s: float = 2.0) -> tuple[object, float]:
+    """The result and the fastest of the calls made until one takes under ``FAST_S`` (or
+    ``budget_s`` has passed): a busy machine can pre-empt a few calls, not every one for two
+    seconds, while a decoder that unpacks the whole payload is never that fast."""
+    best, end = math.inf, time.monotonic() + budget_s
+    while True:
         t0 = time.perf_counter()
         result = decode(payload)
         best = min(best, time.perf_counter() - t0)
-    return result, best
+        if best < FAST_S or time.monotonic() > end:
+            return result, best
 
 
 @pytest.mark.parametrize("element", [{}, [], None, ""], ids=["maps", "arrays", "nils", "strs"])
@@ -70,13 +77,13 @@ def timed(decode, payload: bytes) -> tuple[object, float]:
 )
 def test_a_container_bomb_is_refused_at_its_header(decode, message, limit, element):
     """Before: telemetry 240 ms (maps) / 1185 ms (arrays), the map 442 / 2475 ms; now < 1 ms
-    (measured 0.14 ms); 5 ms allows for a loaded machine."""
+    (measured 0.14 ms)."""
     assert not isinstance(decode(msgpack.packb(message)), Rejection)
     rejected, took_s = timed(decode, bomb(message, limit, element))
     assert isinstance(rejected, Rejection)
     assert rejected.reason is RejectReason.TOO_LARGE, rejected
     assert "array of" in rejected.detail and "> limit" in rejected.detail
-    assert took_s < 0.005, took_s
+    assert took_s < FAST_S, took_s
 
 
 @pytest.mark.parametrize(
@@ -93,7 +100,7 @@ def test_nothing_nests_in_telemetry(junk):
     rejected, took_s = timed(decode_telemetry, msgpack.packb({**BASE, "junk": junk}))
     assert isinstance(rejected, Rejection)
     assert rejected.reason is RejectReason.WRONG_TYPE
-    assert took_s < 0.005, took_s
+    assert took_s < FAST_S, took_s
 
 
 def test_unknown_keys_of_the_telemetry_s_shape_are_still_ignored():

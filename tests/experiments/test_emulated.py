@@ -32,7 +32,7 @@ S = 1_000_000_000
 @pytest.fixture(scope="module")
 def checker():
     profile = get_profile("pioneer3dx")
-    return FootprintChecker(load_world("hallway"), profile.length_m, profile.width_m)
+    return FootprintChecker(load_world("hallway"), profile.footprint)
 
 
 def line(t_s, x, y=0.6, state="DRIVING", lim="none", v=0.1):

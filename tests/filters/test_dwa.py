@@ -10,14 +10,18 @@ import math
 
 import numpy as np
 import pytest
+from egc_common.footprint import Footprint, mitred_outline, signed_distance
 from egc_common.kinematics import signed_distance_to_rectangle
-from egc_common.profiles import JACKAL, PIONEER3DX, RobotProfile
+from egc_common.profiles import HUSKY, JACKAL, PIONEER3DX, RobotProfile
 from egc_robot.filters.dwa import (
     DwaCase,
     DwaParams,
     contact_angles,
+    disc_contact_angles,
     dwa_filter,
     dynamic_window,
+    polygon_contact_angles,
+    polygon_straight_free,
     stopping_times,
 )
 from egc_robot.safety import (
@@ -28,6 +32,8 @@ from egc_robot.safety import (
 )
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
+from tests.shapes import DISC, L_SHAPE, PENTAGON
 
 FAR = np.array([[30.0, 30.0]])  # one point far away: a scan that sees, and sees nothing near
 
@@ -209,7 +215,7 @@ def test_invalid_numbers_stop(bad, where):
 
 # -- window and properties --------------------------------------------------------------------
 
-profiles = st.sampled_from([PIONEER3DX, JACKAL])
+profiles = st.sampled_from([PIONEER3DX, JACKAL, HUSKY, DISC, PENTAGON, L_SHAPE])
 fractions = st.floats(-1.0, 1.0, allow_nan=False)
 coords = st.floats(-3.0, 3.0, allow_nan=False)
 clouds = st.lists(st.tuples(coords, coords), min_size=1, max_size=30)
@@ -285,6 +291,101 @@ def test_contact_angle_matches_a_fine_brute_force_orbit(radius, x, y):
         assert got == math.inf or got > 2.0 * math.pi - 1e-3
     else:
         assert got == pytest.approx(t[np.argmax(inside)], abs=1e-4)
+
+
+def _orbit_first_inside(radius: float, x: float, y: float, inside_fn) -> float:
+    """The first clockwise angle about (0, R) at which the point is inside (brute force)."""
+    t = np.linspace(0.0, 2.0 * math.pi, 200_001)
+    px = np.cos(t) * x + np.sin(t) * (y - radius)
+    py = -np.sin(t) * x + np.cos(t) * (y - radius) + radius
+    inside = inside_fn(px, py)
+    return float(t[np.argmax(inside)]) if inside.any() else math.inf
+
+
+_OUTLINES = {
+    "pentagon": PENTAGON.footprint.vertices,
+    "l-shape": L_SHAPE.footprint.vertices,
+    "l-shape mirrored": L_SHAPE.footprint.vertices * np.array([-1.0, 1.0]),
+}
+
+
+@pytest.mark.parametrize("shape", sorted(_OUTLINES))
+@settings(max_examples=80, deadline=None)
+@given(
+    st.one_of(st.just(0.0), st.floats(0.0, 0.5), st.floats(0.5, 50.0)),
+    coords,
+    coords,
+)
+def test_polygon_contact_angle_matches_a_fine_brute_force_orbit(shape, radius, x, y):
+    outline = _OUTLINES[shape]
+    fp = Footprint.polygon(outline.tolist())
+    if signed_distance(fp, x, y) <= 1e-3:
+        return
+    got = polygon_contact_angles(np.array([[radius]]), np.array([[x]]), np.array([[y]]), outline)[0]
+    want = _orbit_first_inside(radius, x, y, lambda px, py: signed_distance(fp, px, py) <= 0.0)
+    if got < want - 1e-4:  # only a graze of a corner, which sampling steps over, comes first
+        px = math.cos(got) * x + math.sin(got) * (y - radius)
+        py = -math.sin(got) * x + math.cos(got) * (y - radius) + radius
+        assert abs(float(signed_distance(fp, px, py))) <= 1e-9
+    elif want == math.inf:
+        assert got == math.inf or got > 2.0 * math.pi - 1e-3
+    else:
+        assert got == pytest.approx(want, abs=1e-4)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.one_of(st.just(0.0), st.floats(0.0, 0.5), st.floats(0.5, 50.0)), coords, coords)
+def test_disc_contact_angle_matches_a_fine_brute_force_orbit(radius, x, y):
+    r = 0.171
+    if math.hypot(x, y) - r <= 1e-3:
+        return
+    got = disc_contact_angles(np.array([[radius]]), np.array([[x]]), np.array([[y]]), r)[0]
+    want = _orbit_first_inside(radius, x, y, lambda px, py: np.hypot(px, py) <= r)
+    if want == math.inf:
+        assert got == math.inf or got > 2.0 * math.pi - 1e-3
+    else:
+        assert got == pytest.approx(want, abs=1e-4)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.one_of(st.just(0.0), st.floats(0.0, 0.5), st.floats(0.5, 50.0)), coords, coords)
+def test_polygon_contact_angle_on_a_rectangle_is_the_closed_form(radius, x, y):
+    hl, hw = 0.25, 0.2
+    if signed_distance_to_rectangle(x, y, hl, hw) <= 1e-3:
+        return
+    rect = Footprint.rectangle(2 * hl, 2 * hw).vertices
+    args = np.array([[radius]]), np.array([[x]]), np.array([[y]])
+    want = contact_angles(*args, np.array([[hl]]), np.array([[hw]]))[0]
+    got = polygon_contact_angles(*args, rect)[0]
+    assert got == pytest.approx(want, abs=1e-9) or (got > 6.28 and want > 6.28)
+
+
+@settings(max_examples=80, deadline=None)
+@given(coords, coords)
+def test_polygon_straight_free_is_the_distance_to_the_first_touch(x, y):
+    outline = L_SHAPE.footprint.vertices
+    fp = L_SHAPE.footprint
+    if signed_distance(fp, x, y) <= 1e-3 or np.abs(outline[:, 1] - y).min() < 1e-9:
+        return  # touching now, or grazing a corner at the height of a vertex
+    got = polygon_straight_free(np.array([x]), np.array([y]), outline)
+    s = np.linspace(0.0, 7.0, 70_001)  # the robot moves +x: the point moves -x
+    inside = signed_distance(fp, x - s, np.full_like(s, y)) <= 0.0
+    want = float(s[np.argmax(inside)]) if inside.any() else math.inf
+    assert got == pytest.approx(want, abs=2e-4) or (got == math.inf and want == math.inf)
+
+
+def test_l_shape_drives_past_an_obstacle_in_its_notch():
+    """A post in the L's notch (inside the bounding box, outside the robot) does not stop it
+    backing away or turning left out of it; driving ahead into the notch's back wall does."""
+    p = DwaParams.from_profile(L_SHAPE)
+    post = np.array([[0.15, -0.15]])
+    assert signed_distance(L_SHAPE.footprint, 0.15, -0.15) == pytest.approx(0.15)
+    back = dwa_filter(-0.3, 0.0, post, 0.0, 0.0, None, L_SHAPE, p)
+    assert back.v_mps < 0.0 and not back.stopped
+    # Straight ahead the post stays in the notch until the notch's inner edge (x = 0) is
+    # 0.15 m on: the free distance, not zero and not unlimited.
+    outline = mitred_outline(L_SHAPE.footprint, 0.0)
+    assert polygon_straight_free(post[:, 0], post[:, 1], outline) == pytest.approx(0.15)
 
 
 # -- parameters -------------------------------------------------------------------------------

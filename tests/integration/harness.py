@@ -335,10 +335,15 @@ def assert_no_jump(telemetry: list[Telemetry], accel_mps2: float = 0.3) -> None:
 
 
 def first_zero_after(base: list[tuple[int, BaseCommand]], since_ns: int) -> int | None:
-    """Arrival time of the first all-zero base command after ``since_ns``."""
-    for rx, b in base:
-        if rx >= since_ns and b.linear_mps == 0.0 and b.angular_radps == 0.0:
-            return rx
+    """The robot's stamp of the first all-zero base command stamped after ``since_ns``.
+
+    Reaction times are taken from the robot's own stamps (the host's CLOCK_MONOTONIC, as the
+    test's), not from arrival at the observer: what DESIGN 8 bounds is when the robot acts, and
+    the message's trip to the test's process is scheduling noise on a busy machine (issue 32).
+    """
+    for _, b in base:
+        if b.stamp_ns >= since_ns and b.linear_mps == 0.0 and b.angular_radps == 0.0:
+            return b.stamp_ns
     return None
 
 
@@ -358,8 +363,37 @@ def start_link(procs: Processes, listen: str, connect: str, *args: str, name: st
 
 
 def first_state_after(observer: Observer, state: str, since_ns: int) -> int | None:
-    """Arrival time of the first telemetry in ``state`` received after ``since_ns``."""
+    """The robot's stamp of the first telemetry in ``state`` stamped after ``since_ns`` (the
+    robot's clock: see ``first_zero_after``)."""
     with observer._lock:
         return next(
-            (rx for rx, t, _ in observer.rec.telemetry if rx > since_ns and t.state == state), None
+            (
+                t.stamp_ns
+                for _, t, _ in observer.rec.telemetry
+                if t.stamp_ns > since_ns and t.state == state
+            ),
+            None,
+        )
+
+
+def first_motion_after(observer: Observer, since_ns: int) -> int | None:
+    """The robot's stamp of the first base command with forward speed stamped after
+    ``since_ns`` (the robot's clock: see ``first_zero_after``)."""
+    return next(
+        (b.stamp_ns for _, b in observer.base() if b.stamp_ns > since_ns and b.linear_mps > 0.0),
+        None,
+    )
+
+
+def first_reason_after(observer: Observer, reasons: tuple[str, ...], since_ns: int) -> int | None:
+    """The robot's stamp of the first state message with one of ``reasons`` stamped after
+    ``since_ns`` (the robot's clock: see ``first_zero_after``)."""
+    with observer._lock:
+        return next(
+            (
+                s.stamp_ns
+                for _, s in observer.rec.state
+                if s.stamp_ns > since_ns and s.reason in reasons
+            ),
+            None,
         )

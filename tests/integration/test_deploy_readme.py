@@ -20,7 +20,6 @@ unit reading a file no step installed, two different install paths, and a robot 
 from __future__ import annotations
 
 import argparse
-import importlib
 import re
 import shlex
 import subprocess
@@ -31,7 +30,7 @@ import pytest
 import zenoh
 from egc_common.transport import free_tcp_port
 
-from egc_app.cli import SUBCOMMANDS, CliArgumentParser
+from tests import cli_process
 from tests.integration.harness import ROOT
 from tests.integration.test_deploy_acl import ACL
 from tests.integration.test_deploy_tls import OPENSSL, client_config, router_config
@@ -65,17 +64,22 @@ def commands(text: str) -> list[list[str]]:
     return [shlex.split(line, comments=True) for line in joined.splitlines() if line.strip()]
 
 
+def parse_all(*argvs: list[str]) -> list[tuple[str, argparse.Namespace]]:
+    """``egc-teleop SUBCOMMAND ...`` lines through their subcommands' real parsers (in one
+    process: nothing imports egc_app, DESIGN 2)."""
+    for argv in argvs:
+        assert argv[0].endswith("egc-teleop"), argv
+    parsed = []
+    for argv, result in zip(argvs, cli_process.parse(*(a[1:] for a in argvs)), strict=True):
+        if isinstance(result, str):
+            pytest.fail(f"does not parse: {shlex.join(argv)}: {result}")
+        parsed.append((argv[1], argparse.Namespace(**result)))
+    return parsed
+
+
 def parse(argv: list[str]) -> tuple[str, argparse.Namespace]:
-    """``egc-teleop SUBCOMMAND ...`` through the subcommand's real parser."""
-    assert argv[0].endswith("egc-teleop"), argv
-    name = argv[1]
-    module = importlib.import_module(SUBCOMMANDS[name][0])
-    parser = CliArgumentParser(prog=f"egc-teleop {name}")
-    module.configure(parser)
-    try:
-        return name, parser.parse_args(argv[2:])
-    except SystemExit:
-        pytest.fail(f"does not parse: {shlex.join(argv)}")
+    (parsed,) = parse_all(argv)
+    return parsed
 
 
 # -- the certificate recipe ---------------------------------------------------------------------
@@ -187,7 +191,7 @@ def acl_robot_ids() -> set[str]:
 
 def test_the_tls_command_lines_name_the_robot_the_acl_knows():
     lines = [c for c in commands(block_with("--zenoh-config /etc/egc/operator-tls.json5")) if c]
-    parsed = [parse(argv) for argv in lines]
+    parsed = parse_all(*lines)
     names = [name for name, _ in parsed]
     assert names == ["router", "robot", "sim", "operator"], names
     assert acl_robot_ids() == {"robot-1"}
@@ -271,9 +275,11 @@ def test_each_unit_runs_a_command_that_parses_from_installed_files(path):
 
 
 def test_the_robot_unit_has_its_bridge_unit():
-    _, robot = parse(exec_start(DEPLOY / "systemd" / "egc-robot.service"))
+    bridge_units = [exec_start(u) for u in UNITS if exec_start(u)[1] == "sim"]
+    (_, robot), *bridges = parse_all(
+        exec_start(DEPLOY / "systemd" / "egc-robot.service"), *bridge_units
+    )
     assert robot.driver == "zenoh"
-    bridges = [parse(exec_start(u)) for u in UNITS if exec_start(u)[1] == "sim"]
     assert len(bridges) == 1, bridges
     _, sim = bridges[0]
     assert (sim.robot, sim.zenoh_config) == (robot.robot, robot.zenoh_config)

@@ -13,6 +13,7 @@ import math
 import time
 
 import pytest
+from egc_common.messages import Telemetry
 from egc_common.profiles import PIONEER3DX
 from egc_robot.latency_governor import latency_speed_limit
 
@@ -39,14 +40,17 @@ def test_direct_mode_through_a_300_ms_round_trip_is_capped_by_the_formula(
         30,
     )
     since = time.monotonic_ns()
-    time.sleep(1.0)
-    capped = [t for t in observer.telemetry(since) if t.limiter == "latency"]
-    assert len(capped) >= 15
-    for t in capped:
+
+    def capped() -> list[Telemetry]:
+        return [t for t in observer.telemetry(since) if t.limiter == "latency"]
+
+    observer.wait_for("15 more capped cycles", lambda: len(capped()) >= 15, 10)
+    for t in capped():
         assert t.mode == "direct" and t.state == "DRIVING"
         tau_s = t.loop_delay_ms / 1e3
         # tau: p90 command age (~150 ms + jitter) + view age (~150 ms + up to a cycle) + 0.25 s
-        assert 0.5 < tau_s < 0.9, tau_s
+        # = 0.55-0.65 s; a busy machine adds its scheduling delays to both ages
+        assert 0.5 < tau_s < 1.2, tau_s
         expected = latency_speed_limit(tau_s, PIONEER3DX.v_max_mps, PIONEER3DX.decel_max_mps2, 0.5)
         assert t.v_lim_latency == pytest.approx(expected, rel=1e-9)
         assert t.v_cmd == pytest.approx(expected, rel=1e-9)  # scaled to the cap exactly

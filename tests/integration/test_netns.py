@@ -119,13 +119,19 @@ def test_two_hosts_are_isolated_and_always_torn_down(tmp_path):
 @needs_netns
 @pytest.mark.skipif(netns.nft_unavailable_reason() is not None, reason="no nft")
 def test_kernel_loss_drops_about_the_asked_share(tmp_path):
+    # Ready once bound; waits as long as a busy machine needs for the sender's first datagram
+    # (it was 2 s from the receiver's start, and a fixed 0.5 s was assumed for the bind), then
+    # ends 2 s after the last. A large buffer: a receiver kept off the CPU must not add loss.
     receiver = (
         "import socket\n"
         "s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)\n"
-        f"s.bind(('{netns.MIDDLE_OP_ADDR}', 9000)); s.settimeout(2)\n"
+        "try: s.setsockopt(socket.SOL_SOCKET, 33, 1 << 23)  # SO_RCVBUFFORCE (root)\n"
+        "except OSError: s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 23)\n"
+        f"s.bind(('{netns.MIDDLE_OP_ADDR}', 9000)); s.settimeout(60)\n"
+        "print('ready', flush=True)\n"
         "n = 0\n"
         "try:\n"
-        "    while True: s.recv(64); n += 1\n"
+        "    while True: s.recv(64); n += 1; s.settimeout(2)\n"
         "except OSError: print(n)\n"
     )
     sender = (
@@ -137,9 +143,9 @@ def test_kernel_loss_drops_about_the_asked_share(tmp_path):
     with netns.TwoHosts() as net:
         net.set_loss("up", 20)
         rx = net.popen("mid", [sys.executable, "-c", receiver], stdout=subprocess.PIPE)
-        time.sleep(0.5)
+        assert rx.stdout is not None and rx.stdout.readline() == b"ready\n"
         net.run("op", [sys.executable, "-c", sender])
-        received = int(rx.communicate(timeout=10)[0])
+        received = int(rx.communicate(timeout=60)[0])
         assert 1400 < received < 1800, received  # 20 % of 2000 lost, +- 5 sigma
         net.set_outage(True)
         assert "drop" in net.nft_ruleset()

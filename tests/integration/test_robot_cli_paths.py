@@ -16,7 +16,7 @@ pytestmark = pytest.mark.integration
 def _robot(*args: str) -> subprocess.CompletedProcess[str]:
     cmd = [sys.executable, "-m", "egc_app.cli", "robot", "--robot", "paths"]
     cmd += ["--listen", loopback_endpoint(free_tcp_port()), *args]
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=30)
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=120)
 
 
 @pytest.mark.parametrize(

@@ -53,8 +53,10 @@ def test_robot_and_operator_drive_through_egc_teleop_router(proto, port, procs, 
         wait_full_speed(observer)
         last = observer.last_telemetry()
         assert last is not None and last.operator == "alice", last
-        # the operator's clock queries crossed the router: its commands carry robot-clock stamps
-        assert last.cmd_age_ms is not None and 0 <= last.cmd_age_ms < 100, last
+        # the operator's clock queries crossed the router: its commands carry robot-clock
+        # stamps (the median: one cycle's age is one scheduling hiccup away from 100 ms)
+        ages = sorted(t.cmd_age_ms for t in observer.telemetry() if t.cmd_age_ms is not None)
+        assert ages and 0 <= ages[len(ages) // 2] < 100, ages
         observer.wait_for(
             "the operator's liveliness token at the robot",
             lambda: "operator alice alive" in procs.log("robot"),

@@ -33,6 +33,7 @@ from egc_common.transport import ZenohOptions, free_port, open_session
 
 from tests.integration.harness import (
     MS,
+    first_motion_after,
     first_state_after,
     forward_file,
     operator_args,
@@ -64,7 +65,7 @@ def test_an_operator_drives_the_robot_over_udp(port, procs, observer, tmp_path):
     procs.start("op", *udp_operator(port, udp, "alice", forward_file(tmp_path)))
     wait_full_speed(observer)
     since = time.monotonic_ns()
-    time.sleep(1.0)
+    observer.wait_for("a second of telemetry", lambda: observer.telemetry(since + 10**9), 10)
     driving = [t for t in observer.telemetry(since) if t.state == "DRIVING"]
     assert len(driving) >= 15 and all(t.operator == "alice" for t in driving), driving[-1:]
     ages = sorted(t.cmd_age_ms for t in driving if t.cmd_age_ms is not None)
@@ -109,7 +110,8 @@ def test_udp_through_a_lossy_relay(port, procs, observer, tmp_path):
 def test_one_second_udp_outage_resumes_without_centring(port, procs, observer, tmp_path):
     udp = robot_on_tcp_and_udp(procs, observer, port)
     relay = f"udp/127.0.0.1:{free_port('udp')}"
-    outage_start_s = 7.0
+    # after the relay's start: time to reach full speed first (see test_link_outage)
+    outage_start_s = 15.0
     t0 = start_relay(procs, relay, udp, "--up", f"outage={outage_start_s:g}+1", "--down",
                      f"outage={outage_start_s:g}+1")  # fmt: skip
     procs.start("op", *udp_operator(port, relay, "alice", forward_file(tmp_path, 90)))
@@ -121,11 +123,7 @@ def test_one_second_udp_outage_resumes_without_centring(port, procs, observer, t
         "HOLD", lambda: first_state_after(observer, "HOLD", begin), outage_start_s + 5
     )
     assert (hold - begin) / MS <= 250 + 100
-    moving = observer.wait_for(
-        "moving again",
-        lambda: next((rx for rx, b in observer.base(end) if b.linear_mps > 0.0), None),
-        5,
-    )
+    moving = observer.wait_for("moving again", lambda: first_motion_after(observer, end), 5)
     assert (moving - end) / MS <= 300
     t = observer.wait_state("DRIVING", since_ns=end)
     assert t.reason == "resumed after a link gap", t

@@ -6,10 +6,9 @@ import subprocess
 import sys
 
 import pytest
+from egc_common.cli_args import CliArgumentParser
 from egc_common.transport import options_from_args
 from egc_operator import cli
-
-from egc_app.cli import CliArgumentParser
 
 
 def parse(*argv: str):

@@ -137,10 +137,11 @@ def test_filter_button_cycles_the_shared_filters_in_design_order(caplog):
     assert js.sample(0.0).filter is None  # no pick: the robot runs its default
     picks = []
     with caplog.at_level("INFO", logger="egc.operator.joystick"):
-        for i in range(5):
+        for i in range(6):
             pad.push((EV_KEY, BTN_NORTH, 1), (EV_KEY, BTN_NORTH, 2), (EV_KEY, BTN_NORTH, 0))
             picks.append(js.sample(0.1 * (i + 1)).filter)
-    assert picks == ["egc", "ek-egc", "assist", "dwa", "egc"]  # FILTER_NAMES without "none"
+    # FILTER_NAMES without "none", then round again
+    assert picks == ["egc", "ek-egc", "assist", "dwa", "cbf", "egc"]
     assert "filter ek-egc" in caplog.text  # each pick is logged
 
 
@@ -201,3 +202,22 @@ def test_an_unplugged_pad_keeps_its_filter_pick():
     pad.unplugged = True
     s = js.sample(0.0)
     assert (s.deadman, s.filter, s.via_next) == (False, "dwa", False)
+
+
+def test_the_d_pad_switches_robots_as_a_hat_or_as_buttons():
+    """DESIGN 15: D-pad right/left (a hat on xpad and hid-playstation, buttons on others)
+    read as robot_next/robot_prev while held, and at least once after a tap."""
+    hat = CODES["ABS_HAT0X"]
+    pad = FakePad()
+    js = EvdevJoystick(pad)
+    pad.push((EV_ABS, hat, 1))
+    assert js.sample(0.0).robot_next and js.sample(0.02).robot_next  # held right
+    pad.push((EV_ABS, hat, 0), (EV_ABS, hat, -1), (EV_ABS, hat, 0))  # a tap left between samples
+    s = js.sample(0.04)
+    assert s.robot_prev and not s.robot_next
+    assert not js.sample(0.06).robot_prev
+    pad.push((EV_KEY, CODES["BTN_DPAD_RIGHT"], 1), (EV_KEY, CODES["BTN_DPAD_RIGHT"], 0))
+    assert js.sample(0.08).robot_next
+    generic = PRESETS["generic"]
+    assert (generic.robot_next, generic.robot_prev) == (CODES["BTN_BASE6"], CODES["BTN_BASE5"])
+    assert ButtonMap.from_table({"robot_next": "BTN_SOUTH"}).robot_next == CODES["BTN_SOUTH"]

@@ -30,13 +30,13 @@ def test_files_without_the_new_columns_read_as_before():
 
 
 def test_shared_filters_are_the_family_without_direct_mode():
-    assert SHARED_FILTERS == ("egc", "ek-egc", "assist", "dwa")
+    assert SHARED_FILTERS == ("egc", "ek-egc", "assist", "dwa", "cbf")
 
 
 @pytest.mark.parametrize(
     ("cell", "message"),
     [
-        ("EGC", "filter must be one of egc, ek-egc, assist, dwa or empty, got 'EGC'"),
+        ("EGC", "filter must be one of egc, ek-egc, assist, dwa, cbf or empty, got 'EGC'"),
         ("none", "(direct mode is the mode column)"),
     ],
 )

@@ -7,6 +7,7 @@ commands the node sends.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from typing import Any
@@ -67,6 +68,7 @@ class RecordingView:
         self.telemetry: list[tuple[Telemetry, int | None]] = []
         self.commands: list[tuple[int, int, int]] = []  # (robot_now, len, newest stamp)
         self.routes: list[tuple[tuple[tuple[float, float], ...], str]] = []
+        self.rtts_ms: list[float] = []  # the clock samples' round trips (on_link)
         self.lock = threading.Lock()
 
     def on_telemetry(self, t: Telemetry, received_ns: int | None = None) -> None:
@@ -86,7 +88,16 @@ class RecordingView:
         pass
 
     def on_link(self, rtt_ms: float, offset_ns: int) -> None:
-        pass
+        with self.lock:
+            self.rtts_ms.append(rtt_ms)
+
+    def clock_error_ns(self) -> int:
+        """The clock sync's own error bar: an estimate from a sample with round trip rtt is off
+        by at most rtt / 2 (clock_sync.py); the largest over the samples it reported covers
+        whichever was in use (+1 us for the float milliseconds)."""
+        with self.lock:
+            assert self.rtts_ms, "no clock sample reported"
+            return math.ceil(max(self.rtts_ms) * 1e6 / 2) + 1000
 
     def close(self) -> None:
         pass
@@ -158,6 +169,7 @@ def test_commands_carry_view_age_and_the_view_gets_the_history(session: zenoh.Se
         published_at = robot_clock()
         session.put(keys.telemetry(ROBOT), telemetry.encode())
         wait_for(lambda: len(view.telemetry) == 1)
+        shown_at = robot_clock()  # the view has had it by now
         n = len(sent)
         wait_for(lambda: len(sent) >= n + 10)
     finally:
@@ -168,19 +180,33 @@ def test_commands_carry_view_age_and_the_view_gets_the_history(session: zenoh.Se
             entity.undeclare()
     ((shown, received),) = view.telemetry
     assert shown.stamp_ns == stamp
-    assert received is not None and 150 * MS <= received - stamp < 2000 * MS
-    ages = [(c.view_age_ms, at) for c, at in sent if c.view_age_ms is not None]
+    # ``received`` is the node's estimate of the robot's clock at arrival: between the true
+    # clock when the test published and when the view was handed it, give or take the error
+    # the clock sync itself reports (issue 32: 149.8 ms measured against a bound of 150 ms).
+    err = view.clock_error_ns()
+    assert received is not None
+    assert published_at - err <= received <= shown_at + err, (received - stamp, err)
+    ages = [(c.view_age_ms, c.stamp_ns, at) for c, at in sent if c.view_age_ms is not None]
     assert len(ages) >= 10
-    for age, arrived in ages:
-        assert age >= 150
-        # the age grows with the command's send time: never more than the time it took to arrive
-        assert age <= (arrived - stamp) // MS + 5
-    assert ages[-1][0] >= ages[0][0] and ages[0][0] <= (robot_clock() - published_at) // MS + 150
+    for i, (age, stamped, arrived) in enumerate(ages):
+        # stamped with the robot's clock when sent: before it arrived, and (but the first,
+        # whose clock may have been read just before the telemetry came) after the telemetry
+        assert stamped <= arrived + err, (stamped - arrived, err)
+        assert i == 0 or published_at - err <= stamped, (stamped - published_at, err)
+        # the telemetry's age on the robot's clock when the command is sent (DESIGN 7), in
+        # whole milliseconds: it grows with the send time
+        assert abs(age - (stamped - stamp) // MS) <= 1, (age, stamped - stamp)
     # every synchronised command went into the history handed to the view, newest last
-    synced = [c for c, _ in sent if c.stamp_ns]
+    # (the one command after the stop releases the deadman; it is not for the predictive view)
+    synced = [c for c, _ in sent if c.stamp_ns and c.deadman]
+    assert sent[-1][0].deadman is False and sent[-2][0].deadman is True
     handed = [newest for _, _, newest in view.commands]
     assert handed[: len(synced)] == [c.stamp_ns for c in synced]  # the last may be in flight
-    assert len(node.history) == len(handed)
+    # The node's history is the newest of them: all on an idle machine; on a busy one the run
+    # can outlast the history's 4 s, or a better clock sample can move the stamps back (the
+    # history then starts over, prediction.CommandHistory)
+    kept = [c.stamp_ns for c in node.history.since(0)]
+    assert kept and kept == handed[-len(kept) :]
     assert all(now == newest for now, _, newest in view.commands)
     command = node.history.newest
     assert command is not None and (command.x, command.y, command.mode) == (0.5, 0.25, "shared")

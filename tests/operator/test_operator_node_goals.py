@@ -126,28 +126,35 @@ def test_route_goes_out_when_the_robot_is_seen_every_second_and_at_once_on_a_pre
         state = StateMessage(time.monotonic_ns(), "DRIVING", "x", "op1")
         session.put(keys.state(ROBOT), state.encode())
         seen = time.monotonic()
-        wait_for(lambda: len(goals) >= 1, 3.0)
-        assert goals[0][0] - seen < 0.5  # at once on taking control
-        wait_for(lambda: len(goals) >= 3, 4.0)  # republished at 1 Hz
+        wait_for(lambda: len(goals) >= 1, 10.0)
+        # At once on taking control: well before a republish period (1 s; the slack is for a
+        # busy machine, issue 32)
+        assert goals[0][0] - seen < 0.9
+        wait_for(lambda: len(goals) >= 3, 10.0)  # republished at 1 Hz
         with lock:
             first = [g for _, g in goals]
             gaps = [b - a for (a, _), (b, _) in itertools.pairwise(goals)]
         assert all(g.points == ROUTE.points and g.frame == "odom" for g in first)
-        assert all(0.8 < gap < 1.5 for gap in gaps), gaps
-        # The robot reports the second point active: "next" skips it, at once.
+        # 1 Hz, not at every poll (0.05 s) nor every other second; arrival times: +- delivery
+        assert all(0.7 < gap < 1.7 for gap in gaps), gaps
+        # The robot reports the second point active: "next" skips it at once, not on the next
+        # republish: pressed just after a republish, the skip comes well before the next one.
         session.put(keys.telemetry(ROBOT), telemetry((2.0, -1.0), 1).encode())
         wait_for(lambda: node._telemetry is not None)
         n = len(goals)
-        pressed = time.monotonic()
+        wait_for(lambda: len(goals) > n, 10.0)
         source.via_next = True
-        wait_for(lambda: len(goals) > n, 0.5)
-        assert goals[n][1].points == ((3.0, 1.0),)
-        assert goals[n][0] - pressed < 0.3
+        wait_for(lambda: len(goals) > n + 1, 10.0)
+        republished, skipped = goals[n], goals[n + 1]
+        assert skipped[1].points == ((3.0, 1.0),)
+        assert skipped[0] - republished[0] < 0.8, skipped[0] - republished[0]
         time.sleep(0.3)  # still held: one press, one skip
-        assert [g.points for _, g in goals[n:]] == [((3.0, 1.0),)]
+        assert {g.points for _, g in goals[n + 1 :]} == {((3.0, 1.0),)}
         source.via_next = False
         source.via_clear = True
-        wait_for(lambda: any(g.points == () for _, g in goals), 0.5)
+        wait_for(lambda: any(g.points == () for _, g in goals), 10.0)
+        cleared = next(t for t, g in goals if g.points == ())
+        assert cleared - skipped[0] < 0.8  # at once: the republish is 1 s after the skip
         source.via_clear = False
         # the operator's pick wins over the --filter default
         source.filter = "dwa"

@@ -315,3 +315,60 @@ def test_via_points_the_robot_did_not_take_are_said_so():
     line = format_status(replace(BASE, via_untaken=True))
     assert "| via points NOT taken by the robot (does the router pass egc/<robot>/goal?) |" in line
     assert "NOT taken" not in format_status(replace(BASE, via_untaken=True, goal=(1.0, 2.0)))
+
+
+# -- command sources and operator priorities (DESIGN 14) --------------------------------------
+
+
+def test_a_source_that_drives_and_a_lock_that_holds_are_named():
+    nav = replace(BASE, reason="source nav", source="nav", in_control=False, controller=None)
+    assert situation(nav) == "DRIVING - source nav drives"
+    assert (
+        situation(replace(nav, limiter="egc"))
+        == "SLOWED: obstacle (filter egc) - source nav drives"
+    )
+    line = format_status(replace(nav, lock="pause"))
+    assert "| source nav | lock pause |" in line
+    locked = replace(BASE, robot_state="HOLD", reason="lock hb: silent for 0.62 s", lock="hb")
+    assert (
+        situation(locked) == "LOCKED by hb (silent for 0.62 s) - nothing drives until it releases"
+    )
+
+
+def test_an_operator_whose_control_a_supervisor_took_is_told_who():
+    from egc_operator.status_line import Episode
+
+    command = OperatorCommand(5, 1, 0.0, 0.0, "shared", True, False, False, "alice", 0)
+    episode = Episode()
+    mine = Telemetry(1, 10, "DRIVING", "shared", 0.0, 0.0, 0.0, 0.0, 1.0, operator="alice")
+    taken = Telemetry(1, 20, "HOLD", "shared", 0.0, 0.0, 0.0, 0.0, 1.0, operator="sup")
+    episode.update(mine)
+    episode.update(taken)
+    status = status_of(command, taken, None, 1.0, True, episode=episode)
+    assert status.taken_by == "sup"
+    assert situation(status) == (
+        "TAKEN OVER: sup took control - you can take over once it quits or is lost"
+    )
+    # Another operator that was merely watching is not told it was taken over.
+    bob = OperatorCommand(5, 1, 0.0, 0.0, "shared", True, False, False, "bob", 0)
+    assert situation(status_of(bob, taken, None, 1.0, True, episode=episode)).startswith(
+        "WATCHING: sup"
+    )
+
+
+def test_a_fleet_operator_s_line_names_the_driven_robot_and_the_others() -> None:
+    from egc_operator.status_line import FleetLine
+
+    out = io.StringIO()
+    fleet = [FleetLine("rb", "ra HOLD, rc IDLE")]
+    line = StatusLine(out, tty=False, fleet=lambda: fleet[0])
+    line.show(BASE, 0.0)
+    text = out.getvalue()
+    assert text.startswith("[rb] DRIVING") and text.rstrip().endswith("| fleet: ra HOLD, rc IDLE")
+    line.show(BASE, 0.1)
+    assert out.getvalue() == text  # nothing changed: no new plain line
+    fleet[0] = FleetLine("rc", "ra HOLD, rb HOLD")  # a switch prints at once
+    line.show(BASE, 0.2)
+    assert out.getvalue().count("\n") == 2 and "[rc]" in out.getvalue()
+    line.say("robots (3; * driven):")
+    assert out.getvalue().endswith("robots (3; * driven):\n")

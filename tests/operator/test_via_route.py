@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from egc_common.cli_args import CliArgumentParser
 from egc_common.messages import MAX_GOAL_POINTS, GoalMessage, decode_goal
 from egc_operator import cli
 from egc_operator.via_route import (
@@ -23,8 +24,6 @@ from egc_operator.via_route import (
     parse_route_text,
     route_from_options,
 )
-
-from egc_app.cli import CliArgumentParser
 
 S = 1_000_000_000
 

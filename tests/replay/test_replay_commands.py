@@ -22,7 +22,7 @@ from egc_robot.replay_core import (
     velocity_fault,
 )
 
-from egc_app.cli import main
+from tests.cli_process import main
 from tests.replay.logs import TS, T, corridor_log
 
 S = 1_000_000_000
@@ -114,10 +114,9 @@ def test_odometry_keeps_its_own_limit(tmp_path, capsys):
 @pytest.mark.parametrize("value", ["0", "-1", "nan", "abc", "-inf"])
 def test_bad_timeouts(tmp_path, capsys, value):
     log = corridor_log(tmp_path / "log", "mcap", WALLS[:5])
-    with pytest.raises(SystemExit) as exc:
-        main(["replay", str(log), f"--cmd-timeout-s={value}"])
+    code = main(["replay", str(log), f"--cmd-timeout-s={value}"])
     err = capsys.readouterr().err
-    assert exc.value.code == 2 and err.count("\n") == 1 and "--cmd-timeout-s" in err, err
+    assert code == 2 and err.count("\n") == 1 and "--cmd-timeout-s" in err, err
 
 
 def twist(v: float, w: float = 0.0) -> bytes:

@@ -14,11 +14,13 @@ import subprocess
 import sys
 from pathlib import Path
 
+import egc_experiments.log_replay as log_replay
 import numpy as np
 import pytest
+from egc_common.errors import UsageError
+from egc_common.profiles import get_profile
+from egc_robot.replay_core import Replayer
 
-import egc_app.replay_cmd as replay_cmd
-from egc_app.cli import main
 from tests.replay.logs import corridor_log
 
 PINNED = ("scans", "commands", "changed", "max_cut_mps", "hold_s", "closest_m", "filter", "profile")
@@ -26,12 +28,20 @@ SCANS = 60  # corridor_log writes one command per scan
 WALLS = tuple(np.linspace(2.5, 0.3, SCANS))
 
 
-def run_replay(*args: str) -> tuple[int, str, str]:
-    """``main`` in process; an exception escaping it is the traceback a user would see."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        code = main(["replay", *args])
-    return code, out.getvalue(), err.getvalue()
+def run_replay(log: str) -> tuple[int, str, str]:
+    """The replay engine in this process, as ``egc-teleop replay LOG`` runs it (the default
+    filter and profile): 0, the summary as JSON and what it said on stderr; or 2, nothing and
+    its UsageError, the one line the CLI prints after ``egc-teleop replay: error:`` (its real
+    process: ``test_an_overflowing_record_length_in_a_real_process``). Any other exception
+    escaping is the traceback a user would see."""
+    err = io.StringIO()
+    replayer = Replayer.for_filter("egc", get_profile("pioneer3dx"))
+    with contextlib.redirect_stderr(err):
+        try:
+            summary = log_replay.replay(log_replay.log_file_in(Path(log)), replayer)
+        except UsageError as exc:
+            return 2, "", f"{err.getvalue()}{exc}\n"
+    return 0, json.dumps(summary), err.getvalue()
 
 
 def storage_file(log: Path) -> Path:
@@ -73,7 +83,7 @@ def test_no_traceback_wherever_the_bytes_are_overwritten(clean_log, tmp_path):
             if code == 2:
                 lines = err.strip().splitlines()
                 assert out == "" and len(lines) == 1, (where, err)
-                assert lines[0].startswith("egc-teleop replay: error: "), (where, err)
+                assert lines[0].startswith(f"{damaged}"), (where, err)  # names the log
                 continue
             s = json.loads(out)
             assert all(k in s for k in PINNED), where
@@ -155,8 +165,8 @@ class FailingReader:
 )
 def test_a_reader_error_mid_log_keeps_what_was_read(tmp_path, monkeypatch, exc):
     log = corridor_log(tmp_path / "log", "sqlite3", WALLS)
-    real = replay_cmd._reader
-    monkeypatch.setattr(replay_cmd, "_reader", lambda path: FailingReader(real(path), 25, exc))
+    real = log_replay._reader
+    monkeypatch.setattr(log_replay, "_reader", lambda path: FailingReader(real(path), 25, exc))
     code, out, err = run_replay(str(log))
     assert code == 0, err
     s = json.loads(out)
@@ -167,10 +177,10 @@ def test_a_reader_error_mid_log_keeps_what_was_read(tmp_path, monkeypatch, exc):
     assert line.startswith("egc-teleop replay: read 25 of the 60 scans the log declares on")
     assert f"(the reader: {type(exc).__name__}: {exc})" in line
     # nothing readable at all: a bad log, one line
-    monkeypatch.setattr(replay_cmd, "_reader", lambda path: FailingReader(real(path), 0, exc))
+    monkeypatch.setattr(log_replay, "_reader", lambda path: FailingReader(real(path), 0, exc))
     code, out, err = run_replay(str(log))
     assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
-    assert err.startswith(f"egc-teleop replay: error: {log}: cannot read this log (")
+    assert err.startswith(f"{log}: cannot read this log (")
     assert str(exc) in err
 
 
@@ -186,7 +196,7 @@ def test_an_overflowing_record_length_in_a_real_process(tmp_path):
         bad[off : off + 64] = b"\xff" * 64
         mcap.write_bytes(bytes(bad))
         try:
-            with replay_cmd._reader(mcap) as reader:
+            with log_replay._reader(mcap) as reader:
                 for _ in reader.messages():
                     pass
         except OverflowError:

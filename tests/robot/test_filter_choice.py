@@ -54,4 +54,4 @@ def test_an_unknown_filter_name_is_rejected_on_the_wire() -> None:
 
 
 def test_every_shared_filter_name_is_pinned() -> None:
-    assert SHARED_FILTERS == ("egc", "ek-egc", "assist", "dwa")
+    assert SHARED_FILTERS == ("egc", "ek-egc", "assist", "dwa", "cbf")

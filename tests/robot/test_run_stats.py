@@ -40,3 +40,41 @@ def test_empty_summary_has_no_percentiles():
         "p99_ms": None,
         "max_ms": None,
     }
+
+
+def test_view_timeline_per_second():
+    """DESIGN 12's view_timeline: per second of the robot's clock, the view age's largest and
+    median, the view plane's kbit/s and budget, camera frames sent, the newest camera frame's
+    age at best and the largest command latency."""
+    s = RunStats()
+    second = 1_000_000_000
+    frames = 0
+    for i in range(80):  # 4 s at 20 Hz, the view age a 20-70 ms sawtooth
+        t = 10 * second + i * 50_000_000
+        age = 20.0 + i % 6 * 10
+        s.on_cycle(Telemetry(i, t, "DRIVING", "shared", 0.1, 0.0, 0.1, 0.0, 1.0, view_age_ms=age))
+        frames += i % 2  # 10 frames a second
+        s.on_view_rate(t, 300.0, budget_kbps=350.0, camera_frames=frames)
+        s.on_camera_age(120.0 - i % 2 * 40, t)
+        s.on_latency((5 + i) * 1_000_000, t)
+    timeline = {e["t_s"]: e for e in s.summary()["view_timeline"]}
+    first, later = timeline[10], timeline[13]
+    assert first["view_age_ms"] == 70.0 and first["view_age_p50_ms"] == 40.0
+    assert later["view_age_p50_ms"] == 40.0  # the last second, flushed by summary()
+    assert later["kbps"] == 300.0 and later["budget_kbps"] == 350.0 and later["cam_frames"] == 10
+    assert "kbps" not in first  # a partial first window is left out
+    assert first["camera_age_ms"] == 80.0 and first["cmd_age_ms"] == 24.0
+    assert later["cmd_age_ms"] == 84.0
+
+
+def test_the_fixed_rate_loop_s_lateness_against_its_period():
+    stats = RunStats()
+    assert stats.summary()["loop_overrun_p99"] is None  # no cycle yet
+    for k in range(200):  # 50 ms period; two cycles in a hundred start 40 ms late
+        stats.on_loop_start(40_000_000 if k % 50 == 0 else 1_000_000, 50_000_000)
+    stats.on_loop_start(-5, 50_000_000)  # early (a clock read before the deadline): 0
+    s = stats.summary()
+    assert s["loop_period_ms"] == 50.0 and s["loop_late_ms"]["n"] == 201
+    assert s["loop_late_ms"]["p50_ms"] == pytest.approx(1.0)
+    assert s["loop_overrun_p99"] == pytest.approx(s["loop_late_ms"]["p99_ms"] / 50.0, abs=1e-3)
+    assert s["loop_overrun_p99"] > 0.5  # 2 % of the cycles more than half a period late

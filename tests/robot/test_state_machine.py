@@ -107,3 +107,36 @@ def test_unchanged_transition_is_the_same_object():
 def test_driving_is_not_inherited_when_control_changed_hands():
     t = next_state(at(State.DRIVING), with_(centred=False, same_control=False))
     assert t == Transition(State.HOLD, "waiting for a centred stick")
+
+
+# -- command sources (DESIGN 14) ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("start", [State.IDLE, State.HOLD])
+def test_a_source_other_than_the_operator_drives_at_once_without_a_stick(start):
+    t = next_state(at(start), with_(source="nav", same_control=False))
+    assert t == Transition(State.DRIVING, "source nav")
+
+
+def test_a_switch_of_source_is_a_new_driving_episode():
+    current = at(State.DRIVING, "source nav")
+    assert next_state(current, with_(source="nav")) is current
+    assert next_state(current, with_(same_control=False)).reason == "fresh centred command"
+
+
+def test_a_source_still_needs_a_fresh_scan():
+    t = next_state(at(State.DRIVING, "source nav"), with_(source="nav", scan_fresh=False))
+    assert t == Transition(State.HOLD, "sensor stale")
+
+
+@pytest.mark.parametrize("start", [State.IDLE, State.DRIVING, State.HOLD])
+def test_a_lock_holds_whatever_drove(start):
+    t = next_state(at(start), with_(operator_present=False, lock_reason="lock pause: true"))
+    assert t == Transition(State.HOLD, "lock pause: true")
+
+
+def test_an_estop_outranks_a_lock_and_a_lock_does_not_reset_it():
+    locked = with_(operator_present=False, lock_reason="lock pause: true")
+    assert next_state(at(State.HOLD), dataclasses.replace(locked, estop=True)).state is State.ESTOP
+    estop = at(State.ESTOP, "estop")
+    assert next_state(estop, dataclasses.replace(locked, reset=True)) is estop

@@ -53,7 +53,9 @@ def test_failed_cycles_send_zero_and_the_loop_keeps_running(caplog):
         stop = threading.Event()
         loop = threading.Thread(target=node.run, args=(stop,))
         loop.start()
-        time.sleep(0.5)
+        deadline = time.monotonic() + 30.0  # 10 cycles at 50 Hz: 0.2 s on an idle machine
+        while controller.calls < 10 and loop.is_alive() and time.monotonic() < deadline:
+            time.sleep(0.01)
         stop.set()
         loop.join(timeout=5)
         node.shutdown()

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 import rclpy
+from egc_common.executor_thread import ExecutorThread
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.context import Context
@@ -38,6 +39,8 @@ _COUNTER = itertools.count()
 BEAMS = 360
 RANGE_MIN_M = 0.1
 RANGE_MAX_M = 8.0
+# Both threads leave within a wait or a loop period; this long means one is stuck.
+STOP_PATIENCE_S = 30.0
 
 
 def domain_for_test() -> int:
@@ -94,13 +97,12 @@ class FakeBase:
         )
         self._executor = SingleThreadedExecutor(context=self._context)
         self._executor.add_node(self.node)
+        self._errors: list[Exception] = []
+        self._spinner = ExecutorThread(self._executor, self._errors.append, name="fake-base-ros2")
         self._stop = threading.Event()
-        self._threads = [
-            threading.Thread(target=self._executor.spin, daemon=True),
-            threading.Thread(target=self._loop, daemon=True),
-        ]
-        for thread in self._threads:
-            thread.start()
+        self._loop_thread = threading.Thread(target=self._loop, name="fake-base-loop", daemon=True)
+        self._spinner.start()
+        self._loop_thread.start()
 
     # -- /cmd_vel -------------------------------------------------------------------------------
 
@@ -195,11 +197,15 @@ class FakeBase:
             self._odom_pub.publish(odom)
 
     def close(self) -> None:
+        """Both threads out, then the node goes: destroying it under a thread still using it
+        segfaulted a CI run (issue 31). A thread still inside fails the test and the node is
+        left to the process's exit."""
         self._stop.set()
-        self._threads[1].join(2)
-        # The spinning thread leaves the executor before the node goes (destroying the node
-        # under a running wait segfaulted a CI run).
-        self._executor.shutdown(timeout_sec=1.0)
-        self._threads[0].join(2)
+        self._loop_thread.join(STOP_PATIENCE_S)
+        spinner_out = self._spinner.stop(STOP_PATIENCE_S)
+        if self._loop_thread.is_alive() or not spinner_out:
+            raise AssertionError(f"the fake base's threads did not stop in {STOP_PATIENCE_S} s")
+        self._executor.shutdown()
         self.node.destroy_node()
         self._context.try_shutdown()
+        assert not self._errors, f"the fake base's executor failed: {self._errors}"

@@ -19,6 +19,9 @@ from tests.ros2.fake_base import FakeBase
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 MS = 1_000_000
+# A ROS 2 process's exit after SIGTERM (its node closed, then rclpy's and Fast DDS's teardown)
+# took 4-14 s with the cores taken (issue 31), past the harness's default of 5 s.
+STOP_TIMEOUT_S = 60.0
 
 
 @pytest.fixture
@@ -81,9 +84,10 @@ def test_drives_in_free_space_and_stops_within_half_a_second_of_a_silent_operato
     # HOLD; the base's own controller brakes), which from v_max alone would take 0.28 s.
     start_robot_and_operator(base, procs, tmp_path, 1.0)
     base.wait_driving()
-    time.sleep(1.0)
+    # all +inf: free, so full speed (a 0.5 s ramp; waited for, not slept: a busy machine)
+    base.wait_for("full speed", lambda: base.commands()[-1].linear_mps > 0.133, 10.0)
     moving = base.commands()[-1]
-    assert moving.linear_mps == pytest.approx(0.14, rel=0.05), moving  # all +inf: free
+    assert moving.linear_mps == pytest.approx(0.14, rel=0.05), moving
     assert moving.angular_radps == 0.0
     assert moving.frame_id is None
     silent_ns = time.monotonic_ns()
@@ -94,17 +98,15 @@ def test_drives_in_free_space_and_stops_within_half_a_second_of_a_silent_operato
         5.0,
     )
     assert (zero.rx_ns - silent_ns) / 1e9 < 0.5
-    time.sleep(0.5)
-    assert all(c.linear_mps == 0.0 for c in base.commands(zero.rx_ns)), "drove on after the stop"
     # It keeps publishing (every control cycle), so a base that needs a stream stays stopped.
-    assert len(base.commands(zero.rx_ns)) >= 5
+    base.wait_for("5 more twists", lambda: len(base.commands(zero.rx_ns)) >= 5, 10.0)
+    assert all(c.linear_mps == 0.0 for c in base.commands(zero.rx_ns)), "drove on after the stop"
 
 
 def test_stops_within_a_second_of_the_scans_stopping(base, procs, tmp_path):
     start_robot_and_operator(base, procs, tmp_path, 0.5)
     base.wait_driving()
-    time.sleep(0.5)
-    assert base.commands()[-1].linear_mps > 0.05
+    base.wait_for("moving", lambda: base.commands()[-1].linear_mps > 0.05, 10.0)
     quiet_ns = time.monotonic_ns()
     base.scans_on.clear()
     zero = base.wait_for(
@@ -119,12 +121,15 @@ def test_stops_within_a_second_of_the_scans_stopping(base, procs, tmp_path):
 def test_sigterm_while_driving_leaves_a_zero_twist_last(base, procs, tmp_path):
     start_robot_and_operator(base, procs, tmp_path, 1.0)
     base.wait_driving()
-    time.sleep(0.5)
-    assert base.commands()[-1].linear_mps > 0.05
-    assert procs.stop("robot", signal.SIGTERM) == 0
-    time.sleep(0.3)
-    last = base.commands()[-1]
-    assert (last.linear_mps, last.angular_radps) == (0.0, 0.0), base.commands()[-5:]
+    base.wait_for("moving", lambda: base.commands()[-1].linear_mps > 0.05, 10.0)
+    assert procs.stop("robot", signal.SIGTERM, STOP_TIMEOUT_S) == 0
+    # the robot has exited: nothing more comes, but its last twist may still be on its way to
+    # our executor (a fixed 0.3 s was assumed enough)
+    base.wait_for(
+        "a zero twist last",
+        lambda: (base.commands()[-1].linear_mps, base.commands()[-1].angular_radps) == (0, 0),
+        5.0,
+    )
     assert "last zero twist was not acknowledged" not in procs.log("robot")
 
 
@@ -139,9 +144,9 @@ def test_a_wall_nearer_than_range_min_is_not_driven_into(ros_domain, procs, tmp_
             base, procs, tmp_path, 1.0, "--profile", "jackal", "--filter", filter_name
         )
         wait_log(procs, "robot", r"state DRIVING", 30.0)
-        time.sleep(1.5)
+        time.sleep(1.5)  # the stick goes forward 1 s after the centred start
+        base.wait_for("20 twists", lambda: len(base.commands()) > 20, 10.0)
         cmds = base.commands()
-        assert len(cmds) > 20
         assert max(c.linear_mps for c in cmds) <= 0.0, max(c.linear_mps for c in cmds)
         assert base.max_x_m + 0.254 < 0.5, base.max_x_m
     finally:
@@ -202,9 +207,9 @@ def test_no_forward_motion_into_minus_inf_readings(base, procs, tmp_path):
     base.ranges_override = ranges
     start_robot_and_operator(base, procs, tmp_path, 1.0)
     wait_log(procs, "robot", r"state DRIVING", 30.0)
-    time.sleep(1.5)
+    time.sleep(1.5)  # the stick goes forward 1 s after the centred start
+    base.wait_for("20 twists", lambda: len(base.commands()) > 20, 10.0)
     cmds = base.commands()
-    assert len(cmds) > 20
     assert max(c.linear_mps for c in cmds) <= 0.0, max(c.linear_mps for c in cmds)
     # The same stick in free space drives: the -inf readings, not the setup, held it.
     base.ranges_override = None

@@ -14,7 +14,7 @@ pytest.importorskip("rclpy", reason="ROS 2's rclpy is not installed (pip install
 from egc_common.transport import free_tcp_port, loopback_endpoint
 
 from tests.integration.harness import ROBOT, Processes, joystick_file, operator_args
-from tests.ros2.test_robot_ros import wait_log
+from tests.ros2.test_robot_ros import STOP_TIMEOUT_S, wait_log
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 
@@ -63,7 +63,7 @@ def test_sim_ros2_drives_under_the_robot_and_stops_on_silence(
     procs.children["robot"].send_signal(signal.SIGKILL)
     procs.children["robot"].wait(5)
     time.sleep(1.0)
-    assert procs.stop("sim") == 0
+    assert procs.stop("sim", timeout_s=STOP_TIMEOUT_S) == 0
     sim_log = procs.log("sim")
     assert "collided: False" in sim_log
     commands = int(sim_log.rsplit("stopped after ", 1)[1].split()[0])
@@ -85,10 +85,15 @@ def test_sim_ros2_base_stops_half_a_second_after_cmd_vel_goes_silent(ros_domain,
     context = Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node("probe", context=context)
+    # (the simulator's stamp, v): its ROS clock is the system clock, time.time_ns() here; the
+    # stamp says when it braked, without the message's trip to this process (issue 32)
     odom: list[tuple[int, float]] = []
-    node.create_subscription(
-        Odometry, "/odom", lambda m: odom.append((time.monotonic_ns(), m.twist.twist.linear.x)), 10
-    )
+
+    def on_odom(m: Odometry) -> None:
+        stamp = m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
+        odom.append((stamp, m.twist.twist.linear.x))
+
+    node.create_subscription(Odometry, "/odom", on_odom, 10)
     pub = node.create_publisher(Twist, "/cmd_vel", 10)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
@@ -100,19 +105,21 @@ def test_sim_ros2_base_stops_half_a_second_after_cmd_vel_goes_silent(ros_domain,
             pub.publish(msg)
             executor.spin_once(timeout_sec=0.05)
         assert odom and odom[-1][1] > 0.0999, "the simulator never reached 0.1 m/s"
-        last_cmd_ns = time.monotonic_ns()
+        last_cmd_ns = time.time_ns()
         end = time.monotonic() + 1.5
         while time.monotonic() < end:
             executor.spin_once(timeout_sec=0.05)
         # It keeps the last command for 0.5 s, then brakes at the profile's deceleration
-        # (Pioneer 3-DX: 0.5 m/s^2, so 0.2 s from 0.1 m/s), as a real base does.
+        # (Pioneer 3-DX: 0.5 m/s^2, so 0.2 s from 0.1 m/s), as a real base does. On the
+        # simulator's stamps: 0.506-0.515 s and 0.704-0.712 s at load average 6.6.
         braking = next(t for t, v in odom if t > last_cmd_ns and v < 0.099)
         stopped = next(t for t, v in odom if t > last_cmd_ns and v == 0.0)
-        assert 0.45 < (braking - last_cmd_ns) / 1e9 < 0.5 + 0.1, (braking - last_cmd_ns) / 1e9
-        assert (stopped - last_cmd_ns) / 1e9 < 0.5 + 0.2 + 0.1, (stopped - last_cmd_ns) / 1e9
+        assert 0.45 < (braking - last_cmd_ns) / 1e9 < 0.5 + 0.15, (braking - last_cmd_ns) / 1e9
+        assert (stopped - last_cmd_ns) / 1e9 < 0.5 + 0.2 + 0.15, (stopped - last_cmd_ns) / 1e9
         assert all(v == 0.0 for t, v in odom if t > stopped)
         assert math.isfinite(odom[-1][1])
     finally:
-        executor.shutdown(timeout_sec=1.0)
+        # Spun in this thread only (spin_once above), so nothing is inside it now (issue 31).
+        executor.shutdown()
         node.destroy_node()
         context.try_shutdown()

@@ -5,12 +5,12 @@ footprint sweep still keeps the robot off the obstacle. Real pipeline, real simu
 from __future__ import annotations
 
 from egc_common.profiles import get_profile
+from egc_experiments.episode import PipelineController
 from egc_robot.pipeline import PipelineConfig
 from egc_sim.episodes import run_episode
 from egc_sim.operators import ForwardOperator
 from egc_sim.simulator import Simulator
 
-from egc_app.episode import PipelineController
 from tests.sim.helpers import boxed_room, grid_world
 
 

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 from egc_common.profiles import JACKAL, PIONEER3DX
+from egc_experiments.episode import EpisodeSettings, run_settings
 from egc_sim.careful import (
     STEP_M,
     CarefulOperator,
@@ -22,8 +23,6 @@ from egc_sim.grid_world import World
 from egc_sim.observation import Observation
 from egc_sim.operators import make_operator
 from egc_sim.route import RouteError
-
-from egc_app.episode import EpisodeSettings, run_settings
 
 
 def _room(gap_m: float) -> World:
@@ -112,7 +111,7 @@ def test_the_path_goes_through_the_middle_of_a_wide_enough_gap():
     assert tuple(path.xy[0]) == (1.0, 1.0) and tuple(path.xy[-1]) == (5.0, 1.0)
     crossing = path.xy[np.argmin(np.abs(path.xy[:, 0] - 3.0))]
     assert crossing[1] == pytest.approx(3.0, abs=0.1)
-    checker = FootprintChecker(world, JACKAL.length_m, JACKAL.width_m)
+    checker = FootprintChecker(world, JACKAL.footprint)
     assert footprint_clearances(path.xy, checker).min() >= p.clearance_m + p.check_margin_m
     assert path.speed_mps[-1] == 0.0 and path.speed_mps.max() <= p.speed_mps
 

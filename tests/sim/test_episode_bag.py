@@ -13,7 +13,7 @@ from egc_sim.episode_bag import BagError, BagStep, EpisodeBag, check_bag_path
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
-from egc_app.cli import main
+from tests.cli_process import main
 
 
 def _scan(n: int = 8, r: float = 2.0) -> Scan:

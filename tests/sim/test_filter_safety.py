@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from egc_app.episode import EpisodeSettings, run_batch
+from egc_experiments.episode import EpisodeSettings
+from egc_experiments.episode_batch import run_batch
 
 
 def random_stick_file(path, seed: int, duration_s: float = 30.0) -> str:

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import pytest
+from egc_experiments.episode import EpisodeSettings, run_settings
+from egc_experiments.episode_batch import run_batch
 from egc_sim.worlds import load_world
-
-from egc_app.episode import EpisodeSettings, run_batch, run_settings
 
 # Obstacles of the hallway (worlds/hallway.toml): centre (x, y), radius 0.3 m, and the side the
 # paper's Fig. 10 expands the guide circle to in each area.

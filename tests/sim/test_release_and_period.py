@@ -18,9 +18,8 @@ from pathlib import Path
 import pytest
 from egc_common.errors import UsageError
 from egc_common.profiles import JACKAL, PIONEER3DX
+from egc_experiments.episode import EpisodeSettings, run_settings
 from egc_robot.safety import MAX_CONTROL_PERIOD_S, decelerate
-
-from egc_app.episode import EpisodeSettings, run_settings
 
 MRPB = Path(__file__).resolve().parents[2].parent / "shared" / "worlds" / "mrpb"
 

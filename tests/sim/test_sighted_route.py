@@ -6,14 +6,13 @@ import math
 
 import numpy as np
 import pytest
+from egc_experiments.episode import EpisodeSettings, run_settings
 from egc_sim.grid_world import World
 from egc_sim.observation import Observation, ViewBuffer
 from egc_sim.operators import make_operator
 from egc_sim.route import RouteError, RouteOperator, building_map, plan_route
 from egc_sim.sighted import SightedOperator, SightedParams, free_distances
 from egc_sim.worlds import load_world
-
-from egc_app.episode import EpisodeSettings, run_settings
 
 OFFICE_START = (-7.0, -1.0, math.pi / 2)
 OFFICE_GOAL = (-2.0, 3.6)
@@ -187,7 +186,7 @@ def test_make_operator_builds_and_rejects_the_models():
 
 
 def test_episode_cli_takes_the_models(capsys):
-    from egc_app.cli import main
+    from tests.cli_process import main
 
     assert (
         main(["episode", "--map", "random:2", "--operator", "route", "--filter", "none", "--json"])

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from egc_common.footprint import Footprint
 from egc_common.kinematics import wheel_speeds
 from egc_common.profiles import JACKAL, PIONEER3DX
 from egc_sim.collision import FootprintChecker
@@ -106,58 +107,105 @@ def _separating_axis_distance(rect: np.ndarray, square: np.ndarray) -> float:
     if overlap(rect, square):
         return 0.0
 
-    def point_segment(p, a, b):
-        t = np.clip(np.dot(p - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
-        return float(np.linalg.norm(p - (a + t * (b - a))))
+    def point_segment(p, a, b):  # plain floats: this runs ~10^5 times
+        (px, py), (ax, ay), (bx, by) = p, a, b
+        ex, ey = bx - ax, by - ay
+        t = min(1.0, max(0.0, ((px - ax) * ex + (py - ay) * ey) / (ex * ex + ey * ey)))
+        return math.hypot(px - ax - t * ex, py - ay - t * ey)
 
     best = math.inf
-    for poly, other in ((rect, square), (square, rect)):
+    for poly, other in ((rect.tolist(), square.tolist()), (square.tolist(), rect.tolist())):
         for p in poly:
             for i in range(len(other)):
                 best = min(best, point_segment(p, other[i], other[(i + 1) % len(other)]))
     return best
 
 
-def test_clearance_is_exact_against_a_polygon_reference():
+# Footprints as a union of convex parts in {R} (the reference below is for convex polygons).
+_PENTAGON = [[0.35, 0.0], [0.15, 0.25], [-0.25, 0.25], [-0.25, -0.25], [0.15, -0.25]]
+_L_PARTS = [
+    [[0.3, 0.3], [-0.3, 0.3], [-0.3, 0.0], [0.3, 0.0]],
+    [[0.0, 0.0], [-0.3, 0.0], [-0.3, -0.3], [0.0, -0.3]],
+]
+_L = [[0.3, 0.3], [-0.3, 0.3], [-0.3, -0.3], [0.0, -0.3], [0.0, 0.0], [0.3, 0.0]]
+_SHAPES = {
+    "pioneer3dx": (PIONEER3DX.footprint, [list(PIONEER3DX.footprint.vertices_m)]),
+    "pentagon": (Footprint.polygon(_PENTAGON), [_PENTAGON]),
+    "l-shape": (Footprint.polygon(_L), _L_PARTS),
+    "disc": (Footprint.disc(0.2), None),
+}
+
+
+@pytest.mark.parametrize("shape", sorted(_SHAPES))
+def test_clearance_is_exact_against_a_polygon_reference(shape):
+    footprint, parts = _SHAPES[shape]
     world = load_world("random:5")
-    checker = FootprintChecker(world, PIONEER3DX.length_m, PIONEER3DX.width_m)
+    checker = FootprintChecker(world, footprint)
     rng = np.random.default_rng(0)
     blocked = np.argwhere(world.occupancy)
     res = world.resolution_m
-    hl, hw = PIONEER3DX.length_m / 2, PIONEER3DX.width_m / 2
-    checked = 0
+    checked = contacts = 0
     while checked < 25:
         x, y = rng.uniform(0.3, world.width_m - 0.3), rng.uniform(0.3, world.height_m - 0.3)
         yaw = rng.uniform(-math.pi, math.pi)
         got = checker.clearance(x, y, yaw)
         c, s = math.cos(yaw), math.sin(yaw)
-        rect = np.array(
-            [
-                [x + c * u - s * v, y + s * u + c * v]
-                for u, v in ((hl, hw), (-hl, hw), (-hl, -hw), (hl, -hw))
-            ]
-        )
-        near = blocked[
-            np.hypot((blocked[:, 1] + 0.5) * res - x, (blocked[:, 0] + 0.5) * res - y) < 1.6
+        # The nearest square to the footprint is at most 2 reach + a cell farther from the
+        # robot's centre than the square nearest the centre: only those need the reference.
+        centre_d = np.hypot((blocked[:, 1] + 0.5) * res - x, (blocked[:, 0] + 0.5) * res - y)
+        if centre_d.min() - footprint.reach_m - res > 1.0:
+            assert got == 1.0  # nothing within the cap
+            continue
+        near = blocked[centre_d <= centre_d.min() + 2 * footprint.reach_m + res]
+        squares = [
+            np.array([[cc, rr], [cc + 1, rr], [cc + 1, rr + 1], [cc, rr + 1]], float) * res
+            for rr, cc in near
         ]
-        ref = min(
-            (
-                _separating_axis_distance(
-                    rect,
-                    np.array([[cc, rr], [cc + 1, rr], [cc + 1, rr + 1], [cc, rr + 1]], float) * res,
-                )
-                for rr, cc in near
-            ),
-            default=math.inf,
-        )
+        if parts is None:  # a disc: centre to square, minus the radius
+            ref = min(
+                (
+                    math.hypot(
+                        max(sq[0, 0] - x, 0.0, x - sq[1, 0]), max(sq[0, 1] - y, 0.0, y - sq[2, 1])
+                    )
+                    - footprint.radius_m
+                    for sq in squares
+                ),
+                default=math.inf,
+            )
+        else:
+            placed = [
+                np.array([[x + c * u - s * v, y + s * u + c * v] for u, v in part])
+                for part in parts
+            ]
+            ref = min(
+                (_separating_axis_distance(p, sq) for p in placed for sq in squares),
+                default=math.inf,
+            )
         if ref >= 1.0:
             assert got == 1.0
             continue
-        if ref == 0.0:
+        if ref <= 0.0:
             assert got <= 0.0
+            contacts += 1
         else:
             assert got == pytest.approx(ref, abs=1e-9)
         checked += 1
+    assert contacts < checked  # the draw measured clearances, not contacts only
+
+
+def test_a_thin_part_across_a_cell_is_contact():
+    """An edge of the footprint through a blocked cell with no vertex of either inside the
+    other: the corner tests alone would miss it."""
+    occupancy = np.zeros((20, 20), dtype=bool)
+    occupancy[10, 10] = True  # the cell [1.0, 1.1] x [1.0, 1.1] at 0.1 m
+    world = grid_world(occupancy, 0.1, (0.0, 0.0))
+    # A body with a long arm 2 cm thick (a T on its side), its vertices far from the cell.
+    arm = [[0.5, 0.01], [-0.4, 0.01], [-0.4, 0.1], [-0.5, 0.1], [-0.5, -0.1], [-0.4, -0.1]]
+    bar = Footprint.polygon([*arm, [-0.4, -0.01], [0.5, -0.01]])
+    checker = FootprintChecker(world, bar)
+    assert checker.clearance(1.05, 1.05, 0.0) <= 0.0
+    assert checker.clearance(1.05, 1.05, math.pi / 2) <= 0.0
+    assert checker.clearance(1.05, 0.97, 0.0) == pytest.approx(0.02, abs=1e-9)
 
 
 def test_driving_into_a_wall_stops_at_contact():
@@ -197,5 +245,5 @@ def test_bad_starts_and_steps():
         sim.step(math.nan, 0.0, 0.05)
     with pytest.raises(ValueError):
         sim.step(0.1, 0.0, 0.0)
-    with pytest.raises(ValueError, match="wider than a cell"):
-        FootprintChecker(grid_world(boxed_room(40.0, 40.0), 1.0), 1.0, 1.0)
+    with pytest.raises(TypeError, match="Footprint"):
+        FootprintChecker(grid_world(boxed_room(40.0, 40.0), 1.0), 1.0)  # type: ignore[arg-type]

@@ -165,3 +165,14 @@ def test_random_worlds_are_seeded_solvable_and_block_the_straight_line():
         t = np.linspace(0.0, 1.0, 400)
         assert any(w.blocked_at(sx + u * (gx - sx), sy + u * (gy - sy)) for u in t), seed
     assert load_world("random", seed=3).name == "random:3"
+
+
+def test_the_world_id_names_the_map_frame_whatever_the_file():
+    """DESIGN 15 ``map`` in the robot's info: the same grid is the same frame, wherever it was
+    loaded from; another grid is another frame."""
+    from egc_sim.grid_world import world_id
+
+    names = builtin_names()
+    a, b = load_world(names[0]), load_world(names[0])
+    assert world_id(a) == world_id(b) and world_id(a).startswith("grid:")
+    assert world_id(load_world(names[1])) != world_id(a)

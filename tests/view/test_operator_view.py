@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from egc_common.messages import StateMessage
+from egc_common.messages import StateMessage, Telemetry
 from egc_operator import view_blueprint as paths
 from egc_operator.view import OperatorView, record_episode
 from egc_operator.view_scene import command_vector, status_text
@@ -83,7 +83,8 @@ def test_the_file_carries_the_default_layout(recording_path) -> None:  # type: i
             origin = batch.column("ViewBlueprint:space_origin").to_pylist()[0][0]
             views.setdefault(kind, set()).add(origin)
     assert views == {
-        "2D": {"/"},  # robot frame and world frame (each selects its subtree)
+        # robot frame and world frame (each selects its subtree), the camera (DESIGN 12)
+        "2D": {"/", paths.CAMERA},
         "StateTimeline": {paths.LANES},
         "TextLog": {paths.TEXT_LOG},
         "TextDocument": {paths.LINK_TEXT},  # the link figures in plain numbers
@@ -269,3 +270,26 @@ def test_text_without_any_robot_is_kept_at_time_zero(tmp_path: Path) -> None:
     log = read_recording(tmp_path / "alone.rrd")[_entity(paths.TEXT_LOG)]
     assert [r[0] for r in log.column("TextLog:text")] == ["no robot answers"]
     assert log.rows.column("robot_time").cast("int64").to_pylist() == [0]
+
+
+def test_a_round_robot_is_drawn_round(tmp_path: Path) -> None:
+    """DESIGN 14: a footprint that is not a centred rectangle is drawn as its outline, in the
+    robot frame and on the map (a TurtleBot 4: a circle of radius 0.171 m)."""
+    path = tmp_path / "round.rrd"
+    view = record_episode(path, "sim", recording_name="round")
+    for i in range(3):
+        view.on_telemetry(telemetry(i, profile="turtlebot4"))
+    view.close()
+    rec = read_recording(path)
+    strips = rec[_entity(paths.FOOTPRINT)].column("LineStrips2D:strips")
+    outline = np.array(strips[0][0])
+    assert len(outline) == 33 and np.allclose(np.hypot(*outline.T), 0.171)
+    world = rec[_entity(paths.POSE_FOOTPRINT)].static_column("LineStrips2D:strips")
+    assert np.allclose(np.hypot(*np.array(world[0][0]).T), 0.171)
+
+
+def test_the_status_text_names_the_source_and_the_lock():
+    """DESIGN 14: which source drives and which lock holds, in the robot-frame view."""
+    t = Telemetry(1, 1, "DRIVING", "shared", 0.1, 0.0, 0.1, 0.0, 1.0, source="nav", lock="pause")
+    assert status_text(t).endswith(" · source nav · lock pause")
+    assert "source" not in status_text(Telemetry(1, 1, "IDLE", "shared", 0, 0, 0, 0, 1.0))

@@ -168,3 +168,21 @@ def test_map_image_places_cells_at_their_world_position() -> None:
 def test_map_image_rejects_bad_maps(occupancy, resolution, origin) -> None:  # type: ignore[no-untyped-def]
     with pytest.raises(ValueError):
         map_image(occupancy, resolution, origin)
+
+
+def test_shapes_beyond_the_rectangle_are_drawn_as_given() -> None:
+    """DESIGN 14: a disc or a polygon is drawn by its outline; a centred rectangle stays a box."""
+    from egc_common.profiles import HUSKY, TURTLEBOT4
+    from egc_operator.view_scene import footprint_corners
+
+    from tests.shapes import PENTAGON
+
+    round_scene = robot_frame_scene(telemetry(1, profile="turtlebot4"))
+    assert round_scene.footprint_outline is not None
+    assert np.allclose(np.hypot(*np.array(round_scene.footprint_outline).T), 0.171)
+    assert robot_frame_scene(telemetry(1, profile="husky")).footprint_outline is None
+    assert footprint_half_size(HUSKY) == (0.495, 0.335)
+    corners = footprint_corners((1.0, 2.0, math.pi / 2), PENTAGON)
+    assert corners[0] == pytest.approx((1.0, 2.35))  # the nose, turned to +y
+    assert corners[0] == corners[-1] and len(corners) == 6
+    assert len(footprint_corners((0.0, 0.0, 0.0), TURTLEBOT4)) == 33

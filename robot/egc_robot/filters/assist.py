@@ -580,7 +580,7 @@ def _wall_heading(
     mask = (
         (r2 <= params.wall_range_m * params.wall_range_m)
         & (s * y >= -params.corridor_half_width_m)
-        & (x >= -0.5 * profile.length_m)
+        & (x >= profile.footprint.bounds[0])  # not behind the back of the robot
     )
     if not bool(np.any(mask)):
         return s * params.wall_lost_turn_rad, False

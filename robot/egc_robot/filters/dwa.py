@@ -14,7 +14,7 @@ profile and ``DwaParams`` in; a frozen ``DwaResult`` out. One call:
    v <= 0. When the window does not reach the allowed sign (moving forward fast while reverse is
    asked for) it keeps the hardest braking it reaches.
 2. **Admissible velocities.** (v, w) is admissible when the robot can stop before the first
-   contact of its footprint (the profile's L x W rectangle) along the arc: the paper's
+   contact of its footprint along the arc: the paper's
    v <= sqrt(2 dist a_dec), here with the stopping model of the pipeline's footprint sweep
    (``safety.stopping_time_s``): the command held for ``latency_s``, then v and w ramped down
    together (same curvature) at the profile's limits, so the stop covers |v| T of arc and |w| T
@@ -23,10 +23,16 @@ profile and ``DwaParams`` in; a frozen ``DwaResult`` out. One call:
    (points mirrored x -> -x), turns in place by the angle before a corner touches.
    Contact is exact, not sampled: in the moving frame every point orbits the instantaneous
    centre of rotation, and the first contact angle is the first crossing of that circle with the
-   rectangle's edges (closed form, vectorised over candidates x points).
-   Margin, the rule of the pipeline's sweep (DESIGN 5.10): "contact" is with the rectangle grown
-   by min(``margin_m``, the footprint's clearance now), so far from obstacles the margin is
-   kept, and closer than the margin motion may keep the clearance (drive along a wall, back
+   footprint's boundary (vectorised over candidates x points): the profile's shape as given
+   (DESIGN 14), in closed form on a centred rectangle's four edges (``contact_angles``), as two
+   circles for a disc (``disc_contact_angles``), and as circle-segment crossings on every edge
+   of any other polygon (``polygon_contact_angles``; reverse and right turns mirror the polygon
+   with the points, as it need not be symmetric).
+   Margin, the rule of the pipeline's sweep (DESIGN 5.10): "contact" is with the footprint grown
+   by g = min(``margin_m``, the footprint's clearance now) (a disc by g; the centred rectangle
+   by g on each side; another polygon by its mitred outline, whose sharp corners reach at most
+   g beyond it, so its edges move out by g / ``mitre_factor``), so far from obstacles the margin
+   is kept, and closer than the margin motion may keep the clearance (drive along a wall, back
    away) but not lower it. A point inside the footprint (contact now) leaves nothing but
    stopping.
 3. **Score** of each admissible candidate, every term normalised to [0, 1]:
@@ -50,7 +56,7 @@ Cases, each never less safe than stopping (as EGC's DESIGN 5.9 rules):
   (``egc.EgcCase.NO_POINTS_UNKNOWN``'s rule). ``NO_POINTS_FREE``: declared free -> every
   candidate is admissible with full clearance.
 - A candidate whose arc deviates from a straight line by less than 0.5 um within the reach
-  (radius >= 2 reach^2 / 1 um, thousands of km) is driven as straight, the rectangle grown by
+  (radius >= 2 reach^2 / 1 um, thousands of km) is driven as straight, the footprint grown by
   that deviation; points closer than 1 um to the footprint count as touching it.
 
 Cost: candidates x points in reach (within half-diagonal + margin + look-ahead of the origin);
@@ -66,7 +72,8 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 import numpy.typing as npt
-from egc_common.kinematics import ramp_toward, signed_distance_to_rectangle
+from egc_common.footprint import Footprint, mitre_factor, mitred_outline, signed_distance
+from egc_common.kinematics import ramp_toward
 from egc_common.profiles import RobotProfile
 from egc_common.scan import MAX_ABS_COORD_M, ObstaclePoints, obstacle_points
 
@@ -284,6 +291,147 @@ def contact_angles(
     return result
 
 
+def disc_contact_angles(
+    radius_m: FloatArray, x_m: FloatArray, y_m: FloatArray, disc_m: float
+) -> FloatArray:
+    """``contact_angles`` for a disc of radius ``disc_m`` about the origin (a round robot):
+    the first clockwise crossing of each point's orbit (centre (0, R), R >= 0) with the circle.
+    Turning in place (R = 0) the orbit is concentric with the disc: never a contact."""
+    r = radius_m
+    dy0 = y_m - r
+    phi0 = np.arctan2(dy0, x_m)
+    rho2 = x_m * x_m + dy0 * dy0
+    # Crossings P: |P| = disc, |P - (0, R)| = rho, so P_y = (disc^2 - rho^2 + R^2) / (2 R).
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        py = (disc_m * disc_m - rho2 + r * r) / (2.0 * r)
+        px2 = disc_m * disc_m - py * py
+    ok = (r > 0.0) & (px2 >= 0.0)
+    px = np.sqrt(np.maximum(px2, 0.0))
+    best = np.full(np.broadcast_shapes(r.shape, x_m.shape), np.inf)
+    for sign in (1.0, -1.0):
+        psi = np.arctan2(py - r, sign * px)
+        np.minimum(best, np.where(ok, np.mod(phi0 - psi, _TWO_PI), np.inf), out=best)
+    if best.size == 0:
+        return np.full(len(r), np.inf)
+    result: FloatArray = best.min(axis=1)
+    return result
+
+
+def polygon_contact_angles(
+    radius_m: FloatArray, x_m: FloatArray, y_m: FloatArray, outline: FloatArray
+) -> FloatArray:
+    """``contact_angles`` for any simple polygon ``outline`` ((E, 2) vertices, in the canonical
+    frame): the first clockwise crossing of each point's orbit (centre (0, R), radius rho) with
+    an edge. Starting outside, the first crossing of the boundary is the first contact, so the
+    smallest crossing angle over all edges is exact. Shapes: radius (K, 1), points (1, N);
+    returns (K,)."""
+    r = radius_m[:, :, None]  # (K, 1, 1)
+    x, y = x_m[:, :, None], y_m[:, :, None]  # (1, N, 1)
+    dy0 = y - r
+    phi0 = np.arctan2(dy0, x)
+    rho2 = x * x + dy0 * dy0
+    p0 = outline
+    e = np.roll(outline, -1, axis=0) - outline
+    ex, ey = e[:, 0], e[:, 1]  # (E,)
+    fx, fy = p0[:, 0], p0[:, 1] - r  # (E,), (K, 1, E)
+    a = ex * ex + ey * ey
+    b = 2.0 * (fx * ex + fy * ey)
+    c = fx * fx + fy * fy - rho2  # (K, N, E)
+    disc = b * b - 4.0 * a * c
+    root = np.sqrt(np.maximum(disc, 0.0))
+    best = np.full(c.shape, np.inf)
+    for sign in (1.0, -1.0):
+        t = (-b + sign * root) / (2.0 * a)
+        ok = (disc >= 0.0) & (t >= 0.0) & (t <= 1.0)
+        psi = np.arctan2(p0[:, 1] + t * ey - r, p0[:, 0] + t * ex)
+        np.minimum(best, np.where(ok, np.mod(phi0 - psi, _TWO_PI), np.inf), out=best)
+    if best.size == 0:
+        return np.full(len(radius_m), np.inf)
+    result: FloatArray = best.min(axis=(1, 2))
+    return result
+
+
+def polygon_straight_free(x_m: FloatArray, y_m: FloatArray, outline: FloatArray) -> float:
+    """Free distance driving straight ahead (+x) before the polygon ``outline`` touches any
+    point (canonical frame; inf for none): for each point, the nearest edge crossing of the
+    horizontal line through it at or behind it."""
+    x0, y0 = outline[:, 0], outline[:, 1]
+    x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
+    px, py = x_m[:, None], y_m[:, None]
+    span = (np.minimum(y0, y1) <= py) & (py <= np.maximum(y0, y1)) & (y0 != y1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cx = x0 + (py - y0) * (x1 - x0) / (y1 - y0)
+    gap = np.where(span & (cx <= px), px - cx, np.inf)
+    return float(gap.min()) if gap.size else math.inf
+
+
+def _shape_free(
+    fp: Footprint,
+    grow_m: float,
+    x: FloatArray,
+    y: FloatArray,
+    sx: FloatArray,
+    sy: FloatArray,
+    radius: FloatArray,
+    straight: BoolArray,
+    turning: BoolArray,
+) -> tuple[FloatArray, FloatArray]:
+    """(free distance of the straight candidates, contact angle of the turning ones) for a
+    footprint that is not a centred rectangle: a disc (exact circles) or any polygon (its
+    mitred outline grown so that it stays inside every point's clearance)."""
+    dev = 0.5 * _TOUCH_M
+    s_free = np.full(int(straight.sum()), np.inf)
+    theta = np.full(int(turning.sum()), np.inf)
+    if fp.is_disc:
+        rd = fp.radius_m + grow_m
+        if s_free.size:
+            xs = sx[straight, None] * x[None, :]
+            hits = (np.abs(y) <= rd + dev)[None, :] & (xs > 0.0)
+            front = np.sqrt(np.maximum((rd + dev) ** 2 - y * y, 0.0))[None, :]
+            s_free = np.maximum(np.where(hits, xs - front, np.inf).min(axis=1), 0.0)
+        if theta.size:
+            xt = sx[turning, None] * x[None, :]
+            yt = sy[turning, None] * y[None, :]
+            rows = max(1, _BLOCK // x.size)
+            theta = np.concatenate(
+                [
+                    disc_contact_angles(
+                        radius[i : i + rows], xt[i : i + rows], yt[i : i + rows], rd
+                    )
+                    for i in range(0, len(radius), rows)
+                ]
+            )
+        return s_free, theta
+    # The sharp corners reach mitre_factor * g beyond the footprint: g keeps them within the
+    # clearance every point has now, and the straight test's deviation within that too.
+    g = grow_m / mitre_factor(fp) - dev
+    vertices = fp.vertices
+    for mx in (1.0, -1.0):  # straight: mirror x for reverse (the polygon with the points)
+        pick = straight & (sx == mx)
+        if pick.any():
+            outline = mitred_outline(fp, g + dev) * np.array([mx, 1.0])
+            s_free[(sx[straight] == mx)] = max(polygon_straight_free(mx * x, y, outline), 0.0)
+    if theta.size:
+        idx = np.flatnonzero(turning)
+        outline0 = mitred_outline(fp, g)
+        rows = max(1, _BLOCK // (x.size * len(vertices)))
+        for mx in (1.0, -1.0):
+            for my in (1.0, -1.0):
+                group = (sx[idx] == mx) & (sy[idx] == my)
+                if not group.any():
+                    continue
+                outline = outline0 * np.array([mx, my])
+                rg = radius[group]
+                xt, yt = (mx * x)[None, :], (my * y)[None, :]
+                theta[group] = np.concatenate(
+                    [
+                        polygon_contact_angles(rg[i : i + rows], xt, yt, outline)
+                        for i in range(0, len(rg), rows)
+                    ]
+                )
+    return s_free, theta
+
+
 def dwa_filter(
     v_ref_mps: float,
     w_ref_radps: float,
@@ -386,50 +534,57 @@ def _free_and_admissible(
     free = np.full(k, np.inf)
     standing = (v == 0.0) & (w == 0.0)
     admissible = standing.copy()
-    half_l, half_w = profile.half_size_m
-    reach = profile.half_diagonal_m + params.margin_m + lookahead
+    fp = profile.footprint
+    box = fp.centred_box
+    reach = fp.reach_m + params.margin_m + lookahead
     near = pts.r2 <= reach * reach
     x, y = pts.x[near], pts.y[near]
     if x.size == 0:  # nothing within reach: every candidate is free up to the look-ahead
         admissible[:] = True
         return free, admissible
-    now = signed_distance_to_rectangle(x, y, half_l, half_w)
+    now = signed_distance(fp, x, y)
     if bool((now <= 2.0 * _TOUCH_M).any()):  # in contact now: only stopping
         free[~standing] = 0.0
         return free, admissible
     grow = min(float(now.min()), params.margin_m) - _TOUCH_M
-    a, b = half_l + grow, half_w + grow
 
     # Canonical form: forward (mirror x for reverse), then left turns (mirror y for right).
     sx = np.where(v < 0.0, -1.0, 1.0)
     sy = np.where(sx * w < 0.0, -1.0, 1.0)
     speed, turn = np.abs(v), np.abs(w)
     # Curvature below TOUCH / reach^2 deviates from a straight line by at most TOUCH / 2 within
-    # the reach: driven as straight, with the rectangle grown by that deviation.
+    # the reach: driven as straight, with the footprint grown by that deviation.
     dev = 0.5 * _TOUCH_M
     straight = ~standing & (turn * reach * reach <= _TOUCH_M * speed)
     turning = ~standing & ~straight
+    radius = (speed[turning] / turn[turning])[:, None]  # turning: |w| > 0
 
-    if straight.any():
-        xs = sx[straight, None] * x[None, :]
-        hits = (np.abs(y) <= b + dev)[None, :] & (xs > 0.0)
-        gap = np.where(hits, xs - (a + dev), np.inf)
-        s_free = np.maximum(gap.min(axis=1), 0.0)
+    if box is None:  # a disc or any other polygon
+        s_free, theta = _shape_free(fp, grow, x, y, sx, sy, radius, straight, turning)
         free[straight] = s_free
         admissible[straight] = speed[straight] * t_stop[straight] <= s_free
-
+    else:  # the centred rectangle: closed forms on its four edges
+        a, b = box[0] + grow, box[1] + grow
+        if straight.any():
+            xs = sx[straight, None] * x[None, :]
+            hits = (np.abs(y) <= b + dev)[None, :] & (xs > 0.0)
+            gap = np.where(hits, xs - (a + dev), np.inf)
+            s_free = np.maximum(gap.min(axis=1), 0.0)
+            free[straight] = s_free
+            admissible[straight] = speed[straight] * t_stop[straight] <= s_free
+        theta = np.full(len(radius), np.inf)
+        if turning.any():
+            xt = sx[turning, None] * x[None, :]
+            yt = sy[turning, None] * y[None, :]
+            rows = max(1, _BLOCK // x.size)  # blocks of candidates that stay in cache
+            theta = np.concatenate(
+                [
+                    contact_angles(radius[i : i + rows], xt[i : i + rows], yt[i : i + rows], a, b)
+                    for i in range(0, len(radius), rows)
+                ]
+            )
     if turning.any():
-        radius = (speed[turning] / turn[turning])[:, None]
-        xt = sx[turning, None] * x[None, :]
-        yt = sy[turning, None] * y[None, :]
-        rows = max(1, _BLOCK // x.size)  # blocks of candidates that stay in cache
-        theta = np.concatenate(
-            [
-                contact_angles(radius[i : i + rows], xt[i : i + rows], yt[i : i + rows], a, b)
-                for i in range(0, len(radius), rows)
-            ]
-        )
-        arm = np.where(radius[:, 0] > 0.0, radius[:, 0], profile.half_diagonal_m)
+        arm = np.where(radius[:, 0] > 0.0, radius[:, 0], fp.reach_m)
         free[turning] = theta * arm
         admissible[turning] = turn[turning] * t_stop[turning] <= theta
     return free, admissible

@@ -8,8 +8,9 @@ the rules common to all of them afterwards: the no-dead-lock rule and profile li
 DESIGN 5.10, the footprint sweep, and (in the controller) the latency governor of DESIGN 9.
 
 Inputs, all in the robot frame {R} and SI units: the operator's command after eq. 4, the scan's
-obstacle points, the robot's current velocity, the active via point (or None) and the time
-(monotonic ns, passed in; never read here).
+obstacle points, the robot's current velocity, the active via point (or None), the time
+(monotonic ns, passed in; never read here) and the loop delay tau of DESIGN 9 when the caller
+knows it (``cbf``'s margin grows with it).
 """
 
 from __future__ import annotations
@@ -24,11 +25,12 @@ from egc_common.profiles import RobotProfile
 from egc_common.scan import ObstaclePoints
 
 from egc_robot.filters.assist import AssistMemory, AssistParams, assist_step
+from egc_robot.filters.cbf import CbfParams, cbf_filter
 from egc_robot.filters.dwa import DwaCase, DwaParams, dwa_filter
 from egc_robot.filters.egc import EgcCase, EgcParams, EgcResult, Region, Side, egc_filter
 from egc_robot.filters.ek_egc import ek_egc_filter
 
-FILTERS: Final = FILTER_NAMES  # ("none", "egc", "ek-egc", "assist", "dwa")
+FILTERS: Final = FILTER_NAMES  # ("none", "egc", "ek-egc", "assist", "dwa", "cbf")
 # Filtered modes an operator cycles through at run time, in this order.
 SHARED_FILTERS: Final = tuple(name for name in FILTERS if name != "none")
 
@@ -59,6 +61,7 @@ class FilterInput:
     state: RobotState = field(default_factory=RobotState)
     goal_xy_m: tuple[float, float] | None = None  # active via point in {R}
     now_ns: int = 0
+    loop_delay_s: float | None = None  # tau (DESIGN 9); None: unknown (cbf takes its default)
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,15 +89,16 @@ class FilterResult:
 class FilterSettings:
     """Parameters of every filter, built once from the profile and the robot's config.
 
-    ``dwa`` and ``assist`` default to their ``from_profile`` parameters (with the driver's
-    "no return is free" declaration of ``egc``); the robot TOML's ``[dwa]`` and ``[assist]``
-    tables override them.
+    ``dwa``, ``assist`` and ``cbf`` default to their ``from_profile`` parameters (with the
+    driver's "no return is free" declaration of ``egc``); the robot TOML's ``[dwa]``,
+    ``[assist]`` and ``[cbf]`` tables override them.
     """
 
     profile: RobotProfile
     egc: EgcParams
     dwa: DwaParams | None = None
     assist: AssistParams | None = None
+    cbf: CbfParams | None = None
 
     def __post_init__(self) -> None:
         free = self.egc.no_return_is_free
@@ -105,6 +109,10 @@ class FilterSettings:
         if self.assist is None:
             object.__setattr__(
                 self, "assist", AssistParams.from_profile(self.profile, no_return_is_free=free)
+            )
+        if self.cbf is None:
+            object.__setattr__(
+                self, "cbf", CbfParams.from_profile(self.profile, no_return_is_free=free)
             )
 
     @property
@@ -224,12 +232,46 @@ def _run_assist(inp: FilterInput, settings: FilterSettings, memory: object | Non
     )
 
 
+def _run_cbf(inp: FilterInput, settings: FilterSettings, memory: object | None) -> FilterResult:
+    assert settings.cbf is not None
+    res = cbf_filter(
+        inp.v_ref_mps,
+        inp.w_ref_radps,
+        inp.obstacles,
+        inp.state.v_mps,
+        inp.state.w_radps,
+        inp.loop_delay_s,
+        settings.profile,
+        settings.cbf,
+    )
+    if not res.modified:  # DESIGN 13: unchanged, the operator's very values
+        return FilterResult(
+            "cbf", inp.v_ref_mps, inp.w_ref_radps, False, res.case.value, detail=res
+        )
+    stopped = res.v_mps == 0.0 and res.w_radps == 0.0
+    moving = abs(inp.v_ref_mps) > _SAME or abs(inp.w_ref_radps) > _SAME
+    return FilterResult(
+        name="cbf",
+        v_mps=res.v_mps,
+        w_radps=res.w_radps,
+        modified=True,
+        reason=res.case.value,
+        w_si=0.0 if stopped and moving else 1.0,
+        region=Region.UNSAFE if stopped and moving else Region.CONDITIONAL,
+        # Never: the barriers let every motion that approaches nothing through (DESIGN 13), so
+        # the pipeline's escape rule, which looks at the end of a 1 s arc only, is not needed.
+        stopped_near_obstacle=False,
+        detail=res,
+    )
+
+
 _REGISTRY: dict[str, FilterFn] = {
     "none": _run_none,
     "egc": _run_egc,
     "ek-egc": _run_ek_egc,
     "assist": _run_assist,
     "dwa": _run_dwa,
+    "cbf": _run_cbf,
 }
 
 

@@ -33,6 +33,8 @@ from egc_operator.view_scene import (
     SENT_RED,
     command_vector,
     footprint_half_size,
+    footprint_is_box,
+    footprint_outline,
 )
 from egc_robot.pipeline import PipelineResult
 from egc_robot.replay_core import Replayer, ScanVerdict
@@ -129,12 +131,12 @@ class ReplayRecording:
         )
         rec.log(ROBOT, rr.Transform3D(mat3x3=ROBOT_TO_SCREEN), static=True)
         rec.log(SCAN, rr.Points2D.from_fields(radii=0.02, colors=SCAN_INK), static=True)
+        profile = replayer.config.profile
         rec.log(
             FOOTPRINT,
-            rr.Boxes2D(
-                half_sizes=[footprint_half_size(replayer.config.profile)],
-                colors=(120, 120, 120),
-            ),
+            rr.Boxes2D(half_sizes=[footprint_half_size(profile)], colors=(120, 120, 120))
+            if footprint_is_box(profile)
+            else rr.LineStrips2D([footprint_outline(profile)], colors=(120, 120, 120)),
             static=True,
         )
         for name in CIRCLES:

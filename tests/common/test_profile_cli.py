@@ -1,0 +1,132 @@
+"""``--profile NAME|FILE.toml`` on the command line (DESIGN 14): the same files work for
+``filter``, ``replay`` and ``episode``, and a bad file is one line naming the key, exit 2,
+before anything runs."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from egc_app.cli import main
+from tests.replay.logs import corridor_log
+from tests.shapes import L_SHAPE_FILE, PENTAGON_FILE
+
+ROOT = Path(__file__).resolve().parents[2]
+MAPPING1 = ROOT / ".." / "shared" / "bags" / "Mapping1.bag"
+
+BAD = """
+[profile]
+name = "cart"
+source = "a test"
+footprint = [[0.3, 0.3], [-0.3, -0.3], [0.3, -0.3], [-0.3, 0.3]]
+v_max = 0.5
+w_max = 1.0
+a_max = 0.5
+a_dec = 1.0
+alpha_max = 2.0
+r_max = 1.2
+"""
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["filter"],
+        ["episode", "--map", "hallway"],
+        ["replay", "LOG"],
+        ["sim"],
+        ["robot"],
+        ["demo", "--no-view", "--duration", "1"],
+    ],
+    ids=lambda a: a[0],
+)
+def test_a_bad_file_is_one_line_naming_the_key(argv, tmp_path):
+    bad = tmp_path / "bowtie.toml"
+    bad.write_text(BAD)
+    argv = [str(tmp_path / "log") if a == "LOG" else a for a in argv]
+    if argv[0] == "replay":
+        corridor_log(tmp_path / "log", "mcap")
+    proc = subprocess.run(
+        [sys.executable, "-m", "egc_app.cli", *argv, "--profile", str(bad)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        stdin=subprocess.DEVNULL,
+        cwd=tmp_path,
+    )
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and proc.stdout == "", proc.stderr
+    assert len(lines) == 1, lines
+    assert lines[0].startswith(f"egc-teleop {argv[0]}: error: ")
+    assert f"{bad}: footprint: self-intersecting polygon" in lines[0]
+
+
+@pytest.mark.parametrize("profile", ["turtlebot4", "husky", str(PENTAGON_FILE), str(L_SHAPE_FILE)])
+def test_filter_takes_names_and_files(profile, monkeypatch, capsys):
+    import io
+
+    # A wall 1 m ahead: the command is cut by each robot's own radii and limits.
+    line = {"v": 0.3, "w": 0.0, "points": [[1.0, y / 10] for y in range(-10, 11)]}
+    monkeypatch.setattr(sys, "stdin", io.StringIO(json.dumps(line) + "\n"))
+    assert main(["filter", "--profile", profile]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert "error" not in out and out["final"]["v"] <= 0.3
+
+
+@pytest.mark.parametrize("profile", [str(PENTAGON_FILE), "turtlebot4"])
+def test_replay_takes_the_same_files(profile, tmp_path, capsys):
+    log = corridor_log(tmp_path / "log", "mcap")
+    rrd = tmp_path / "replay.rrd"
+    code = main(["replay", str(log), "--profile", profile, "--record", str(rrd)])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    summary = json.loads(out)
+    name = "pentagon-cart" if profile.endswith(".toml") else profile
+    assert summary["profile"] == name and summary["scans"] > 0
+    assert rrd.stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_replay_of_mapping1_with_a_polygon_file(tmp_path, capsys):
+    code = main(["replay", str(MAPPING1), "--profile", str(L_SHAPE_FILE), "--filter", "dwa"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["profile"] == "l-shape" and summary["scans"] == 1727
+
+
+def test_episode_takes_a_file(tmp_path, capsys):
+    code = main(
+        ["episode", "--map", "hallway", "--profile", str(L_SHAPE_FILE), "--max-time", "5", "--json"]
+    )
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    result = json.loads(out)
+    assert not result["collided"] and result["time_s"] > 0
+
+
+def test_the_profiles_laser_pose_is_the_ros2_default(tmp_path):
+    """A profile's laser_pose places the laser for --driver ros2 unless [ros2] or the flag
+    says otherwise."""
+    import argparse
+
+    from egc_app.robot_cmd import _ros2_settings
+
+    path = tmp_path / "mounted.toml"
+    path.write_text(PENTAGON_FILE.read_text() + "laser_pose = [0.2, -0.05, 3.14159]\n")
+    flags = dict.fromkeys(
+        ("ros_scan", "ros_odom", "ros_cmd", "ros_cmd_type", "ros_namespace", "laser_pose")
+    )
+    args = argparse.Namespace(profile=str(path), laser_upside_down=None, **flags)
+    laser = _ros2_settings(args, {}, need_rclpy=False).laser
+    assert (laser.x_m, laser.y_m, laser.yaw_rad) == (0.2, -0.05, 3.14159)
+    table = {"ros2": {"laser_pose": [0.1, 0.0, 0.0]}}
+    assert _ros2_settings(args, table, need_rclpy=False).laser.x_m == 0.1
+    args.laser_pose = "0.3,0,0"
+    assert _ros2_settings(args, table, need_rclpy=False).laser.x_m == 0.3
+    args.profile, args.laser_pose = "pioneer3dx", None
+    assert _ros2_settings(args, {}, need_rclpy=False).laser.x_m == 0.0

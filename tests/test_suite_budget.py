@@ -1,0 +1,93 @@
+"""The test run's own budget (``tests/suite_budget.py``, issue 31): past it the run stops, names
+the tests then running and prints its summary."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from tests.suite_budget import BUDGET_ENV, SuiteBudget
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+class CrashReport:
+    """What pytest-xdist reports for the test of a crashed worker (``when`` is ``???``)."""
+
+    def __init__(self, nodeid: str) -> None:
+        self.nodeid = nodeid
+        self.when = "???"
+
+
+def test_the_report_names_the_tests_started_and_not_finished() -> None:
+    budget = SuiteBudget(60.0)
+    try:
+        budget.pytest_runtest_logstart("t.py::a")
+        budget.pytest_runtest_logstart("t.py::b")
+        budget.pytest_runtest_logstart("t.py::c")
+        budget.pytest_runtest_logfinish("t.py::a")
+        budget.pytest_runtest_logreport(CrashReport("t.py::c"))  # type: ignore[arg-type]
+        budget.pytest_xdist_node_collection_finished(["t.py::a", "t.py::b", "t.py::c", "t.py::d"])
+        text = budget.report(now=float("inf"))
+    finally:
+        budget.pytest_unconfigure()
+    assert "budget of 60 s" in text and "after 1 of 4 tests" in text
+    running = [line.strip() for line in text.splitlines()[1:]]
+    assert len(running) == 1 and running[0].startswith("t.py::b (for ")
+
+
+def test_an_idle_run_is_called_stuck() -> None:
+    budget = SuiteBudget(60.0)
+    try:
+        budget.pytest_xdist_node_collection_finished(["t.py::a"])
+        assert "every worker idle" in budget.report(now=0.0)
+    finally:
+        budget.pytest_unconfigure()
+
+
+@pytest.mark.slow
+def test_a_hanging_test_ends_the_run_with_its_name_and_the_summary(tmp_path: Path) -> None:
+    (tmp_path / "conftest.py").write_text(
+        "from tests import suite_budget\n\n\n"
+        "def pytest_configure(config):\n"
+        "    suite_budget.configure(config)\n"
+    )
+    (tmp_path / "test_hangs.py").write_text(
+        textwrap.dedent(
+            """
+            import time
+
+            def test_fails():
+                assert 1 == 2
+
+            def test_hangs():
+                time.sleep(600)
+
+            def test_never_reached():
+                pass
+            """
+        )
+    )
+    env = {
+        **os.environ,
+        BUDGET_ENV: "10",
+        "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
+    }
+    proc = subprocess.run(
+        [sys.executable, "-m", "pytest", "-n", "0", "-p", "no:cacheprovider", "-q", str(tmp_path)],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=240,
+    )
+    out = proc.stdout
+    assert proc.returncode == 2, out + proc.stderr  # interrupted
+    assert "used up its budget of 10 s" in out and "after 1 of 3 tests" in out, out
+    assert "test_hangs.py::test_hangs (for " in out, out
+    assert "FAILED test_hangs.py::test_fails" in out, out  # the summary of what failed so far
