@@ -1,7 +1,7 @@
 """Careful-drive logs of the project's own worlds, and how much each filter would change them.
 
     python -m egc_experiments.careful_logs --out DIR [--random N] [--seed S] [--mrpb DIR|none]
-        [--profile jackal] [--filters none,egc,ek-egc,assist,dwa,cbf] [--jobs J]
+        [--profile jackal] [--filters none,egc,ek-egc,assist,dwa,cbf] [--jobs J] [--resume]
 
 Issue 28 measures a filter's intervention on careful drives: a driver who keeps the footprint
 0.2 m from everything, up to 0.8 m/s on the Jackal, recorded as ROS 2 MCAP logs. This makes such
@@ -23,6 +23,9 @@ logs in worlds of our own, the way a user can, and replays them through the filt
 3. **Table**: ``DIR/summary.md``, per filter: logs, commands, commands changed and their share
    over all logs, the median and largest share of one log, the mean cut, the time it would
    have held.
+
+``--resume`` goes on with a run that was stopped: the drives of ``DIR/drives.jsonl`` are kept
+and only the replays missing from ``DIR/replay.jsonl`` are made.
 
 The logs are data (a few hundred kB each): keep them out of git; this command makes them again,
 the same bytes for the same seeds (the simulator and the model are deterministic).
@@ -47,6 +50,7 @@ from egc_common.errors import UsageError
 from egc_common.profiles import get_profile
 from egc_robot.pipeline import FILTERS
 from egc_robot.replay_core import Replayer
+from egc_sim.careful import CarefulParams
 from egc_sim.mrpb_tests import TESTS_FILE, parse_tests
 
 from egc_experiments.episode import EpisodeSettings, run_settings
@@ -185,6 +189,48 @@ def summary_table(rows: Iterable[dict[str, Any]], filters: Sequence[str]) -> str
     return "\n".join(lines) + "\n"
 
 
+def _drive_all(todo: Sequence[Drive], logs: Path, drives_file: Path, jobs: int) -> list[str]:
+    """Step 1 (module docstring): the kept logs, in the order of ``todo``."""
+    clearance_m = CarefulParams().clearance_m  # what the drives are kept to
+    t0 = time.perf_counter()
+    kept: list[str] = []
+    with _pool(jobs) as pool, drives_file.open("w", encoding="utf-8") as f:
+        work = [(d, str(logs / f"{d.name}.mcap"), clearance_m) for d in todo]
+        for record in pool.map(drive, work):
+            f.write(json.dumps(record, allow_nan=False) + "\n")
+            f.flush()
+            if record["log"] is not None:
+                kept.append(record["log"])
+            print(
+                f"{record['name']}: "
+                + (f"kept ({record['time_s']:.1f} s)" if record["log"] else record["why_not"]),
+                file=sys.stderr,
+            )
+    print(
+        f"careful_logs: {len(kept)} careful logs of {len(todo)} drives in {logs} "
+        f"({time.perf_counter() - t0:.0f} s)",
+        file=sys.stderr,
+    )
+    return kept
+
+
+def _kept_logs(drives_file: Path) -> list[str]:
+    records = [json.loads(line) for line in drives_file.read_text().splitlines() if line]
+    return [r["log"] for r in records if r.get("log") and Path(r["log"]).exists()]
+
+
+def _done_replays(replay_file: Path) -> list[dict[str, Any]]:
+    if not replay_file.exists():
+        return []
+    rows = []
+    for line in replay_file.read_text().splitlines():
+        try:
+            rows.append(json.loads(line))
+        except json.JSONDecodeError:  # a line cut short when the run was stopped
+            continue
+    return rows
+
+
 def _pct(share: float) -> str:
     return "-" if math.isnan(share) else f"{100 * share:.1f}%"
 
@@ -221,6 +267,11 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"filters to replay the logs through ({','.join(DEFAULT_FILTERS)})",
     )
     p.add_argument("--jobs", type=int, default=2, help="worker processes (2)")
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="go on with an interrupted run in --out: keep its drives, replay what is missing",
+    )
     return p
 
 
@@ -248,40 +299,34 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"careful_logs: --mrpb {mrpb}: no such folder (or give none)", file=sys.stderr)
         return 2
     todo = drives(args.random, args.seed, args.profile, mrpb)
-    taken = [d.name for d in todo if (logs / f"{d.name}.mcap").exists()]
-    if taken:
-        print(
-            f"careful_logs: {logs} already holds {len(taken)} of these logs (e.g. "
-            f"{taken[0]}.mcap): give another --out, or remove them",
-            file=sys.stderr,
-        )
-        return 2
-    clearance_m = 0.2  # the careful operator's default, what the drives are kept to
-    t0 = time.perf_counter()
-    kept: list[str] = []
-    with _pool(args.jobs) as pool, (out / "drives.jsonl").open("w", encoding="utf-8") as f:
-        jobs = [(d, str(logs / f"{d.name}.mcap"), clearance_m) for d in todo]
-        for record in pool.map(drive, jobs):
-            f.write(json.dumps(record, allow_nan=False) + "\n")
-            f.flush()
-            if record["log"] is not None:
-                kept.append(record["log"])
+    drives_file = out / "drives.jsonl"
+    if args.resume and drives_file.exists():
+        kept = _kept_logs(drives_file)
+        print(f"careful_logs: resuming with the {len(kept)} logs of {drives_file}", file=sys.stderr)
+    else:
+        taken = [d.name for d in todo if (logs / f"{d.name}.mcap").exists()]
+        if taken:
             print(
-                f"{record['name']}: "
-                + (f"kept ({record['time_s']:.1f} s)" if record["log"] else record["why_not"]),
+                f"careful_logs: {logs} already holds {len(taken)} of these logs (e.g. "
+                f"{taken[0]}.mcap): give another --out, --resume, or remove them",
                 file=sys.stderr,
             )
-    print(
-        f"careful_logs: {len(kept)} careful logs of {len(todo)} drives in {logs} "
-        f"({time.perf_counter() - t0:.0f} s)",
-        file=sys.stderr,
-    )
-    rows: list[dict[str, Any]] = []
-    with _pool(args.jobs) as pool, (out / "replay.jsonl").open("w", encoding="utf-8") as f:
-        jobs_r = [(log, name, args.profile) for name in filters for log in kept]
-        for row in pool.map(replay_one, jobs_r):
+            return 2
+        kept = _drive_all(todo, logs, drives_file, args.jobs)
+    replay_file = out / "replay.jsonl"
+    rows = _done_replays(replay_file) if args.resume else []
+    done = {(r["log"], r["filter"]) for r in rows}
+    with _pool(args.jobs) as pool, replay_file.open("w", encoding="utf-8") as f:
+        for row in rows:  # a resumed run's, written again whole (its last line may be cut)
+            f.write(json.dumps(row, allow_nan=False) + "\n")
+        jobs = [
+            (log, name, args.profile) for name in filters for log in kept if (log, name) not in done
+        ]
+        for row in pool.map(replay_one, jobs):
             rows.append(row)
             f.write(json.dumps(row, allow_nan=False) + "\n")
+            f.flush()
+    rows = [r for r in rows if r["filter"] in filters and r["log"] in set(kept)]
     table = summary_table(rows, filters)
     (out / "summary.md").write_text(
         f"Careful drives ({args.profile}, {len(kept)} logs: random:{args.seed}.."

@@ -9,14 +9,21 @@ how often a filter changes the commands of someone who needs no help.
 It knows the map (as ``route`` does) and reads the operator view (``observation``: the pose,
 after a reaction time). Three parts, the first two pure functions of the map:
 
-1. **Plan** (``plan_careful_path``): ``route.plan_route`` on the map, the robot's centre kept
-   ``half_width + clearance_m + margin_m`` (plus half a cell diagonal, since the grid's distance
-   is between cell centres) from every blocked cell: the robot, driving along the path, clears
-   everything beside it by ``clearance_m``. The cost of a step grows as the clearance falls below
-   ``comfort_m`` beyond the footprint's half-diagonal, so that the path keeps to the middle of
-   gaps and corridors where there is room to turn. The grid's staircase is then resampled every
-   ``STEP_M`` and smoothed (a moving average over ``smooth_m``), keeping a point of the plan
-   wherever the smoothed one would come closer to a wall than the plan allowed.
+1. **Plan** (``plan_careful_path``): on the map's cells, the distance from each cell centre to
+   the nearest blocked cell's square (``wall_distance_m``); the robot's centre may only use
+   cells where that is at least the footprint's half-width + ``clearance_m`` + ``margin_m``
+   (half the margin where the full one leaves no way): driving along the path, the robot clears
+   everything beside it by ``clearance_m`` with that to spare. The cheapest 8-connected path
+   (``route.grid_path``) where a step costs more the less room there is, up to the room to
+   turn on the spot plus ``comfort_m``: the path keeps to the middle of gaps and corridors.
+   The grid's staircase is resampled every ``STEP_M`` and smoothed (a moving average over
+   ``smooth_m``, a point keeping its planned place where the smoothed one would have less room).
+   Then the footprint itself, pointing along the path: in a bend of a narrow passage its corners
+   swing out although the centre line keeps its distance, so the path is bent away from the
+   walls there (``fit_footprint``); where even so it would clear something by less than
+   ``clearance_m + check_margin_m`` (a corridor too narrow to turn a corner in), the model
+   refuses the drive up front (``RouteError``): a careful driver does not try what cannot be
+   done carefully.
 2. **Speed along the path** (``speed_profile``): at each point the least of the cruise speed,
    the speed of the curve (lateral acceleration ``lateral_accel_mps2``, turn rate ``turn_radps``),
    and the speed near obstacles (``slow_fraction`` of the cruise speed where the footprint
@@ -25,21 +32,24 @@ after a reaction time). Three parts, the first two pure functions of the map:
    is reached braking at ``decel_mps2``, never later.
 3. **Driving** (``CarefulOperator.command``): pure pursuit of the path from the pose the view
    shows, brought forward to now with the driver's own commands since (a driver knows what the
-   stick has done); the lookahead grows with speed (``lookahead_min_m`` + ``lookahead_s`` times
+   stick has done; over a link they are taken to act when sent, the uplink's delay being
+   unknown to the driver, and a filter's changes are seen only when the view shows them); the
+   lookahead grows with speed (``lookahead_min_m`` + ``lookahead_s`` times
    the speed), short enough that the arc hugs the smoothed path instead of cutting across its
    bends. Heading error beyond ``turn_in_place_rad``: stop and turn on the spot until it is
    under a third of that. The speed is the profile's at the progress point, slowed with the
-   heading error and where the footprint is near something now; speed and turn rate then ramp
-   within the comfortable accelerations (``accel_mps2``, ``decel_mps2``,
+   heading error (times its cosine); speed and turn rate then ramp within the comfortable
+   accelerations (``accel_mps2``, ``decel_mps2``,
    ``angular_accel_radps2``). Last, a check on the map: driving the command for ``hold_s`` and
    braking to a stop along the same arc must keep the footprint ``clearance_m + check_margin_m``
    from everything (or, where it is already nearer, no nearer than now); if not, the command is
-   halved, then quartered, then the driver stops.
+   halved, then quartered, then quartered keeping just ``clearance_m`` (a gap barely wider than
+   the margins), then a turn on the spot towards the path; else the driver stops.
 
 Defaults that are ``None`` are scaled from the robot profile (``CarefulParams.resolved``): the
 cruise speed 0.4 v_max, the turn rate 0.5 w_max, accelerations half the profile's, lateral
 acceleration a quarter of its linear one. The stick is (v / v_max, w / w_max): the robot's eq. 4
-turns it back into exactly the velocity the driver meant, which is what a log records on
+(with the default gamma = 1) turns it back into exactly the velocity the driver meant, which is what a log records on
 ``/cmd_vel``. The model does not read the scan: in the simulator the map is the world, so the
 map is everything there is to keep clear of.
 """
@@ -64,12 +74,12 @@ from egc_sim.route import RouteError, grid_path, nearest_free
 
 STEP_M = 0.05  # spacing of the resampled path
 _HISTORY_S = 5.0  # own commands kept for bringing a seen pose forward
-_SEARCH_M = 2.0
-_HAIR_M = 0.005
+_SEARCH_M = 2.0  # how far along the path the progress point is searched, forward only
+_HAIR_M = 0.005  # the last-resort check's margin over clearance_m
 _BEND_M = 0.3  # how much of the path around a tight point bends with it
 _BEND_STEP_M = 0.01
 _BEND_STEPS = 30
-_WALL_WEIGHT = 8.0  # a step where the footprint clears by just clearance_m costs 9 times more  # the last-resort check's margin over clearance_m  # how far along the path the progress point is searched, forward only
+_WALL_WEIGHT = 8.0  # a step where the footprint clears by just clearance_m costs 9 times more
 
 
 @dataclass(frozen=True, slots=True)
@@ -96,11 +106,17 @@ class CarefulParams:
     reaction_s: float = 0.25
 
     def __post_init__(self) -> None:
-        for name in ("clearance_m", "margin_m", "comfort_m", "smooth_m", "lookahead_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"careful operator: {name} must be >= 0, got {value}")
-        for name in ("reaction_s", "hold_s", "check_margin_m", "slow_band_m"):
+        for name in (
+            "clearance_m",
+            "margin_m",
+            "comfort_m",
+            "smooth_m",
+            "lookahead_s",
+            "reaction_s",
+            "hold_s",
+            "check_margin_m",
+            "slow_band_m",
+        ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"careful operator: {name} must be >= 0, got {value}")

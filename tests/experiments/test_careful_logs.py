@@ -51,6 +51,15 @@ def test_a_careful_log_is_made_kept_and_replayed(tmp_path, capsys):
     assert main(argv) == 2
     assert "already holds" in capsys.readouterr().err
     assert (out / "logs" / "random-5001.mcap").read_bytes() == before
+    # A run stopped during the replays (its last line cut short) goes on where it was.
+    drives_text = (out / "drives.jsonl").read_text()
+    first = (out / "replay.jsonl").read_text().splitlines()[0]
+    (out / "replay.jsonl").write_text(first + "\n" + '{"log": "cut sho')
+    assert main([*argv, "--filters", "none,egc", "--resume"]) == 0
+    again = [json.loads(line) for line in (out / "replay.jsonl").read_text().splitlines()]
+    assert again == rows
+    assert (out / "drives.jsonl").read_text() == drives_text
+    assert (out / "logs" / "random-5001.mcap").read_bytes() == before
 
 
 @pytest.mark.parametrize(
