@@ -45,6 +45,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from egc_experiments.bench_results import write_result
+
 ROOT = Path(__file__).resolve().parents[1]
 SCAN_HZ = 50.0
 ODOM_HZ = 100.0
@@ -334,9 +336,7 @@ def main() -> int:
         help="hold the executor's thread inside a scan callback this long as each stop begins "
         "(default: 0, no stall)",
     )
-    parser.add_argument(
-        "--out", default=str(ROOT / "bench" / "results" / "bench_ros2_teardown.json")
-    )
+    parser.add_argument("--out", help="JSON file (default bench/results/ros2_teardown.json)")
     parser.add_argument("--role", choices=("conductor", "traffic", "cycles"), default="conductor")
     parser.add_argument("--record", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--first", type=int, default=0, help=argparse.SUPPRESS)
@@ -373,9 +373,7 @@ def main() -> int:
         f"{result['close_max_s']:.2f} s; {result['elapsed_s']:.0f} s in all; load "
         f"{result['load_before']:.2f} -> {result['load_after']:.2f}"
     )
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
-    print(f"wrote {args.out}")
+    print(f"wrote {write_result('ros2_teardown', result, args.out)}")
     failed = result["crashes"] or result["hangs"] or result["unclean_stops"]
     return 1 if failed else 0
 

@@ -1,8 +1,8 @@
 """``egc-teleop episode``: headless episodes in the simulator, printed as JSON (pinned CLI).
 
     egc-teleop episode --map PATH --start X,Y,YAW --goal X,Y
-        [--operator goal|forward|sighted|route|FILE]
-        [--filter none|egc] [--profile NAME] [--max-time S] [--goal-tolerance M] [--seed N]
+        [--operator goal|forward|sighted|route|careful|FILE]
+        [--filter none|egc] [--profile NAME|FILE.toml] [--max-time S] [--goal-tolerance M] [--seed N]
         [--stall-time S] [--record OUT.rrd] [--bag OUT.mcap|DIR] --json
     egc-teleop episode --batch SUITE.jsonl | --random-worlds N  [...] [--jobs J] [--out FILE]
 
@@ -77,7 +77,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="via points for the filter: goal (one, at the goal; default) | route (corners of "
         "a route planned on the map) | none",
     )
-    parser.add_argument("--profile", default="pioneer3dx", help=PROFILE_HELP)
+    parser.add_argument("--profile", default="pioneer3dx", metavar="NAME|FILE", help=PROFILE_HELP)
     parser.add_argument("--max-time", type=float, default=300.0, help="simulated seconds (300)")
     parser.add_argument(
         "--goal-tolerance",

@@ -1,6 +1,6 @@
 """``egc-teleop replay LOG``: a recorded robot log through a filter of the family (DESIGN 11).
 
-    egc-teleop replay LOG [--filter NAME] [--profile NAME] [--scan-topic T] [--cmd-topic T]
+    egc-teleop replay LOG [--filter NAME] [--profile NAME|FILE.toml] [--scan-topic T] [--cmd-topic T]
                           [--cmd-timeout-s S] [--record FILE.rrd] [--summary FILE.json]
 
 The arguments and their wiring only (DESIGN 2): the replay is ``egc_experiments.log_replay``

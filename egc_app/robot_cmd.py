@@ -489,11 +489,11 @@ def _ros2_settings(
         "laser_upside_down": args.laser_upside_down,
     }
     try:
-        table = config_mod.section(cfg, "ros2", SECTIONS["ros2"])
-        laser = get_profile(args.profile).laser_pose
-        if laser is not None and "laser_pose" not in table:  # the profile's (DESIGN 14)
-            table = {**table, "laser_pose": list(laser)}
-        settings = ros2_settings(table, flags)
+        settings = ros2_settings(
+            config_mod.section(cfg, "ros2", SECTIONS["ros2"]),
+            flags,
+            default_laser_pose=get_profile(args.profile).laser_pose,
+        )
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     if need_rclpy:

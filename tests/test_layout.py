@@ -124,6 +124,8 @@ PENDING_IMPORTS: dict[str, set[str]] = {
     "bench/bench_ros2.py": {"egc_app.robot_cmd"},
     "tests/integration/test_deploy_files.py": {"egc_app.robot_cmd"},
     "tests/robot/test_robot_cmd_shutdown.py": {"egc_app", "egc_app.cli", "egc_app.robot_cmd"},
+    # the profile's laser_pose as the ROS 2 default: built by robot_cmd's [ros2] wiring
+    "tests/common/test_profile_cli.py": {"egc_app.robot_cmd"},
 }
 PENDING_CLASSES: dict[str, set[str]] = {"robot_cmd.py": {"SimDriver"}}
 

@@ -45,6 +45,7 @@ MAX_SPEED_MPS: Final = 100.0  # v_ref, v_cmd, v_lim_latency (the latter >= 0)
 MAX_TURN_RADPS: Final = 100.0  # w_ref, w_cmd, w_lim_latency (the latter >= 0)
 MAX_POSE_COORD_M: Final = 1e7  # the odometry pose's x and y (as a map's origin)
 MAX_LOCAL_COORD_M: Final = 1e6  # circles in {R} (x, y and radius >= 0), r_rc >= 0
+MAX_CBF_POINTS: Final = 64  # points shown as constraining the command (cbf, DESIGN 13)
 MAX_ANGLE_RAD: Final = 1e6  # pose theta (odometry may not wrap it), suggested_rad
 # Link figures: delays (tau, the accepted commands' age p50/p90, the largest command gap) are
 # >= 0 and at most a day (the robot's own are bounded by its timeouts, view_age_ms by
@@ -574,6 +575,12 @@ class Telemetry:
     source: str | None = None
     lock: str | None = None
     source_age_ms: float | None = None
+    # cbf (DESIGN 13), for the view: the points whose barriers changed the command (float32
+    # (K, 2) in {R}, at most MAX_CBF_POINTS), the margin kept from everything and the margin
+    # straight ahead at the current speed (m); the margins are absent unless cbf ran.
+    cbf_xy: npt.NDArray[np.float32] = field(default_factory=lambda: np.zeros((0, 2), np.float32))
+    cbf_margin_m: float | None = None
+    cbf_ahead_m: float | None = None
 
     def encode(self) -> bytes:
         d = _shallow_fields(self)
@@ -587,6 +594,8 @@ class Telemetry:
                 d["scan_origin"] = [float(v) for v in polar.origin_xy_m]
             xy = xy[polar.shown :]  # the beams' points travel as scan_mm
         d["scan_xy"] = xy.tobytes()
+        cbf_xy = np.ascontiguousarray(self.cbf_xy, dtype="<f4")
+        d["cbf_xy"] = cbf_xy.tobytes() if len(cbf_xy) else None
         for key in ("igc", "agc", "egc", "pose", "goal"):
             if d[key] is not None:
                 d[key] = [float(v) for v in d[key]]
@@ -599,6 +608,9 @@ class Telemetry:
 
 # Optional telemetry keys left out when None (DESIGN 12: bytes count on a thin link).
 _TELEMETRY_OPTIONAL: Final = (
+    "cbf_xy",
+    "cbf_margin_m",
+    "cbf_ahead_m",
     "view_kbps",
     "budget_kbps",
     "link_kbps",
@@ -760,6 +772,11 @@ def _build_telemetry(m: Mapping[Any, Any]) -> Telemetry:
         "source": _opt_str(m, "source"),
         "lock": _opt_str(m, "lock"),
         "source_age_ms": _opt_range(m, "source_age_ms", -MAX_RACE_MS, MAX_CLOCK_MS),
+        "cbf_xy": _f32_array(m, "cbf_xy", 2, MAX_CBF_POINTS)
+        if "cbf_xy" in m
+        else np.zeros((0, 2), np.float32),
+        "cbf_margin_m": _opt_range(m, "cbf_margin_m", 0.0, MAX_LOCAL_COORD_M),
+        "cbf_ahead_m": _opt_range(m, "cbf_ahead_m", 0.0, MAX_LOCAL_COORD_M),
     }
     for key, value in values.items():
         object.__setattr__(t, key, value)

@@ -278,6 +278,7 @@ def _builtin_profiles() -> dict[str, RobotProfile]:
 
 
 _FILE_CACHE: dict[tuple[str, int, int], RobotProfile] = {}
+_LOADED: dict[str, RobotProfile] = {}
 
 
 def is_profile_path(text: str) -> bool:
@@ -308,7 +309,15 @@ def load_profile(name_or_path: str | Path) -> RobotProfile:
     if cached is None:
         cached = read_profile_file(p)
         _FILE_CACHE[key] = cached
+    _LOADED[cached.name] = cached
     return cached
+
+
+def profile_named(name: str) -> RobotProfile | None:
+    """The profile this process knows by ``name`` (what telemetry carries): one loaded from a
+    file under that name (the latest), else the built-in, else None. An operator view in the
+    process that loaded the file (``episode --record``, ``replay --record``) draws its shape."""
+    return _LOADED.get(name) or PROFILES.get(name)
 
 
 def get_profile(name_or_path: str | Path) -> RobotProfile:

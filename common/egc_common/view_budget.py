@@ -50,7 +50,13 @@ behind, camera frames waiting in the robot's lowest-priority queue.
 ``base`` is a clean one) and
 
 - *multiplicative decrease at once* when ``queue_ms > margin_ms``: the operator's ``rx_kbps``
-  measured while a queue stands is what the link delivers (C), so the budget goes to
+  measured while a queue stands is what the link delivers (C); but it is a second's worth,
+  and just after the link narrowed most of that second was the wider link. A queue that grows
+  by r ms a millisecond (the short-window minimum over the last 0.1 s, in the reports'
+  time) is fed at the view plane's rate S and drained at S (1 - r), which is known at once:
+  C is the smaller of the two (S: the view plane's rate at the first cut in a while, which
+  built the queue the next reports still show). The queue the reports show is a round trip old; growing so, it is S / C - 1 times
+  that round trip (twice the base age) longer in the link already. The budget goes to
   ``beta`` times the smaller of it and the budget, with ``beta = 1 - queue / drain_s`` within
   [``min_beta``, ``max_beta``] (0.3-0.8): sending at C (1 - Q / T) for T drains a queue of Q
   seconds in about T (1 s), so a long queue gets a deep cut and a short one a mild cut (0.8
@@ -70,6 +76,16 @@ behind, camera frames waiting in the robot's lowest-priority queue.
   (``ai_kbps`` plus ``ai_fraction`` of the budget per second at most): a link that did not
   widen sees a probe of a few kbit/s too many for one report round trip, a queue of tens of
   milliseconds; one that widened is found within seconds (from 140 kbit/s: 5 s to 600 kbit/s);
+- *a cut taken back* when its queue vanishes faster than a link can drain one: bytes in a queue
+  leave at the link's rate, one millisecond of queue per millisecond at best, and until the
+  cut's effect comes back through the queue the robot still sends at the rate that built it
+  (so within the queue's own length after the cut, a link queue drains no faster). A "queue"
+  of 300 ms gone 20 ms later in the operator's reports (their stamps) was no queue: a process
+  stalled on a busy machine, a delay spike of the link itself. The cut is undone (budget, link
+  estimate, raised base); the hold stays. Only the telemetry's estimate is judged so, over the
+  window it had at the cut (a slower telemetry rate widens it to older, lower ages), only for
+  cuts it made, and only for a cut two holds after the one before (whose lower rate may
+  already be draining the queue, faster than a millisecond a millisecond);
 - the link estimate ``link_kbps`` is the ``rx_kbps`` at the last cut, raised by any higher
   ``rx_kbps`` received with no queue (the link widened); None until a queue was first seen.
 
@@ -106,7 +122,7 @@ class BudgetConfig:
     min_beams: int = 45
     camera: bool = False  # is there a camera to feed
     camera_max_fps: float = 10.0
-    camera_max_kbps: float = 400.0
+    camera_max_kbps: float = 250.0
     camera_keep_kbps: float = 48.0  # a working camera: 6 frames/s of ~1 kB
     camera_keep_fps: float = 6.0
     camera_min_kbps: float = 12.0  # 1 frame/s (a small JPEG)
@@ -166,6 +182,7 @@ class _AgeFilter:
 
     recent: tuple[tuple[int, float], ...] = ()  # (t_ns, age_ms) over the last short window
     buckets: tuple[tuple[int, float], ...] = ()  # (second, min age_ms) over the base window
+    trend: tuple[tuple[int, float], ...] = ()  # (t_ns, short-window minimum), the last 0.2 s
 
     def add(self, now_ns: int, age_ms: float, short_ns: int, base_s: float) -> _AgeFilter:
         recent = (*(r for r in self.recent if now_ns - r[0] <= short_ns), (now_ns, age_ms))
@@ -176,7 +193,20 @@ class _AgeFilter:
             kept[-1] = (second, min(kept[-1][1], current))
         else:
             kept.append((second, current))
-        return _AgeFilter(recent, tuple(kept))
+        trend = (*(e for e in self.trend if now_ns - e[0] <= _TREND_NS), (now_ns, current))
+        return _AgeFilter(recent, tuple(kept), trend)
+
+    def growth(self) -> float | None:
+        """How fast the short-window minimum grew (ms a ms) over the last 0.1 s (or a little
+        more); None with less history."""
+        if not self.trend:
+            return None
+        t_now, now = self.trend[-1]
+        old = [(t, a) for t, a in self.trend if t_now - t >= _TREND_NS // 2]
+        if not old:
+            return None
+        t_old, then = old[-1]  # the newest at least 0.1 s old: the slope now, not before it
+        return (now - then) / ((t_now - t_old) / 1e6)
 
     def queue_ms(
         self, now_ns: int, window_ns: int, min_samples: int = 1, cover: float = 0.0
@@ -196,8 +226,9 @@ class _AgeFilter:
         return min(b for _, b in self.buckets) if self.buckets else None
 
     def raised(self, delta_ms: float) -> _AgeFilter:
-        """The base raised by ``delta_ms`` (the link got slower: module docstring, "Signal")."""
-        if delta_ms <= 0:
+        """The base raised by ``delta_ms`` (the link got slower: module docstring, "Signal");
+        lowered by a negative one (a cut taken back)."""
+        if delta_ms == 0:
             return self
         return replace(self, buckets=tuple((s, b + delta_ms) for s, b in self.buckets))
 
@@ -218,7 +249,26 @@ class BudgetState:
     queue_at_cut_ms: float = 0.0
     last_step_ns: int | None = None
     beyond_ns: int | None = None  # since when the probe is past 1.1 times the last cut's rate
+    undo: _Undo | None = None  # how to take the last cut back (module docstring, "Control")
+    fed_kbps: float | None = None  # what the view plane sent before the first cut of a series
     cuts: int = 0
+    undone: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class _Undo:
+    """The last cut: the stamp of the report that made it, the telemetry's queue it saw (over
+    the window then: a window that widens with a slower telemetry rate holds older, lower ages)
+    and what it changed."""
+
+    stamp_ns: int
+    queue_ms: float
+    window_ns: int
+    budget_kbps: float
+    link_kbps: float | None
+    cut_rx_kbps: float | None
+    view_raise_ms: float
+    camera_raise_ms: float
 
 
 @dataclass(frozen=True, slots=True)
@@ -246,10 +296,13 @@ def on_report(
     report: Report,
     now_ns: int,
     in_force: Plan | None = None,
+    sent_kbps: float | None = None,
 ) -> BudgetState:
     """One report of the operator in control; cuts at once when a queue stands. ``in_force``:
     the plan the robot follows (its rates set the windows that remove each stream's sawtooth,
-    its sizes the serialization taken out of each age; None: ``cfg``'s full rates)."""
+    its sizes what a slower link adds to each age; None: ``cfg``'s full rates); ``sent_kbps``:
+    what the view plane sent over the last second (how fast a growing queue says the link
+    delivers)."""
     hz = in_force.telemetry_hz if in_force is not None else cfg.telemetry_hz
     camera_fps = in_force.camera_fps if in_force is not None else 0.0
     short_ns = int(max(cfg.short_s, 2.5 / max(hz, 1e-3)) * NS_PER_S)
@@ -278,6 +331,11 @@ def on_report(
         queue_ms=queue,
         camera_queue_ms=camera_queue,
     )
+    undo = state.undo
+    if undo is not None and report.stamp_ns is not None:
+        same_window = view.queue_ms(now_ns, undo.window_ns, cover=_COVER)
+        if same_window is not None:
+            state = _maybe_undo(state, cfg, undo, same_window, report.stamp_ns)
     rx = report.rx_kbps
     link = state.link_kbps
     no_queue = queue is not None and queue < cfg.margin_ms / 2
@@ -285,30 +343,88 @@ def on_report(
         state = replace(state, link_kbps=rx)  # the link carries more than we thought
     if cfg.fixed or queue is None or queue <= cfg.margin_ms:
         return state
+    if state.budget_kbps <= cfg.floor_kbps:
+        return state  # nothing left to cut (and the hold must not start again)
     since_cut = None if state.last_cut_ns is None else now_ns - state.last_cut_ns
     growing = queue > 2.0 * state.queue_at_cut_ms + cfg.margin_ms
     if since_cut is not None and since_cut < cfg.hold_s * NS_PER_S and not growing:
         return state  # the last cut has not reached the reports yet
-    beta = min(cfg.max_beta, max(cfg.min_beta, 1.0 - queue / (cfg.drain_s * 1000.0)))
-    delivered = state.budget_kbps if rx is None or rx <= 0 else min(rx, state.budget_kbps)
-    measured = rx is not None and rx > 0
-    if rx is not None and measured and in_force is not None and (link is None or rx < link):
+    rate = rx if rx is not None and rx > 0 else None  # what the link delivers, measured
+    growth = view.growth()
+    ahead_ms = queue  # the queue in the link now: the reports show it a round trip late
+    # The first cut in a while: the view plane sent at the rate S that built this queue; the
+    # cuts right after it still see the queue that rate built.
+    settled = since_cut is None or since_cut > 2 * cfg.hold_s * NS_PER_S
+    fed = sent_kbps if settled else state.fed_kbps
+    if fed and fed > 0 and growth is not None and growth > 0.1:
+        # A queue growing by r ms a ms (in the reports' time) is fed at S and drained at
+        # S (1 - r): what the link delivers now, before rx_kbps (a second's worth) shows it.
+        r = min(growth, 0.9)
+        rate = fed * (1.0 - r) if rate is None else min(rate, fed * (1.0 - r))
+        # and it grew by S / C - 1 = r / (1 - r) ms a ms over the round trip since (about
+        # twice the base age: the downlink's delay each way)
+        ahead_ms += r / (1.0 - r) * 2.0 * (view.base_ms() or 0.0)
+    beta = min(cfg.max_beta, max(cfg.min_beta, 1.0 - ahead_ms / (cfg.drain_s * 1000.0)))
+    delivered = state.budget_kbps if rate is None else min(rate, state.budget_kbps)
+    view_raise = camera_raise = 0.0
+    if rate is not None and in_force is not None and (link is None or rate < link):
         tel_bytes = in_force.telemetry_bytes
         frame_bytes = in_force.camera_kbps * 125.0 / camera_fps if camera_fps > 0 else 0.0
+        view_raise = _slower_link_ms(tel_bytes, link, rate, cfg.margin_ms)
+        camera_raise = _slower_link_ms(frame_bytes, link, rate, cfg.margin_ms)
         state = replace(
-            state,
-            view=state.view.raised(_slower_link_ms(tel_bytes, link, rx, cfg.margin_ms)),
-            camera=state.camera.raised(_slower_link_ms(frame_bytes, link, rx, cfg.margin_ms)),
+            state, view=state.view.raised(view_raise), camera=state.camera.raised(camera_raise)
+        )
+    undo = None
+    if settled and report.stamp_ns is not None and view_queue and view_queue > cfg.margin_ms:
+        undo = _Undo(  # a cut the telemetry's age made (the camera's has no undo)
+            report.stamp_ns,
+            view_queue - view_raise,  # what the raised base leaves of it
+            short_ns,
+            state.budget_kbps,
+            link,
+            state.cut_rx_kbps,
+            view_raise,
+            camera_raise,
         )
     return replace(
         state,
         budget_kbps=max(cfg.floor_kbps, beta * delivered),
-        link_kbps=rx if measured else link,
-        cut_rx_kbps=rx if measured else state.cut_rx_kbps,
+        link_kbps=link if rate is None else rate,
+        cut_rx_kbps=state.cut_rx_kbps if rate is None else rate,
         last_cut_ns=now_ns,
         queue_at_cut_ms=queue,
         beyond_ns=None,
+        undo=undo,
+        fed_kbps=fed,
         cuts=state.cuts + 1,
+    )
+
+
+_DRAIN_SLACK_MS = 30.0  # the link's jitter and a report period
+
+
+def _maybe_undo(
+    state: BudgetState, cfg: BudgetConfig, undo: _Undo, queue_ms: float, stamp_ns: int
+) -> BudgetState:
+    """Take the last cut back when its queue vanished faster than a link drains one (module
+    docstring, "Control"); forget it once that can no longer be told."""
+    elapsed_ms = (stamp_ns - undo.stamp_ns) / 1e6
+    if elapsed_ms < 0:
+        return state
+    if elapsed_ms > min(undo.queue_ms, cfg.hold_s * 1000.0):
+        return replace(state, undo=None)
+    if undo.queue_ms - queue_ms <= elapsed_ms + _DRAIN_SLACK_MS:
+        return state
+    return replace(
+        state,
+        budget_kbps=undo.budget_kbps,
+        link_kbps=undo.link_kbps,
+        cut_rx_kbps=undo.cut_rx_kbps,
+        view=state.view.raised(-undo.view_raise_ms),
+        camera=state.camera.raised(-undo.camera_raise_ms),
+        undo=None,
+        undone=state.undone + 1,
     )
 
 
@@ -340,6 +456,7 @@ def on_cycle(
     return replace(state, budget_kbps=min(cfg.max_kbps, budget + rate * dt_s), beyond_ns=beyond)
 
 
+_TREND_NS = 200_000_000  # the queue's growth: over the last 0.1 s, from entries this old
 _CAMERA_SIGNAL_FPS = 2.0  # the camera's latencies count as a queue signal from this rate up
 _COVER = 0.6  # the reports in the view's short window must span this much of it
 

@@ -107,7 +107,7 @@ def _route_length(settings: EpisodeSettings) -> float:
     start = settings.start or world.start_pose
     goal = settings.goal or world.goal
     assert start is not None and goal is not None
-    half_width = 0.5 * get_profile(settings.profile).width_m
+    half_width = get_profile(settings.profile).half_size_m[1]
     route = plan_route(
         world.occupancy, world.resolution_m, world.origin, start[:2], goal, half_width + 0.1
     )

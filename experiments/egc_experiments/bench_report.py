@@ -87,7 +87,8 @@ ABOUT: dict[str, tuple[str, str]] = {
         "(one core), what H.264 and JPEG give for 100-1000 kbit/s (JPEG halves its picture "
         "below 0.3 bit/pixel), the operator's decode, and the robot process with and without "
         "the camera. Targets: render <= 5 ms, render + H.264 <= 15 ms a frame, H.264 within 30% "
-        "of its target up to 600 kbit/s, keyframes <= 1 s apart, the robot with the camera "
+        "of its target up to 600 kbit/s, no H.264 frame (keyframes too) above 1.5x the target's "
+        "frame, keyframes <= 1 s apart, the robot with the camera "
         "<= 25% of a core and <= 150 MB.",
     ),
     "soak": (
@@ -99,6 +100,26 @@ ABOUT: dict[str, tuple[str, str]] = {
         "first and the last window. Targets: CPU and RSS in the last window within 5% of the "
         "first's, view lag flat (within 20 ms), the robot without a camera <= 10% of a core and "
         "<= 100 MB (with it <= 25% and <= 150 MB). `soak.json` (camera) and `soak-none.json`.",
+    ),
+    "fleet": (
+        "a fleet on one machine",
+        "One `egc-teleop router`, N simulated robots (clients of the router, no camera) and M "
+        "operators without `--robot`, each starting on its own robot and switching to the next "
+        "every `--period-s`, all as their own processes: the time to list the robots (and "
+        "`egc-teleop robots --json --wait 1` as typed), each robot's CPU and RSS idle and while "
+        "driven, the router's and the operators' CPU, every switch from the press to the first "
+        "command the new robot accepted, and how late the robots' control loops ran. Targets: "
+        "all N listed, switch time p50 <= 200 ms, every switch done, no control loop late by "
+        "more than 50% of its period at the p99. It loads the whole machine: run it alone.",
+    ),
+    "ros2_teardown": (
+        "starting and stopping the ROS 2 driver",
+        "The real `Ros2Driver` started and stopped `--cycles` times (200 by default) while another "
+        "process publishes scans at 50 Hz and odometry at 100 Hz and records every `/cmd_vel`, "
+        "optionally with `--busy N` processes keeping the cores taken and a `--stall-s` stall of "
+        "the executor's thread as each stop begins: crashes (a worker killed by a signal), "
+        "hangs, and stops whose last `/cmd_vel` was not zero. Targets: none of the three. "
+        "Skipped without rclpy.",
     ),
     "bandwidth": (
         "what the robot sends back",
@@ -146,6 +167,12 @@ def targets_of(name: str, r: Result) -> dict[str, bool]:
         p99, target = r["ros2"].get("p99_ms"), r.get("target_p99_ms")
         if isinstance(p99, int | float) and isinstance(target, int | float):
             return {f"ROS 2 p99 < {target:g} ms": p99 < target}
+    if name == "ros2_teardown" and "crashes" in r:
+        return {
+            "no crash": not r["crashes"],
+            "no hang": not r.get("hangs"),
+            "every stop's last /cmd_vel zero": not r.get("unclean_stops"),
+        }
     if name == "bandwidth" and isinstance(r.get("missed"), list):
         if not r["missed"]:
             return {"all targets": True}
@@ -519,6 +546,47 @@ def _soak(r: Result) -> list[str]:
     ]
 
 
+def _fleet(r: Result) -> list[str]:
+    rows = r["per_robot"]
+    idle = [x["cpu_idle"] for x in rows.values()]
+    driven = [x["cpu_driven"] for x in rows.values()]
+    rss = [x["peak_rss_mb"] for x in rows.values()]
+    lt, cli, sw, router = r["list"], r["list_cli"], r["switch_ms"], r["router"]
+    listed_ms = None if lt.get("info_s") is None else 1000 * lt["info_s"]
+    out = _table(
+        ["measure", "value"],
+        [
+            ["robots, operators", f"{r['robots']}, {r['operators']}"],
+            ["all robots' info replies after (ms)", _num(listed_ms, 0)],
+            ["`egc-teleop robots --wait 1`: listed, wall s", f"{cli['listed']}, {_num(cli['wall_s'])}"],
+            ["robot CPU idle -> driven, mean (% of a core)",
+             f"{_num(100 * sum(idle) / len(idle), 1)} -> {_num(100 * sum(driven) / len(driven), 1)}"],
+            ["robot peak RSS, mean / max (MB)", f"{_num(sum(rss) / len(rss), 0)} / {_num(max(rss), 0)}"],
+            ["router CPU idle -> driven (% of a core)",
+             f"{_num(100 * router['cpu_idle'], 1)} -> {_num(100 * router['cpu_driven'], 1)}"],
+            ["switches done", f"{sw['n']} of {r['switches_expected']}"],
+            ["switch time p50 / p90 / max (ms)", f"{_num(sw['p50'], 0)} / {_num(sw['p90'], 0)} / {_num(sw['max'], 0)}"],
+            ["worst control loop lateness p99 (share of its period)",
+             _num(max((x["loop_overrun_p99"] or 0.0) for x in rows.values()))],
+        ],
+        (0, 1),
+    )  # fmt: skip
+    before, after = r.get("load_average_before"), r.get("load_average_after")
+    if before and after:
+        out += ["", f"Load average (1 min) {before[0]:.2f} before, {after[0]:.2f} after."]
+    return out
+
+
+def _ros2_teardown(r: Result) -> list[str]:
+    return _table(
+        ["cycles", "completed", "crashes", "hangs", "unclean stops", "unheard", "close() p50 / max s", "load before -> after"],
+        [[_num(r["cycles"]), _num(r["completed"]), _num(len(r["crashes"])), _num(len(r["hangs"])),
+          _num(len(r["unclean_stops"])), _num(len(r["unheard"])),
+          f"{_num(r['close_p50_s'])} / {_num(r['close_max_s'])}",
+          f"{_num(r['load_before'])} -> {_num(r['load_after'])}"]],
+    )  # fmt: skip
+
+
 def _generic(r: Result) -> list[str]:
     """Any other result: its top-level numbers."""
     rows = [
@@ -543,6 +611,8 @@ RENDERERS: dict[str, Callable[[Result], list[str]]] = {
     "camera": _camera,
     "bandwidth": _bandwidth,
     "soak": _soak,
+    "fleet": _fleet,
+    "ros2_teardown": _ros2_teardown,
 }
 
 

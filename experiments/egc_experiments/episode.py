@@ -203,7 +203,7 @@ def run_settings(
         sweep=SweepParams(period_s=settings.dt_s),
     )
     try:
-        via = episode_via_points(settings.via, world, start, goal, 0.5 * profile.width_m)
+        via = episode_via_points(settings.via, world, start, goal, profile.half_size_m[1])
         sim = Simulator(world, profile, start, seed=settings.seed)
         controller = PipelineController(config, lambda: sim.pose, via, min(tolerance, 0.5))
 
@@ -218,7 +218,7 @@ def run_settings(
             seed=settings.seed,
             world=world,
             start=start,
-            half_width_m=0.5 * profile.width_m,
+            half_width_m=profile.half_size_m[1],
             sensor=SimSensor(sim, via=active_via_point),
             via=active_via_point,
             profile=profile,

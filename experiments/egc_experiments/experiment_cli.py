@@ -122,7 +122,7 @@ def check_point(point: RunPoint) -> None:
             seed=point.seed,
             world=world,
             start=start,
-            half_width_m=0.5 * profile.width_m,
+            half_width_m=profile.half_size_m[1],
             profile=profile,
         )
     except ValueError as exc:  # JoystickFileError and RouteError are ValueErrors

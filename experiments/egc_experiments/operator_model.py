@@ -213,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
             seed=args.seed,
             world=world,
             start=start,
-            half_width_m=0.5 * profile.width_m,
+            half_width_m=profile.half_size_m[1],
             profile=profile,
         )
     except (UsageError, ValueError, OSError) as exc:

@@ -210,7 +210,7 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
         seed=point.seed,
         world=world,
         start=start,
-        half_width_m=0.5 * profile.width_m,
+        half_width_m=profile.half_size_m[1],
         profile=profile,
     )
     operator = OperatorSide(model, point.mode, start)

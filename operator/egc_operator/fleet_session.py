@@ -18,7 +18,9 @@ session, the command source, the status line and the view's recording. A switch:
    handed over (DESIGN 8, "explicit release or loss hands it over"). The old robot is never driven again by
    this operator until it is switched back to, as a new session.
 2. **Take.** A new node for the new robot starts at once, its source gated until its clock sync
-   has an estimate (the first command the robot takes is stamped on its clock, DESIGN 7). Its
+   has an estimate (the first command the robot takes is stamped on its clock, DESIGN 7; a
+   robot that answers no clock query within a second gets unsynchronised commands, stamp 0,
+   as an operator with ``--robot`` sends them). Its
    first commands come from a new operator session (new liveliness token, ``seq`` from 1), so
    the robot takes control only with the deadman held and drives only once the stick is
    centred (DESIGN 8); the status line says so meanwhile (the robot's own HOLD reason).
@@ -31,8 +33,11 @@ cycle that took the command, on change), on this process's clock through the new
 sync (error: half the round trip; 0 on one machine).
 
 The other robots' link figures: one clock query a second each (``_probe_loop``), its round trip
-for the fleet panel. The status line shows the driven robot and the others' states
-(``fleet_line``); the view gets the fleet rows once a second (``on_fleet``).
+for the fleet panel (and an estimate of that robot's clock, for its camera snapshot). The
+status line shows the driven robot and the others' states (``fleet_line``); the view gets the
+fleet rows once a second (``on_fleet``) and, while the driven robot's downlink budget leaves
+room, snapshots of the other robots' cameras (``fleet_thumbnails``: one at a time, at most one
+every 5 s).
 """
 
 from __future__ import annotations
@@ -65,6 +70,7 @@ from egc_operator.fleet_choice import (
 )
 from egc_operator.fleet_source import FleetSource, NodeSource
 from egc_operator.fleet_table import FleetRow, fleet_rows, others_text
+from egc_operator.fleet_thumbnails import FleetThumbnails, Thumbnail, snapshots_allowed
 from egc_operator.fleet_watch import FleetWatch
 from egc_operator.status_line import FleetLine, StatusLine
 
@@ -73,12 +79,13 @@ log = logging.getLogger("egc.operator")
 NS_PER_S = 1_000_000_000
 NS_PER_MS = 1_000_000
 _POLL_S = 0.05  # the session's loop: requests wake it at once; this is for the rest
-_SETTLE_NS = 1 * NS_PER_S  # after the first robot appears, wait this long at most for info
+_SETTLE_NS = NS_PER_S // 2  # after the first robot appears, wait this long at most for info
 _WAITING_LOG_NS = 5 * NS_PER_S  # "no robot seen yet", repeated
 _PROBE_PERIOD_S = 1.0  # each robot's clock query (its round trip for the fleet panel)
 _PROBE_TIMEOUT_S = 1.0
 _FLEET_VIEW_PERIOD_NS = NS_PER_S
 _JOIN_S = 8.0
+_SYNC_WAIT_NS = NS_PER_S  # a new robot's commands wait this long at most for its clock
 _RELEASE_ACK_NS = NS_PER_S  # a released robot's state confirms it, else its session ends anyway
 _RELEASE_POLL_S = 0.005  # a closing node: its clock query may wait out its timeout (3 s)
 
@@ -105,6 +112,7 @@ class FleetView(Protocol):
 
     def for_robot(self, robot_id: str) -> Any: ...
     def on_fleet(self, rows: list[FleetRow], me: str, robot_now_ns: int | None) -> None: ...
+    def on_thumbnail(self, thumb: Thumbnail, index: int, robot_now_ns: int | None) -> None: ...
 
 
 class SessionStatus(StatusLine):
@@ -125,6 +133,7 @@ class _Drive:
     source: NodeSource
     stop: threading.Event
     thread: threading.Thread
+    view: Any  # its view (``FleetView.for_robot``), or None
     press_ns: int | None = None  # the press that switched to it (None: the first robot)
     previous: str | None = None
     taken: bool = False  # the robot accepted a command of this node (its state said so)
@@ -147,7 +156,10 @@ class SwitchRecord:
 
 @dataclass
 class _Probe:
+    """The other robots' clock queries: round trip (ms) and clock offset (robot - local, ns)."""
+
     rtt_ms: dict[str, float] = field(default_factory=dict)
+    offset_ns: dict[str, int] = field(default_factory=dict)
 
 
 class FleetSession:
@@ -177,6 +189,20 @@ class FleetSession:
         self._drive: _Drive | None = None
         self._closing: list[_Drive] = []
         self._probe = _Probe()
+        self._snapshots_ns: dict[str, int] = {}  # when each robot's camera snapshot was taken
+        self._thumb_index: dict[str, int] = {}  # its place in the view's row of snapshots
+        self._thumbnails = (
+            None
+            if view is None
+            else FleetThumbnails(
+                session,
+                self._snapshot_candidates,
+                self._snapshots_allowed,
+                self._on_thumbnail,
+                self._robot_clock,
+                clock,
+            )
+        )
         self.switches: list[SwitchRecord] = []
         self.published = 0  # commands sent by the nodes that have closed
         self.source = FleetSource(source, clock, self._on_button)
@@ -200,8 +226,9 @@ class FleetSession:
         states = {r: (s.state, s.rx_ns) for r, s in watch.states().items()}
         with self._lock:
             rtts = dict(self._probe.rtt_ms)
+            snapshots = dict(self._snapshots_ns)
         infos = {r: watch.info(r) for r in robots}
-        return fleet_rows(robots, infos, states, rtts, driven, self._clock())
+        return fleet_rows(robots, infos, states, rtts, driven, self._clock(), snapshots)
 
     def fleet_line(self) -> FleetLine | None:
         driven = self.driven
@@ -326,6 +353,10 @@ class FleetSession:
             target=self._probe_loop, args=(stop,), name="fleet-clocks", daemon=True
         )
         probe.start()
+        if self._thumbnails is not None:
+            threading.Thread(
+                target=self._thumbnails.run, args=(stop,), name="fleet-snapshots", daemon=True
+            ).start()
         try:
             robot = self._wait_first(stop)
             if robot is None:
@@ -372,18 +403,27 @@ class FleetSession:
     def _start(self, robot: str, press_ns: int | None, previous: str | None) -> None:
         view = None if self._view is None else self._view.for_robot(robot)
         holder: list[DrivingNode] = []
+        started = self._clock()
+        unsynced: list[bool] = []
 
-        def synchronised() -> bool:
-            return bool(holder) and holder[0].robot_clock(self._clock()) is not None
+        def ready() -> bool:
+            if holder and holder[0].robot_clock(self._clock()) is not None:
+                return True
+            if self._clock() - started < _SYNC_WAIT_NS:
+                return False
+            if not unsynced:  # a robot that answers no clock query is driven as before
+                unsynced.append(True)
+                log.warning("robot %s: no clock reply yet; commands go out unsynchronised", robot)
+            return True
 
-        source = self.source.node_source(gate=synchronised)
+        source = self.source.node_source(gate=ready)
         node = self._make_node(robot, source, view)
         holder.append(node)
         stop = threading.Event()
         thread = threading.Thread(
             target=self._drive_loop, args=(robot, node, stop), name=f"drive-{robot}", daemon=True
         )
-        drive = _Drive(robot, node, source, stop, thread, press_ns, previous)
+        drive = _Drive(robot, node, source, stop, thread, view, press_ns, previous)
         with self._lock:
             self._drive = drive
         thread.start()
@@ -444,6 +484,8 @@ class FleetSession:
             old.source.released = False  # nothing to switch to after all: drive on
             return
         old.source.release()
+        if old.view is not None:
+            old.view.clear_on_close = True  # the next robot's drawings replace its own
         old.stop.set()  # it sends the release (if its last command held the deadman) and closes
         self._closing.append(old)
         self._say(f"switching from {old.robot} to {request.target} ({request.why})")
@@ -468,6 +510,45 @@ class FleetSession:
             d.thread.join(timeout=_JOIN_S)
         self.watch.close()
 
+    # -- the other robots' camera snapshots -------------------------------------------------------
+
+    def _snapshot_candidates(self) -> list[str]:
+        driven = self.driven
+        out = []
+        for robot in self.watch.robots():
+            info = self.watch.info(robot)
+            if robot != driven and info is not None and info.camera != "none":
+                out.append(robot)
+        return out
+
+    def _snapshots_allowed(self) -> bool:
+        """The driven robot's budget leaves room (``fleet_thumbnails.snapshots_allowed``)."""
+        with self._lock:
+            drive = self._drive
+        view = None if drive is None else drive.view
+        latest = getattr(view, "latest_telemetry", None)
+        return snapshots_allowed(None if latest is None else latest())
+
+    def _on_thumbnail(self, thumb: Thumbnail) -> None:
+        with self._lock:
+            self._snapshots_ns[thumb.robot] = thumb.grabbed_ns
+            index = self._thumb_index.setdefault(thumb.robot, len(self._thumb_index))
+            drive = self._drive
+        if self._view is None or drive is None:
+            return
+        clock = drive.node.robot_clock(self._clock())
+        self._view.on_thumbnail(thumb, index, None if clock is None else clock.now_ns)
+
+    def _robot_clock(self, robot: str, local_ns: int) -> RobotClock | None:
+        """That robot's clock at ``local_ns`` from its clock probe (error: half the round
+        trip), None before a reply."""
+        with self._lock:
+            offset = self._probe.offset_ns.get(robot)
+            rtt_ms = self._probe.rtt_ms.get(robot)
+        if offset is None or rtt_ms is None:
+            return None
+        return RobotClock(local_ns + offset, round(rtt_ms * NS_PER_MS) // 2)
+
     # -- the other robots' clocks: their round trips ----------------------------------------------
 
     def _probe_loop(self, stop: threading.Event) -> None:
@@ -486,9 +567,10 @@ class FleetSession:
                 ok = reply.ok
                 stamp = None if ok is None else decode_clock_reply(payload_bytes(ok))
                 if isinstance(stamp, int):
-                    rtt_ms = (self._clock() - sent) / NS_PER_MS
+                    received = self._clock()
                     with self._lock:
-                        self._probe.rtt_ms[robot] = rtt_ms
+                        self._probe.rtt_ms[robot] = (received - sent) / NS_PER_MS
+                        self._probe.offset_ns[robot] = stamp - (sent + received) // 2
             except Exception as exc:  # nothing from the network raises out of the callback
                 log.debug("clock probe reply of %s: %s", robot, exc)
 

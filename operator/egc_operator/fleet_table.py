@@ -39,6 +39,7 @@ class FleetRow:
     camera: str | None = None
     map_id: str | None = None
     map_pose: tuple[float, float, float] | None = None
+    snapshot_age_s: float | None = None  # its camera's latest snapshot (fleet_thumbnails)
 
     @property
     def stale(self) -> bool:
@@ -52,9 +53,12 @@ def fleet_rows(
     rtts_ms: Mapping[str, float],
     driven: str | None,
     now_ns: int,
+    snapshots_ns: Mapping[str, int] | None = None,
 ) -> list[FleetRow]:
     """The rows, in ``robots``' order; ``states`` maps a robot to its newest state message and
-    its arrival time (``now_ns``'s clock)."""
+    its arrival time (``now_ns``'s clock), ``snapshots_ns`` to when its camera's latest
+    snapshot was taken (same clock)."""
+    snapshots_ns = snapshots_ns or {}
     rows = []
     for robot in robots:
         info = infos.get(robot)
@@ -73,6 +77,9 @@ def fleet_rows(
                 camera=None if info is None else info.camera,
                 map_id=None if info is None else info.map,
                 map_pose=None if state is None else state.map_pose,
+                snapshot_age_s=None
+                if robot not in snapshots_ns
+                else max(0.0, (now_ns - snapshots_ns[robot]) / NS_PER_S),
             )
         )
     return rows
@@ -116,9 +123,12 @@ def fleet_markdown(rows: Sequence[FleetRow], me: str, note: str = "") -> str:
             else ("this operator" if row.operator == me else row.operator)
         )
         age = "-" if row.state_age_s is None else f"{row.state_age_s:.1f} s"
+        camera = row.camera or "?"
+        if row.snapshot_age_s is not None:
+            camera += f" (snapshot {row.snapshot_age_s:.0f} s ago)"
         lines.append(
             f"| {name} | {_state_word(row)} | {row.reason or '-'} | {who} | {age} | "
-            f"{_figure(row.rtt_ms, '.1f')} ms | {row.profile or '?'} | {row.camera or '?'} |"
+            f"{_figure(row.rtt_ms, '.1f')} ms | {row.profile or '?'} | {camera} |"
         )
     if not rows:
         lines.append("| (no robot seen) | | | | | | | |")

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 from egc_common.kinematics import integrate_arc, ramp_toward, scale_as_whole
 from egc_common.messages import Telemetry
-from egc_common.profiles import PROFILES, RobotProfile
+from egc_common.profiles import RobotProfile, profile_named
 
 NS_PER_S = 1_000_000_000
 NS_PER_MS = 1_000_000
@@ -237,7 +237,7 @@ def predict_from_telemetry(
 
     The uplink is ``uplink_estimate_ms`` (0 when nothing is known yet).
     """
-    profile = PROFILES.get(t.profile)
+    profile = profile_named(t.profile)
     if t.pose is None or profile is None or now_ns <= 0:
         return None
     uplink_ms = uplink_estimate_ms(t.cmd_age_p50_ms, rtt_ms) or 0.0

@@ -53,6 +53,7 @@ from egc_common.messages import StateMessage, Telemetry
 from egc_operator import view_blueprint as paths
 from egc_operator.camera_view import ShownFrame
 from egc_operator.fleet_table import FleetRow, fleet_markdown, on_shared_map
+from egc_operator.fleet_thumbnails import THUMB_WIDTH_PX, Thumbnail
 from egc_operator.prediction import (
     CommandHistory,
     Prediction,
@@ -61,6 +62,7 @@ from egc_operator.prediction import (
 )
 from egc_operator.view_blueprint import operator_blueprint
 from egc_operator.view_scene import (
+    CBF_TEAL,
     CIRCLE_COLOURS,
     CIRCLE_NAMES,
     GOAL_GREEN,
@@ -330,6 +332,8 @@ class OperatorView:
         self.where = where
         self._rec = recording
         self._owns_recording = owns_recording  # False: a ``for_robot`` view of a fleet
+        # A ``for_robot`` view the operator switched away from: ``close`` clears its drawings.
+        self.clear_on_close = False
         self._fleet_drawn = False
         self._lock = threading.Lock()
         self._last: Telemetry | None = None
@@ -367,12 +371,34 @@ class OperatorView:
     def for_robot(self, robot_id: str) -> OperatorView:
         """A view of one driven robot on this view's recording (DESIGN 15): its telemetry,
         clock, trajectory and camera are its own; ``close`` leaves the recording open (this
-        view's ``close`` closes it)."""
+        view's ``close`` closes it) and, with ``clear_on_close`` (switched away from), clears
+        what it drew at its last time."""
         with self._lock:
             rec = self._rec
         view = OperatorView(rec, robot_id, where=self.where, owns_recording=False)
         view.clock = self.clock
         return view
+
+    def latest_telemetry(self) -> Telemetry | None:
+        """The newest telemetry drawn (None: none yet, or no view)."""
+        with self._lock:
+            return self._last
+
+    def on_thumbnail(self, thumb: Thumbnail, index: int, robot_now_ns: int | None) -> None:
+        """Another robot's camera snapshot in the fleet's row of snapshots (DESIGN 15), the
+        ``index``-th from the left, at the driven robot's time now."""
+        with self._lock:
+            rec = self._rec
+            if rec is None or robot_now_ns is None or robot_now_ns <= 0:
+                return
+            _set_time(rec, robot_now_ns, self._cycle)
+            base = f"{paths.FLEET_CAMERAS}/{thumb.robot}"
+            rec.log(base, rr.Transform3D(translation=(index * (THUMB_WIDTH_PX + 8), 0.0, 0.0)))
+            rec.log(f"{base}/image", rr.EncodedImage(contents=thumb.jpeg, media_type="image/jpeg"))
+            rec.log(
+                f"{base}/label",
+                rr.Points2D([(4.0, 6.0)], radii=2.0, labels=[thumb.robot], show_labels=True),
+            )
 
     def on_fleet(self, rows: list[FleetRow], me: str, robot_now_ns: int | None) -> None:
         """The fleet panel and the robots sharing the driven robot's map (DESIGN 15), at the
@@ -637,6 +663,8 @@ class OperatorView:
             if rec is not None:
                 self._log_pending_text(rec, at_ns=self._robot_now() or 0)
         if rec is not None and not self._owns_recording:
+            if not self.clear_on_close:
+                return
             # A fleet's robot no longer driven: its drawings go at its last time, so the next
             # robot's are not shown mixed with them.
             with self._lock:
@@ -819,6 +847,10 @@ class OperatorView:
             )
         rec.log(paths.REFERENCE_ARROW, rr.Arrows2D(vectors=[scene.reference_vector]))
         rec.log(paths.SENT_ARROW, rr.Arrows2D(vectors=[scene.sent_vector]))
+        # cbf (DESIGN 13): its margin and the points that changed the command, over the scan.
+        margin = [] if scene.cbf_margin is None else [scene.cbf_margin]
+        rec.log(paths.CBF_MARGIN, rr.LineStrips2D(margin, colors=CBF_TEAL, radii=THIN_LINE))
+        rec.log(paths.CBF_POINTS, rr.Points2D(scene.cbf_xy, colors=SENT_RED, radii=0.04))
         suggested = suggested_vector(t)
         if suggested is not None:
             rec.log(paths.SUGGESTED_ARROW, rr.Arrows2D(vectors=[suggested]))

@@ -17,8 +17,9 @@ Layout (paper Fig. 8 as a Rerun blueprint)::
 
 An operator driving a fleet (DESIGN 15, ``fleet=True``) gets a fleet panel beside the driven
 robot's view, under the world frame: every robot's state, who controls it and its link figures
-(``FLEET_TABLE``); the robots that share the driven robot's map frame are drawn in the world
-frame at their map poses (``FLEET_POSES``, from their state messages at 1 Hz).
+(``FLEET_TABLE``), and snapshots of the other robots' cameras in a row (``FLEET_CAMERAS``,
+``fleet_thumbnails``); the robots that share the driven robot's map frame are drawn in the
+world frame at their map poses (``FLEET_POSES``, from their state messages at 1 Hz).
 
 The world frame shows the newest state of everything (latest-at) except the trajectory, which
 shows its whole history up to the time cursor; the ghost (the predictive display, DESIGN 9) is
@@ -45,6 +46,8 @@ CIRCLES = "robot/circles"  # + /reachable, /igc, /agc, /egc
 REFERENCE_ARROW = "robot/command/reference"
 SENT_ARROW = "robot/command/sent"
 SUGGESTED_ARROW = "robot/suggested"  # the filter's suggested direction (assist), in {R}
+CBF_MARGIN = "robot/cbf/margin"  # cbf's margin around the footprint (DESIGN 13), in {R}
+CBF_POINTS = "robot/cbf/points"  # the points whose barriers changed the command
 ROBOT_VIA = "robot/via"  # the active via point seen from the robot (odom frame only)
 
 # World-frame view: ``world`` carries the world -> screen transform.
@@ -74,6 +77,7 @@ CAMERA_AGE = "camera/age"
 FLEET = "fleet"
 FLEET_TABLE = "fleet/table"
 FLEET_POSES = "world/fleet"
+FLEET_CAMERAS = "fleet/cameras"  # + /<robot>: the other robots' camera snapshots, in a row
 
 PLOTS = "plots"  # + /v/ref, /v/cmd, /w/ref, /w/cmd, /w_si, /latency/...
 LINK_RTT = "plots/latency/link_rtt_ms"
@@ -162,13 +166,19 @@ def operator_blueprint(
                 ),
                 world_view,
                 *(
-                    [rrb.TextDocumentView(name="fleet: every robot seen", origin=FLEET_TABLE)]
+                    [
+                        rrb.TextDocumentView(name="fleet: every robot seen", origin=FLEET_TABLE),
+                        rrb.Spatial2DView(
+                            name="fleet: the other robots' camera snapshots",
+                            origin=FLEET_CAMERAS,
+                        ),
+                    ]
                     if fleet
                     else []
                 ),
                 rrb.TextDocumentView(name="link (plain numbers)", origin=LINK_TEXT),
                 rrb.TextLogView(name="log: state changes, rejections, link", origin=TEXT_LOG),
-                row_shares=[4, 4, 2, 2, 2] if fleet else [4, 4, 2, 2],
+                row_shares=[4, 4, 2, 2, 2, 2] if fleet else [4, 4, 2, 2],
             ),
             plots,
             column_shares=[4, 3, 3],

@@ -18,12 +18,14 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
+from egc_common.footprint import mitred_outline
 from egc_common.messages import Circle, Telemetry
-from egc_common.profiles import PROFILES, RobotProfile
+from egc_common.profiles import RobotProfile
+from egc_common.profiles import profile_named as known_profile
 
 from egc_operator.prediction import Prediction
 from egc_operator.status_line import (
@@ -35,6 +37,7 @@ from egc_operator.status_line import (
 from egc_operator.via_route import Route, active_index
 
 F32 = npt.NDArray[np.float32]
+NO_POINTS: F32 = np.zeros((0, 2), np.float32)
 Rgb = tuple[int, int, int]
 Rgba = tuple[int, int, int, int]
 Point = tuple[float, float]
@@ -65,6 +68,7 @@ PREDICTED_LABEL = "predicted (not measured)"
 STEER_BY_GHOST_S = 0.3
 LATENCY_BROWN: Rgb = (150, 90, 30)
 VIA_ORANGE: Rgb = (240, 130, 0)
+CBF_TEAL: Rgb = (0, 170, 120)  # cbf's margin; the points that constrain are SENT_RED
 VIA_PASSED_GREY: Rgb = (175, 175, 175)
 SUGGESTED_LENGTH_M = 1.0
 
@@ -75,6 +79,7 @@ LIMITER_TEXT: dict[str, str] = {
     "ek-egc": "EK-EGC",
     "assist": "assist",
     "dwa": "DWA",
+    "cbf": "CBF",
     "sweep": "footprint sweep",
     "limits": "v/a limits",
     "watchdog": "watchdog",
@@ -100,8 +105,9 @@ FALLBACK_HORIZON_S = 1.0
 
 
 def profile_named(name: str) -> RobotProfile | None:
-    """The pinned profile of that name, or None when the telemetry names none we know."""
-    return PROFILES.get(name)
+    """The profile of that name (a built-in, or one this process loaded from a file, DESIGN
+    14), or None when the telemetry names none we know."""
+    return known_profile(name)
 
 
 def drawable_circle(circle: Circle | None) -> Circle | None:
@@ -184,6 +190,10 @@ class RobotFrameScene:
     # The footprint's outline (closed) when it is not a centred rectangle (then a box is drawn
     # from ``footprint_half_size``); None for a box or an unknown profile.
     footprint_outline: list[Point] | None = None
+    # cbf (DESIGN 13): the points whose barriers changed the command, and the margin it keeps
+    # (``cbf_margin_outline``); empty / None when cbf did not run.
+    cbf_xy: F32 = field(default_factory=lambda: NO_POINTS)
+    cbf_margin: list[Point] | None = None
 
 
 def robot_frame_scene(t: Telemetry) -> RobotFrameScene:
@@ -212,7 +222,25 @@ def robot_frame_scene(t: Telemetry) -> RobotFrameScene:
         status=status_text(t),
         status_anchor=(back, 0.0),
         footprint_outline=outline,
+        cbf_xy=np.ascontiguousarray(t.cbf_xy, dtype=np.float32).reshape(-1, 2),
+        cbf_margin=cbf_margin_outline(profile, t.cbf_margin_m, t.cbf_ahead_m, t.v_cmd < 0.0)
+        if profile is not None and t.cbf_margin_m is not None
+        else None,
     )
+
+
+def cbf_margin_outline(
+    profile: RobotProfile, margin_m: float, ahead_m: float | None, reversing: bool
+) -> list[Point]:
+    """cbf's margin around the footprint (closed, in {R}): the footprint grown by the margin,
+    its front (back, when reversing) pushed out to the margin ahead, which grows with the loop
+    delay and the braking distance at the current speed (DESIGN 13)."""
+    grown = mitred_outline(profile.footprint, margin_m)
+    stretch = max((ahead_m or margin_m) - margin_m, 0.0)
+    side = grown[:, 0] < 0.0 if reversing else grown[:, 0] > 0.0
+    grown[side, 0] += -stretch if reversing else stretch
+    out = [(float(x), float(y)) for x, y in grown]
+    return [*out, out[0]]
 
 
 def time_series(t: Telemetry) -> dict[str, float]:
@@ -265,6 +293,7 @@ LANE_COLOURS: dict[str, tuple[tuple[str, Rgb], ...]] = {
         ("ek-egc", (180, 30, 90)),
         ("assist", VIA_ORANGE),
         ("dwa", (100, 60, 160)),
+        ("cbf", CBF_TEAL),
         ("sweep", AGC_VIOLET),
         ("limits", (120, 160, 220)),
         ("watchdog", _AMBER),
@@ -278,6 +307,7 @@ LANE_COLOURS: dict[str, tuple[tuple[str, Rgb], ...]] = {
         ("ek-egc", (180, 30, 90)),
         ("assist", VIA_ORANGE),
         ("dwa", (100, 60, 160)),
+        ("cbf", CBF_TEAL),
         ("unknown", (120, 120, 120)),
     ),
     "region": tuple(REGION_COLOURS.items()),

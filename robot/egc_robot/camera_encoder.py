@@ -38,7 +38,6 @@ from dataclasses import dataclass, replace
 from fractions import Fraction
 from typing import Any, Final
 
-import av
 import numpy as np
 import numpy.typing as npt
 from PIL import Image
@@ -150,9 +149,13 @@ class Encoded:
 
 
 class _H264:
-    """One open libx264 context for one plan (PyAV as IO: the codec)."""
+    """One open libx264 context for one plan (PyAV as IO: the codec). PyAV is imported here,
+    not with the module: a robot without a camera does not load it (~17 MB of RSS)."""
 
     def __init__(self, plan: StreamPlan) -> None:
+        import av
+
+        self._av = av
         self.plan = plan
         self.vbv_kbps = plan.kbps  # the VBV cap it opened with; fixed while it is open
         ctx: Any = av.CodecContext.create("libx264", "w")
@@ -172,6 +175,7 @@ class _H264:
         self.plan = replace(self.plan, kbps=kbps)
 
     def encode(self, rgb: RGB, key: bool) -> Encoded | None:
+        av = self._av
         frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")
         frame = frame.reformat(
             width=self.plan.width_px, height=self.plan.height_px, format="yuv420p"

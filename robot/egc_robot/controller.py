@@ -65,6 +65,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from egc_common.messages import (
+    MAX_CBF_POINTS,
     MAX_SPEED_MPS,
     MAX_TURN_RADPS,
     BaseCommand,
@@ -82,6 +83,7 @@ from egc_common.scan import ObstaclePoints, Scan
 from egc_common.scan_compact import PolarScan, compact
 from egc_common.source_msg import decode_lock, decode_source_command
 
+from egc_robot.filters.cbf import CbfResult
 from egc_robot.latency_governor import govern, latency_speed_limit, latency_turn_limit
 from egc_robot.link_stats import LinkStats
 from egc_robot.pipeline import (
@@ -113,6 +115,7 @@ from egc_robot.via_points import (
 )
 
 NS_PER_S = 1_000_000_000
+_NO_POINTS = np.zeros((0, 2), np.float32)
 _MAX_TRACKED_OPERATORS = 64
 _MAX_SETTING = 3600.0
 _STOPPED_EPS = 1e-6
@@ -345,6 +348,10 @@ class RobotController:
         self._unreported: CycleOutput | None = None  # the last cycle, telemetry not built yet
         # DESIGN 14 (all unused without sources)
         self._mux = config.sources
+        mux = config.sources
+        self._op_source = None if mux is None else mux.operator_source
+        self._source_specs = {} if mux is None else {s.name: s for s in mux.sources}
+        self._lock_specs = {} if mux is None else {lk.name: lk for lk in mux.locks}
         self._op_priority = dict(config.operator_priorities)
         self._feeds: dict[str, _SourceFeed] = {}
         self._lock_feeds: dict[str, LockFeed] = {}
@@ -500,7 +507,7 @@ class RobotController:
         """A lock's value (from ``on_lock`` or a ROS 2 ``std_msgs/Bool`` topic)."""
         if self._unreported is not None:
             self._report()
-        spec = next((lk for lk in self._mux.locks if lk.name == name), None) if self._mux else None
+        spec = self._lock_specs.get(name)
         if spec is None or (spec.topic is not None) != ros2:
             return self._reject_input(
                 Rejection(RejectReason.NOT_IN_CONTROL, f"no such lock {name!r} of this feed"),
@@ -523,9 +530,8 @@ class RobotController:
     ) -> InputVerdict:
         if self._unreported is not None:
             self._report()
-        mux = self._mux
-        spec = None if mux is None else mux.source(name)
-        if mux is None or spec is None or spec.kind != kind:
+        spec = self._source_specs.get(name)
+        if spec is None or spec.kind != kind:
             return self._reject_input(
                 Rejection(RejectReason.NOT_IN_CONTROL, f"no {kind} source named {name!r}")
             )
@@ -554,7 +560,7 @@ class RobotController:
         # An autonomy stack sees its own sensors: no view delay, no human reaction time.
         feed.link.on_accepted(age_ns, 0, now_ns)
         driving = self._verdict.source if self._verdict is not None else None
-        current = mux.source(driving)
+        current = None if driving is None else self._source_specs.get(driving)
         urgent = driving == name or current is None or spec.priority > current.priority
         return InputVerdict(None, urgent)
 
@@ -783,6 +789,7 @@ class RobotController:
                 filter_name=filter_name,
                 now_ns=now_ns,
                 memory=self._filter_memory,
+                loop_delay_s=tau_s,  # the source's own (cbf's delay-aware margin, DESIGN 13)
             )
             self._filter_memory = result.memory
             v, w, limiter = result.v_cmd_mps, result.w_cmd_radps, result.limiter
@@ -872,7 +879,7 @@ class RobotController:
         mux = self._mux
         assert mux is not None
         claims = {name: feed.rx_ns for name, feed in self._feeds.items()}
-        op_source = mux.operator_source
+        op_source = self._op_source
         claim = self._op_claim_ns  # None once the operator in control is released
         if op_source is not None and claim is not None:
             claims[op_source.name] = claim
@@ -893,8 +900,9 @@ class RobotController:
     ) -> tuple[Inputs, _SourceFeed | None]:
         """The state machine's snapshot for the source that drives (state_machine docstring),
         and that source's feed when it is not the operator."""
-        assert self._mux is not None
-        spec: SourceSpec | None = self._mux.source(verdict.source)
+        spec: SourceSpec | None = (
+            None if verdict.source is None else self._source_specs.get(verdict.source)
+        )
         if spec is not None and spec.kind == "operator":
             return operator, None
         if spec is None:
@@ -1056,6 +1064,7 @@ class RobotController:
             source=None if report is None else report.source,
             lock=None if report is None else report.lock,
             source_age_ms=None if report is None else report.source_age_ms,
+            **_cbf_view(result),
         )
 
     def _telemetry_scan(self) -> tuple[npt.NDArray[np.float32], PolarScan | None]:
@@ -1104,3 +1113,16 @@ class RobotController:
         self._no_operator_reason = reason
         self._route = NO_ROUTE  # via points belong to the operator who set them
         self._goal_seq = None
+
+
+def _cbf_view(result: PipelineResult | None) -> dict[str, Any]:
+    """The telemetry keys of cbf's view (DESIGN 13): the points whose barriers changed the
+    command, the margin and the margin ahead; nothing when cbf did not run this cycle."""
+    detail = None if result is None or result.family is None else result.family.detail
+    if not isinstance(detail, CbfResult):
+        return {}
+    xy = _NO_POINTS
+    if detail.tight is not None and detail.tight.x_m.size:
+        pairs = np.column_stack((detail.tight.x_m, detail.tight.y_m)).astype(np.float32)
+        xy = np.unique(pairs, axis=0)[:MAX_CBF_POINTS]  # a point's (S) and (C) rows: once
+    return {"cbf_xy": xy, "cbf_margin_m": detail.margin_m, "cbf_ahead_m": detail.margin_ahead_m}

@@ -135,11 +135,16 @@ def parse_laser_pose(text: str) -> tuple[float, float, float]:
     return values[0], values[1], values[2]
 
 
-def ros2_settings(table: Mapping[str, Any], flags: Mapping[str, Any]) -> Ros2Settings:
+def ros2_settings(
+    table: Mapping[str, Any],
+    flags: Mapping[str, Any],
+    default_laser_pose: tuple[float, float, float] | None = None,
+) -> Ros2Settings:
     """Settings from the robot TOML's ``[ros2]`` table, overridden by flags that are not None.
 
     Both use the keys of ``ROS2_KEYS``; ``laser_pose`` is ``"X,Y,YAW"`` or a list of three
-    numbers. Raises ValueError with a message naming the key.
+    numbers, and when neither gives one, ``default_laser_pose`` (the profile's ``laser_pose``,
+    DESIGN 14), else 0, 0, 0. Raises ValueError with a message naming the key.
     """
     unknown = sorted(set(table) - set(ROS2_KEYS))
     if unknown:
@@ -151,7 +156,7 @@ def ros2_settings(table: Mapping[str, Any], flags: Mapping[str, Any]) -> Ros2Set
     for key in ("scan", "odom", "cmd", "cmd_type", "namespace"):
         if key in merged and not isinstance(merged[key], str):
             raise ValueError(f"ros2 {key} must be a string, got {merged[key]!r}")
-    pose_value = merged.get("laser_pose", (0.0, 0.0, 0.0))
+    pose_value = merged.get("laser_pose", default_laser_pose or (0.0, 0.0, 0.0))
     if isinstance(pose_value, str):
         pose = parse_laser_pose(pose_value)
     elif (

@@ -534,7 +534,14 @@ class RobotNode:
             report,
             rx_ns,
             self._plan,
+            self._view_sent.kbps(rx_ns),
         )
+        if after.undone > before.undone and self._events.allow("undo", rx_ns) is not None:
+            log.info(
+                "downlink budget cut taken back (%.0f kbit/s): its queue vanished faster than "
+                "a link drains one (a stall of this machine or of the link, not its rate)",
+                after.budget_kbps,
+            )
         if after.cuts > before.cuts and (held := self._events.allow("cut", rx_ns)) is not None:
             camera = after.camera_queue_ms
             log.info(

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from egc_app.cli import main
+from tests.cli_process import main
 from tests.replay.logs import corridor_log
 from tests.shapes import L_SHAPE_FILE, PENTAGON_FILE
 
@@ -66,14 +66,18 @@ def test_a_bad_file_is_one_line_naming_the_key(argv, tmp_path):
 
 
 @pytest.mark.parametrize("profile", ["turtlebot4", "husky", str(PENTAGON_FILE), str(L_SHAPE_FILE)])
-def test_filter_takes_names_and_files(profile, monkeypatch, capsys):
-    import io
-
+def test_filter_takes_names_and_files(profile):
     # A wall 1 m ahead: the command is cut by each robot's own radii and limits.
     line = {"v": 0.3, "w": 0.0, "points": [[1.0, y / 10] for y in range(-10, 11)]}
-    monkeypatch.setattr(sys, "stdin", io.StringIO(json.dumps(line) + "\n"))
-    assert main(["filter", "--profile", profile]) == 0
-    out = json.loads(capsys.readouterr().out)
+    proc = subprocess.run(
+        [sys.executable, "-m", "egc_app.cli", "filter", "--profile", profile],
+        input=json.dumps(line) + "\n",
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
     assert "error" not in out and out["final"]["v"] <= 0.3
 
 
@@ -91,7 +95,7 @@ def test_replay_takes_the_same_files(profile, tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_replay_of_mapping1_with_a_polygon_file(tmp_path, capsys):
+def test_replay_of_mapping1_with_a_polygon_file(capsys):
     code = main(["replay", str(MAPPING1), "--profile", str(L_SHAPE_FILE), "--filter", "dwa"])
     out, err = capsys.readouterr()
     assert code == 0, err
@@ -109,24 +113,38 @@ def test_episode_takes_a_file(tmp_path, capsys):
     assert not result["collided"] and result["time_s"] > 0
 
 
-def test_the_profiles_laser_pose_is_the_ros2_default(tmp_path):
+def test_the_profiles_laser_pose_is_the_ros2_default():
     """A profile's laser_pose places the laser for --driver ros2 unless [ros2] or the flag
     says otherwise."""
-    import argparse
+    from egc_robot.ros2_core import ros2_settings
 
-    from egc_app.robot_cmd import _ros2_settings
+    mounted = (0.2, -0.05, 3.14159)
+    laser = ros2_settings({}, {}, default_laser_pose=mounted).laser
+    assert (laser.x_m, laser.y_m, laser.yaw_rad) == mounted
+    table = {"laser_pose": [0.1, 0.0, 0.0]}
+    assert ros2_settings(table, {}, default_laser_pose=mounted).laser.x_m == 0.1
+    flags = {"laser_pose": "0.3,0,0"}
+    assert ros2_settings(table, flags, default_laser_pose=mounted).laser.x_m == 0.3
+    assert ros2_settings({}, {}).laser.x_m == 0.0
 
-    path = tmp_path / "mounted.toml"
-    path.write_text(PENTAGON_FILE.read_text() + "laser_pose = [0.2, -0.05, 3.14159]\n")
-    flags = dict.fromkeys(
-        ("ros_scan", "ros_odom", "ros_cmd", "ros_cmd_type", "ros_namespace", "laser_pose")
-    )
-    args = argparse.Namespace(profile=str(path), laser_upside_down=None, **flags)
-    laser = _ros2_settings(args, {}, need_rclpy=False).laser
-    assert (laser.x_m, laser.y_m, laser.yaw_rad) == (0.2, -0.05, 3.14159)
-    table = {"ros2": {"laser_pose": [0.1, 0.0, 0.0]}}
-    assert _ros2_settings(args, table, need_rclpy=False).laser.x_m == 0.1
-    args.laser_pose = "0.3,0,0"
-    assert _ros2_settings(args, table, need_rclpy=False).laser.x_m == 0.3
-    args.profile, args.laser_pose = "pioneer3dx", None
-    assert _ros2_settings(args, {}, need_rclpy=False).laser.x_m == 0.0
+
+def test_a_recorded_episode_draws_the_files_shape(tmp_path):
+    """episode --record with a profile file: the view in that process knows the file's
+    profile by the name telemetry carries, and draws its outline (the pentagon's nose)."""
+    from tests.view.rrd import read_recording
+
+    rrd = tmp_path / "pentagon.rrd"
+    argv = ["episode", "--map", "hallway", "--profile", str(PENTAGON_FILE), "--max-time", "2"]
+    assert main([*argv, "--record", str(rrd)]) == 0
+    strips = read_recording(rrd)["/robot/footprint"].column("LineStrips2D:strips")
+    outline = [p for p in strips[0][0]]
+    assert len(outline) == 6 and max(x for x, _ in outline) == pytest.approx(0.35)
+
+
+def test_profile_named_knows_loaded_files():
+    from egc_common.profiles import PIONEER3DX, load_profile, profile_named
+
+    assert profile_named("pioneer3dx") is PIONEER3DX
+    loaded = load_profile(str(L_SHAPE_FILE))
+    assert profile_named("l-shape") is loaded
+    assert profile_named("no-such-robot") is None

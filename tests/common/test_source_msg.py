@@ -85,3 +85,26 @@ def test_telemetry_and_state_carry_source_and_lock_when_known():
     raw = msgpack.unpackb(s.encode())
     assert raw["lock"] == "pause" and "source" not in raw
     assert decode_state(s.encode()) == s
+
+
+@given(
+    st.dictionaries(
+        st.sampled_from(["v", "seq", "stamp_ns", "v_mps", "w_radps", "x"]),
+        st.one_of(
+            st.integers(-5, 2**64 - 1),
+            st.floats(allow_nan=True),
+            st.booleans(),
+            st.text(max_size=3),
+            st.lists(st.integers(), max_size=2),
+            st.dictionaries(st.text(max_size=2), st.integers(), max_size=2),
+        ),
+    )
+)
+def test_the_fast_path_and_the_full_decoder_agree(m):
+    from egc_common.messages import _decode
+    from egc_common.source_msg import MAX_COMMAND_BYTES, _build
+
+    payload = msgpack.packb(m)
+    full = _decode(payload, MAX_COMMAND_BYTES, _build, flat=True)
+    fast = decode_source_command(payload)
+    assert fast == full or (isinstance(fast, Rejection) and isinstance(full, Rejection))

@@ -183,6 +183,61 @@ def test_the_first_report_after_a_gap_does_not_count_alone() -> None:
     assert state.cuts == 1
 
 
+def test_a_fast_growing_queue_says_what_the_link_delivers_before_rx_does() -> None:
+    """The link narrows from 2 Mbit/s to 128 kbit/s under a view plane sending 500 kbit/s: the
+    queue grows by 0.74 ms a ms in the reports' time (fed at 500, drained at 128), while the
+    operator's rx_kbps (a second's worth) still says 450. The cut goes below what the link
+    delivers, not to 0.8 x 450."""
+    cfg = BudgetConfig()
+    state = replace(BudgetState(budget_kbps=600.0), link_kbps=480.0, cut_rx_kbps=480.0)
+    t = 0
+    for _ in range(200):
+        t += 20 * MS
+        state = on_report(state, cfg, Report(100.0, 480.0, stamp_ns=t), t, sent_kbps=500.0)
+    age = 100.0
+    while state.cuts == 0:
+        t += 20 * MS
+        age += 20 * (1.0 - 128.0 / 500.0)
+        state = on_report(state, cfg, Report(age, 450.0, stamp_ns=t), t, sent_kbps=500.0)
+    assert state.budget_kbps < 128.0, state.budget_kbps
+    assert state.link_kbps is not None and state.link_kbps < 200.0
+
+
+def test_at_the_floor_a_standing_queue_does_not_restart_the_hold() -> None:
+    cfg = BudgetConfig()
+    state = replace(BudgetState(budget_kbps=cfg.floor_kbps), last_cut_ns=0, cuts=3)
+    t = 0
+    for _ in range(100):
+        t += 20 * MS
+        state = on_report(state, cfg, Report(100.0 if t < NS else 900.0, 40.0), t)
+    assert state.cuts == 3 and state.last_cut_ns == 0
+
+
+def test_a_queue_that_vanishes_faster_than_a_link_drains_is_taken_back() -> None:
+    """A busy machine: the operator's process stalls 300 ms, and for a window its reports show
+    the view 300 ms older; 20 ms later (by their stamps) it is fresh again. Bytes in a link's
+    queue cannot leave that fast, so the cut is undone. A queue that drains no faster than a
+    millisecond a millisecond stays cut."""
+    cfg = BudgetConfig()
+
+    def run(after_ms: list[float]) -> BudgetState:
+        state = replace(BudgetState(budget_kbps=500.0), link_kbps=480.0, cut_rx_kbps=480.0)
+        t = 0
+        for _ in range(100):
+            t += 20 * MS
+            state = on_report(state, cfg, Report(60.0, 470.0, stamp_ns=t), t)
+        for age in [360.0] * 8 + after_ms:
+            t += 20 * MS
+            state = on_report(state, cfg, Report(age, 300.0, stamp_ns=t), t)
+        return state
+
+    stall = run([60.0] * 10)
+    assert stall.cuts == 1 and stall.undone == 1
+    assert stall.budget_kbps == 500.0 and stall.link_kbps == 480.0
+    draining = run([340.0, 320.0, 300.0, 280.0, 260.0, 240.0, 220.0, 200.0])
+    assert draining.cuts == 1 and draining.undone == 0 and draining.budget_kbps < 300.0
+
+
 def test_a_camera_that_slowed_or_stopped_is_no_queue() -> None:
     """Issue 27 (a): the operator keeps reporting the age of the last frame shown, growing
     without bound once frames stop coming; that is no queue (the budget used to read it as one,
@@ -325,10 +380,9 @@ def run_loop(
     phases: list[tuple[float, float]], duration_s: float, delay_ms: float = 80.0
 ) -> list[Sample]:
     """``phases``: (start_s, rate_kbps). The operator reports every 20 ms; the reports take
-    ``delay_ms`` up. A telemetry message's age: the delay, the queue, its own time on the link
-    and the time since it arrived; a camera frame's: the delay, the queue and its own time on
-    the link, then it is shown until the next one (the age of the last one grows while the
-    camera is off)."""
+    ``delay_ms`` up. Telemetry messages go out at the plan's rate and arrive after the delay,
+    the queue and their own time on the link; the view's age is the newest arrived message's.
+    Camera frames likewise; the last one shown stays (its age grows while the camera is off)."""
     cfg = BudgetConfig(camera=True, max_beams=180)
     state = initial_state(cfg)
     link = FluidLink(delay_ms, phases[0][1])
@@ -338,6 +392,9 @@ def run_loop(
     out: list[Sample] = []
     current = plan(state, cfg, OVERHEAD)
     shown_ns: int | None = None  # the capture stamp of the camera frame shown
+    telemetry: deque[tuple[int, int]] = deque()  # (stamp, arrival) of messages on their way
+    view_ns: int | None = None  # the stamp of the newest telemetry message arrived
+    next_tel = 0
     for i in range(int(duration_s * 100)):
         t = i * dt_ns
         t_s = t / NS
@@ -350,9 +407,16 @@ def run_loop(
         sent += current.camera_kbps
         sent_meter.add(t, int(sent * dt_ns / NS * 1000 / 8))
         link.step(t, dt_ns / NS, sent * dt_ns / NS)
-        own_ms = current.telemetry_bytes * 8.0 / link.rate_kbps
-        period_ms = 1000.0 / current.telemetry_hz
-        view_age = delay_ms + link.queue_ms + own_ms + (t / MS) % period_ms
+        if t >= next_tel:
+            own_ms = current.telemetry_bytes * 8.0 / link.rate_kbps
+            telemetry.append((t, t + int((delay_ms + link.queue_ms + own_ms) * MS)))
+            next_tel += int(NS / current.telemetry_hz)
+        while telemetry and telemetry[0][1] <= t:
+            stamp = telemetry.popleft()[0]
+            view_ns = stamp if view_ns is None else max(view_ns, stamp)
+        if view_ns is None:
+            continue  # nothing to report before the first message
+        view_age = (t - view_ns) / MS
         if current.camera_fps > 0:
             frame_ms = current.camera_kbps / current.camera_fps / link.rate_kbps * 1000.0
             latency_ns = int((delay_ms + link.queue_ms + frame_ms) * MS)
@@ -369,7 +433,7 @@ def run_loop(
             )
             in_flight.append((t + int(delay_ms * MS), report))
         while in_flight and in_flight[0][0] <= t:
-            state = on_report(state, cfg, in_flight.popleft()[1], t, current)
+            state = on_report(state, cfg, in_flight.popleft()[1], t, current, sent_meter.kbps(t))
         if i % 10 == 0:
             out.append(Sample(t_s, view_age, camera_age, current))
     return out
@@ -391,16 +455,25 @@ def test_closed_loop_thin_link_keeps_the_view_fresh_and_the_camera_on() -> None:
 
 def test_closed_loop_recovers_within_3_s_of_each_change() -> None:
     """2 Mbit/s -> 128 kbit/s -> 2 Mbit/s, 10 s each (the issue's scenario): the view's age back
-    under delay + 200 ms within 3 s of each change (its median over each second: the telemetry
-    period's sawtooth rides on top), and the camera back up after the link widens."""
+    under delay + 200 ms within 3 s of each change (its median over half a second: the
+    telemetry period's sawtooth rides on top) and at the median over the rest of the phase (the
+    probes' sawtooth too), and the camera back up after the link widens."""
     trace = run_loop([(0.0, 2000.0), (10.0, 128.0), (20.0, 2000.0)], duration_s=30.0)
+
+    def median(values: list[float]) -> float:
+        return sorted(values)[len(values) // 2]
+
     for change_s in (10.0, 20.0):
-        for second in range(3, 10):
-            ages = sorted(
-                s.view_age_ms for s in trace if change_s + second <= s.t_s < change_s + second + 1
-            )
-            assert ages[len(ages) // 2] <= 80.0 + 200.0, (change_s, second, ages)
-            assert ages[-1] <= 80.0 + 400.0, (change_s, second, ages)  # the probes' short peaks
+        # the median over the last half second, every 100 ms from the change on
+        halves = [
+            (s.t_s, median([a.view_age_ms for a in trace if s.t_s - 0.5 < a.t_s <= s.t_s]))
+            for s in trace
+            if change_s + 0.5 <= s.t_s < change_s + 10.0
+        ]
+        assert [age for t, age in halves if t <= change_s + 3.0][-1] <= 80.0 + 200.0, halves
+        rest = [s.view_age_ms for s in trace if change_s + 3.0 <= s.t_s < change_s + 10.0]
+        assert median(rest) <= 80.0 + 200.0, (change_s, halves)
+        assert max(rest) <= 80.0 + 600.0, (change_s, halves)
     thin = [s.plan for s in trace if 13.0 <= s.t_s < 20.0]
     assert all("camera" in p.cut for p in thin)
     assert max(p.camera_fps for p in thin) >= 1.0  # a thin link still carries some camera
@@ -413,6 +486,6 @@ def test_closed_loop_camera_comes_back_after_a_long_thin_stretch() -> None:
     the link widens: the camera is back at full rate within 10 s."""
     trace = run_loop([(0.0, 64.0), (30.0, 2000.0)], duration_s=42.0)
     thin = [s.plan for s in trace if 5.0 <= s.t_s < 30.0]
-    assert max(p.camera_fps for p in thin) <= 2.0
+    assert sorted(p.camera_fps for p in thin)[len(thin) // 2] <= 2.0  # mostly 1 frame/s or off
     assert trace[-1].plan.camera_fps == BudgetConfig().camera_max_fps
     assert trace[-1].camera_age_ms is not None and trace[-1].camera_age_ms < 300.0

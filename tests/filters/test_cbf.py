@@ -13,7 +13,8 @@ import math
 
 import numpy as np
 import pytest
-from egc_common.profiles import JACKAL, PIONEER3DX, RobotProfile
+from egc_common.footprint import Footprint, signed_distance
+from egc_common.profiles import JACKAL, PIONEER3DX, TURTLEBOT4, RobotProfile
 from egc_common.scan import obstacle_points
 from egc_robot.filters.cbf import (
     PATH_POWER,
@@ -414,3 +415,54 @@ def test_the_family_runs_cbf_with_the_robot_state_and_the_loop_delay():
     slow_link = run_filter("cbf", FilterInput(v, w, pts, loop_delay_s=1.0), settings_)
     assert slow_link.modified and slow_link.v_mps < v
     assert not fast.stopped_near_obstacle  # cbf lets motion away through itself
+
+
+# -- footprints other than rectangles (DESIGN 14) ------------------------------------------------
+
+
+def _shapes() -> list[RobotProfile]:
+    nose = [[0.4, 0.0], [0.1, 0.3], [-0.3, 0.3], [-0.3, -0.3], [0.1, -0.3]]
+    return [TURTLEBOT4, JACKAL.with_overrides(name="pentagon", footprint=Footprint.polygon(nose))]
+
+
+def approach_fd(fp: Footprint, pts: np.ndarray, v: float, w: float, dt: float = 1e-6):
+    """How fast the footprint closes on each point under (v, w), by finite differences of the
+    footprint's own signed distance (``egc_common.footprint``), independent of the filter's
+    normals and levers."""
+    dx, dy, dth = v * dt, 0.0, w * dt  # first order over dt
+    c, s = math.cos(dth), math.sin(dth)
+    px, py = pts[:, 0] - dx, pts[:, 1] - dy
+    moved = np.column_stack((c * px + s * py, -s * px + c * py))
+    before = signed_distance(fp, pts[:, 0], pts[:, 1])
+    after = signed_distance(fp, moved[:, 0], moved[:, 1])
+    return (before - after) / dt, before
+
+
+@pytest.mark.parametrize("profile", _shapes(), ids=lambda p: p.name)
+@settings(max_examples=150)
+@given(data=st.data(), pts=near_st, tau=st.floats(0.0, 1.0))
+def test_any_footprint_is_never_approached_faster_than_its_barrier_allows(profile, data, pts, tau):
+    """The weakest of the rows, approach <= alpha max(sd - margin, 0), checked with the
+    footprint's own distance function: a disc (turtlebot4) and a pentagon nose first."""
+    params = CbfParams.from_profile(profile)
+    pts = pts[signed_distance(profile.footprint, pts[:, 0], pts[:, 1]) > 0.01]  # no contact
+    assume(len(pts))
+    v, w = data.draw(command_st(profile))
+    v_now, w_now = data.draw(command_st(profile))
+    res = cbf_filter(v, w, pts, v_now, w_now, tau, profile, params)
+    u, sd = approach_fd(profile.footprint, pts, res.v_mps, res.w_radps)
+    allowed = params.alpha_per_s * np.maximum(sd - params.margin_m, 0.0)
+    assert (u <= allowed + 1e-4).all()
+    if (approach_fd(profile.footprint, pts, v, w)[0] <= 0.0).all():
+        assert (res.v_mps, res.w_radps) == (v, w)  # moving away from everything: untouched
+
+
+def test_a_disc_robot_turns_in_place_next_to_a_wall():
+    """Turning never moves a disc about its centre towards anything: always allowed."""
+    r = TURTLEBOT4.footprint.radius_m
+    wall = np.column_stack((np.full(41, r + 0.01), np.linspace(-1, 1, 41)))
+    p = CbfParams.from_profile(TURTLEBOT4)
+    res = cbf_filter(0.0, 1.5, wall, 0.0, 1.5, None, TURTLEBOT4, p)
+    assert (res.v_mps, res.w_radps, res.case) == (0.0, 1.5, CbfCase.CLEAR)
+    ahead = cbf_filter(0.3, 0.0, wall, 0.3, 0.0, None, TURTLEBOT4, p)
+    assert ahead.v_mps <= 0.0

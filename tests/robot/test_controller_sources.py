@@ -361,3 +361,39 @@ def test_without_sources_nothing_new_is_sent():
     assert c.verdict is None
     assert not c.on_source("nav", SourceCommand(1, 0, 0.1, 0).encode(), T0).accepted
     assert decode_telemetry(out.telemetry.encode()).source is None
+
+
+def test_a_sources_own_loop_delay_reaches_a_delay_aware_filter():
+    """cbf's margin grows with the loop delay (DESIGN 13): a source's own tau goes to it, as
+    the operator's does (unstamped: command_timeout; stamped: its commands' ages). Driving at
+    v_max, a wall appears 0.4 m ahead: at tau 0.25 s cbf lets the robot go on this cycle, at
+    0.7 s it brakes (the governor caps neither: its limit is above v_max at both)."""
+    from egc_robot.pipeline import filter_velocity
+
+    wall = wall_ahead(0.4)
+    pipeline = PipelineConfig(PROFILE, filter="cbf")
+
+    def at_the_wall(age_ms: float | None) -> float:
+        rig = Rig()
+        rig.c = RobotController(ControllerConfig(pipeline, sources=MuxConfig((NAV, TELEOP))), T0)
+        for _ in range(20):
+            stamp = 0 if age_ms is None else rig.now - int(age_ms * MS)
+            rig.nav(V_MAX, stamp_ns=stamp)
+            out = rig.cycle()
+        assert out.base.linear_mps == pytest.approx(V_MAX)
+        rig.scan = wall
+        stamp = 0 if age_ms is None else rig.now - int(age_ms * MS)
+        rig.nav(V_MAX, stamp_ns=stamp)
+        out = rig.cycle()
+        assert (out.telemetry.filter, out.telemetry.source) == ("cbf", "nav")
+        return out.base.linear_mps
+
+    def expected(tau_s: float) -> float:
+        return filter_velocity(
+            pipeline, V_MAX, 0.0, "shared", wall.obstacles(), (V_MAX, 0.0), 0.05,
+            filter_name="cbf", loop_delay_s=tau_s,
+        ).v_cmd_mps  # fmt: skip
+
+    assert expected(0.25) > expected(0.7) + 0.01  # the scene makes tau matter
+    assert at_the_wall(None) == pytest.approx(expected(0.25))  # unknown age: command_timeout
+    assert at_the_wall(700.0) == pytest.approx(expected(0.7))

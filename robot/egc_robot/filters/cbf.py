@@ -10,13 +10,16 @@ with its intermediates out.
 along {R}'s x axis: DESIGN 5.10, ``ObstaclePoints.seen_ahead_m`` / ``seen_behind_m``, a point
 beyond which nothing is known to be free):
 
-- sd_i: the signed distance from the footprint (the profile's L x W rectangle centred on {R}) to
-  p_i, and n_i its unit gradient: from the footprint's nearest point q_i towards p_i (for a point
-  inside the footprint, the outward normal of the nearest edge, and q_i on that edge).
+- sd_i: the signed distance from the footprint as given (DESIGN 14: the profile's polygon or
+  disc; an axis-aligned rectangle centred on {R}, the Pioneer's and the Jackal's, in closed form)
+  to p_i, and n_i its unit gradient: from the footprint's nearest boundary point q_i towards p_i
+  (for a point inside the footprint, from p_i towards q_i: outwards). The exact shape, no disc
+  cover: its distances are exact, so no margin is lost to a cover's bulges.
 - A rigid motion (v, w) moves a fixed point of the world at (-v + w y, -w x) in {R}, so
   d sd_i / dt = -(n_x v - b_i w) with b_i = n_x q_y - n_y q_x: exactly linear in (v, w) (no
-  linearisation: the gradient of the distance to a convex set is n). The footprint *approaches*
-  p_i at u_i(v, w) = n_x v - b_i w (m/s).
+  linearisation: the gradient of the distance to a set is n wherever q_i is unique). The
+  footprint *approaches* p_i at u_i(v, w) = n_x v - b_i w (m/s); |b_i| <= |q_i| <= the
+  footprint's reach.
 - The barrier is h_i = sd_i - m_i with the margin m_i = ``margin_m`` + omega_i K u_i: a fixed
   margin, plus the distance the footprint closes on p_i during the loop delay, the control
   period and the stop, K = tau + P + T / 2 with P = ``period_s`` (a command holds until the
@@ -87,6 +90,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 import numpy.typing as npt
+from egc_common.footprint import Footprint, closest_boundary_points, signed_distance
 from egc_common.profiles import RobotProfile
 from egc_common.scan import MAX_ABS_COORD_M, ObstaclePoints, obstacle_points
 
@@ -406,7 +410,7 @@ class _Scene:
 
     def points_in_reach(
         self, pts: ObstaclePoints, v_range: tuple[float, float], w_bound: float
-    ) -> tuple[FloatArray, FloatArray, int, list[tuple[float, float]]] | None:
+    ) -> tuple[FloatArray, FloatArray, int, list[tuple[float, float, float]]] | None:
         """The points (x, y), how many are scan points, and the unseen edges, that a command
         with v in ``v_range`` and |w| <= ``w_bound`` could approach faster than their barriers
         allow; None when there is none.
@@ -417,7 +421,7 @@ class _Scene:
         motion and turning only, points behind by reversing and turning only.
         """
         p, alpha, q_max = self.params, self.params.alpha_per_s, self.profile.half_diagonal_m
-        half_l = 0.5 * self.profile.length_m
+        x_back, x_front, _, _ = self.profile.footprint.bounds
         reach_sd = []
         for v_away, v_state in (
             (max(v_range[1], 0.0), max(self.v_now, 0.0)),
@@ -438,30 +442,30 @@ class _Scene:
                     near = pts.r2 <= np.where(pts.x > 0.0, reach_f * reach_f, reach_b * reach_b)
                 if near.any():
                     x, y = pts.x[near], pts.y[near]
-        unseen = [
-            (sign, seen)
-            for sign, seen, room in (
-                (1.0, pts.seen_ahead_m, reach_sd[0]),
-                (-1.0, pts.seen_behind_m, reach_sd[1]),
+        unseen = [  # (direction, how far it saw, the footprint's extent that way)
+            (sign, seen, extent)
+            for sign, seen, extent, room in (
+                (1.0, pts.seen_ahead_m, x_front, reach_sd[0]),
+                (-1.0, pts.seen_behind_m, -x_back, reach_sd[1]),
             )
-            if seen - half_l < room
+            if seen - extent < room
         ]
         if x.size == 0 and not unseen:
             return None
         return x, y, x.size, unseen
 
     def rows(
-        self, x: FloatArray, y: FloatArray, n_scan: int, unseen: list[tuple[float, float]]
+        self, x: FloatArray, y: FloatArray, n_scan: int, unseen: list[tuple[float, float, float]]
     ) -> _Rows:
         """The half-planes of the points (module docstring)."""
         p, alpha = self.params, self.params.alpha_per_s
-        half_l, half_w = self.profile.half_size_m
         v0, w0, v_now, w_now = self.v0, self.w0, self.v_now, self.w_now
-        sd, nx, ny, qx, qy = _geometry(x, y, half_l, half_w)
+        sd, nx, ny, qx, qy = _geometry(x, y, self.profile.footprint)
         if unseen:
-            # A wall across the axis where the laser stopped seeing: n = (+-1, 0), q = (+-L/2, 0).
+            # A wall across the axis where the laser stopped seeing, met first by the
+            # footprint's front (back) extent: n = (+-1, 0), q = (front or back, 0).
             extra = np.array(
-                [(s * seen, 0.0, seen - half_l, s, 0.0, s * half_l, 0.0) for s, seen in unseen]
+                [(s * seen, 0.0, seen - ext, s, 0.0, s * ext, 0.0) for s, seen, ext in unseen]
             ).T
             x, y = np.concatenate((x, extra[0])), np.concatenate((y, extra[1]))
             sd, nx, ny, qx, qy = (
@@ -495,10 +499,39 @@ class _Scene:
 
 
 def _geometry(
-    x: FloatArray, y: FloatArray, half_l: float, half_w: float
+    x: FloatArray, y: FloatArray, fp: Footprint
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
     """Signed distance sd, unit normal (nx, ny) and the footprint's nearest point (qx, qy) of
-    each point (inside: the nearest edge's outward normal, the depth as a negative distance)."""
+    each point. The normal is the gradient of sd: from q towards the point outside, from the
+    point towards q inside (the outward normal of the nearest edge)."""
+    box = fp.centred_box
+    if box is not None:
+        return _box_geometry(x, y, *box)
+    if fp.is_disc:
+        r = np.sqrt(x * x + y * y)
+        centre = r <= 0.0
+        safe = np.where(centre, 1.0, r)
+        nx, ny = np.where(centre, 1.0, x / safe), np.where(centre, 0.0, y / safe)
+        radius = fp.radius_m
+        return r - radius, nx, ny, radius * nx, radius * ny
+    qx, qy = closest_boundary_points(fp, x, y)
+    dx, dy = x - qx, y - qy
+    dist = np.sqrt(dx * dx + dy * dy)
+    sd = np.where(signed_distance(fp, x, y) < 0.0, -dist, dist)
+    on_edge = dist <= 0.0
+    safe = np.where(on_edge, 1.0, dist)
+    sign = np.where(sd < 0.0, -1.0, 1.0)  # inside: towards the edge, i.e. outwards
+    nx, ny = sign * dx / safe, sign * dy / safe
+    if on_edge.any():  # on the edge itself: away from the origin, as outwards as any
+        r = np.maximum(np.sqrt(x * x + y * y), _SAME)
+        nx, ny = np.where(on_edge, x / r, nx), np.where(on_edge, y / r, ny)
+    return sd, nx, ny, qx, qy
+
+
+def _box_geometry(
+    x: FloatArray, y: FloatArray, half_l: float, half_w: float
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """``_geometry`` of the rectangle |x| <= half_l, |y| <= half_w in closed form."""
     qx = np.minimum(np.maximum(x, -half_l), half_l)
     qy = np.minimum(np.maximum(y, -half_w), half_w)
     dx = x - qx
