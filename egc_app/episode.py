@@ -1,9 +1,9 @@
 """``egc-teleop episode``: headless episodes in the simulator, printed as JSON (pinned CLI).
 
     egc-teleop episode --map PATH --start X,Y,YAW --goal X,Y
-        [--operator goal|forward|sighted|route|FILE]
+        [--operator goal|forward|sighted|route|careful|FILE]
         [--filter none|egc] [--profile NAME|FILE.toml] [--max-time S] [--goal-tolerance M] [--seed N]
-        [--stall-time S] [--record OUT.rrd] --json
+        [--stall-time S] [--record OUT.rrd] [--bag OUT.mcap|DIR] --json
     egc-teleop episode --batch SUITE.jsonl | --random-worlds N  [...] [--jobs J] [--out FILE]
 
 The arguments and their wiring only (DESIGN 2): the episode engine is
@@ -19,6 +19,9 @@ an intervention), the suite files and the worker processes ``egc_experiments.epi
   ``none``.
 - ``--record OUT.rrd`` saves the episode as the operator view shows a live run; open it with
   ``rerun OUT.rrd``.
+- ``--bag OUT`` writes the episode as a ROS 2 log: ``/scan``, ``/odom`` and the driver's
+  ``/cmd_vel`` (the command *before* the filter), stamped with the simulated clock; ``OUT.mcap``
+  is one MCAP file, any other name a ROS 2 bag directory. ``egc-teleop replay OUT`` reads it.
 - ``--stall-time S`` ends an episode as ``stalled`` once the robot has stood still for S
   simulated seconds; off by default.
 
@@ -51,6 +54,7 @@ from egc_experiments.episode import (
 )
 from egc_experiments.episode_batch import run_batch, suite_settings
 from egc_robot.pipeline import FILTERS
+from egc_sim.episode_bag import BagError, check_bag_path
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -60,7 +64,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--operator",
         default="goal",
-        help="goal | forward | sighted | route | a joystick CSV file (default goal)",
+        help="goal | forward | sighted | route | careful | a joystick CSV file (default goal)",
     )
     parser.add_argument(
         "--filter",
@@ -87,6 +91,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--record", metavar="OUT.rrd", help="save the episode's operator view (Rerun .rrd)"
+    )
+    parser.add_argument(
+        "--bag",
+        metavar="OUT.mcap|DIR",
+        help="write the episode as a ROS 2 log: /scan, /odom and the driver's /cmd_vel (before "
+        "the filter); OUT.mcap is one MCAP file, another name a bag directory",
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     batch = parser.add_argument_group("batch")
@@ -139,6 +149,8 @@ def run(args: argparse.Namespace) -> int:
     if args.batch or args.random_worlds is not None:
         if args.record:
             raise UsageError("--record saves a single episode; it cannot be used with a batch")
+        if args.bag:
+            raise UsageError("--bag writes a single episode; it cannot be used with a batch")
         return _run_batch(args, base)
     if args.out is not None:
         raise UsageError(
@@ -149,7 +161,14 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--map is required (a map.yaml, a .toml world or a built-in name)")
     if args.record:
         check_writable(args.record, "--record")
-    _, summary = run_settings(base, record_path=args.record)
+    if args.bag:
+        try:
+            check_bag_path(args.bag)
+        except BagError as exc:
+            raise UsageError(f"--bag {exc}") from None
+    _, summary = run_settings(base, record_path=args.record, bag_path=args.bag)
+    if args.bag:
+        summary["bag"] = args.bag
     if args.json:
         print(json.dumps(summary, allow_nan=False))
     else:

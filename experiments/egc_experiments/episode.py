@@ -21,6 +21,10 @@ copied. When the operator releases the deadman or presses e-stop the robot's sto
   at the active via point while there is one, and at the goal after the last (issue 11).
 - ``record_path`` saves the episode as the operator view shows a live run
   (``egc_operator.view.record_episode``), one telemetry message per cycle.
+- ``bag_path`` writes the episode as a ROS 2 log (``egc_sim.episode_bag``): ``/scan``,
+  ``/odom`` and the driver's ``/cmd_vel`` (the command *before* the filter), stamped with the
+  simulated clock; a path ending in ``.mcap`` is one MCAP file, any other a ROS 2 bag
+  directory.
 - ``stall_time_s`` ends an episode as ``stalled`` once the robot has stood still that long
   (``egc_sim.episodes``); None (the default) ends an episode only at the goal, at a contact or
   at ``max_time_s``.
@@ -64,6 +68,7 @@ from egc_robot.pipeline import (
 )
 from egc_robot.safety import MAX_CONTROL_PERIOD_S, SweepParams, decelerate
 from egc_robot.via_points import DEFAULT_TOLERANCE_M, ViaPoints, advance, to_robot_frame
+from egc_sim.episode_bag import BagError, BagStep, EpisodeBag
 from egc_sim.episodes import ControlOutput, EpisodeResult, TraceRow, run_episode
 from egc_sim.grid_world import World
 from egc_sim.observation import SimSensor
@@ -165,11 +170,15 @@ class PipelineController:
 
 
 def run_settings(
-    settings: EpisodeSettings, record_trace: bool = False, record_path: str | None = None
+    settings: EpisodeSettings,
+    record_trace: bool = False,
+    record_path: str | None = None,
+    bag_path: str | None = None,
 ) -> tuple[EpisodeResult, dict[str, Any]]:
     """Run one episode; returns the result and its JSON summary. Bad settings -> UsageError.
 
-    ``record_path`` saves the operator view of the episode to a Rerun .rrd file.
+    ``record_path`` saves the operator view of the episode to a Rerun .rrd file; ``bag_path``
+    writes it as a ROS 2 log (module docstring).
     """
     try:
         world = load_world(settings.map, seed=settings.seed)
@@ -219,14 +228,24 @@ def run_settings(
             half_width_m=profile.half_size_m[1],
             sensor=SimSensor(sim, via=active_via_point),
             via=active_via_point,
+            profile=profile,
         )
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    recorder = (
-        None if record_path is None else EpisodeRecorder(record_path, world, goal, controller)
-    )
-    t0 = time.perf_counter()
+    observers: list[Callable[[TraceRow, Scan], None]] = []
+    bag: EpisodeBag | None = None
+    recorder: EpisodeRecorder | None = None
     try:
+        if record_path is not None:
+            recorder = EpisodeRecorder(record_path, world, goal, controller)
+            observers.append(recorder)
+        if bag_path is not None:
+            try:
+                bag = EpisodeBag(bag_path)
+            except BagError as exc:
+                raise UsageError(f"--bag {exc}") from None
+            observers.append(bag_observer(bag, sim))
+        t0 = time.perf_counter()
         result = run_episode(
             sim,
             operator,
@@ -237,11 +256,13 @@ def run_settings(
             settings.dt_s,
             record_trace,
             settings.stall_time_s,
-            recorder,
+            _each(observers),
         )
     finally:
         if recorder is not None:
             recorder.close()
+        if bag is not None:
+            bag.close()
     wall_s = time.perf_counter() - t0
     summary = {
         **result.summary(),
@@ -261,6 +282,40 @@ def run_settings(
         **controller.tally.as_dict(),
     }
     return result, summary
+
+
+def bag_observer(bag: EpisodeBag, sim: Simulator) -> Callable[[TraceRow, Scan], None]:
+    """Each cycle into the log: the scan, the simulator's odometry and base twist at the start
+    of the cycle, and the driver's command before the filter (``v_ref``, ``w_ref``)."""
+
+    def observe(row: TraceRow, scan: Scan) -> None:
+        bag.write(
+            BagStep(
+                round(row.t_s * NS_PER_S),
+                scan,
+                sim.odometry,
+                sim.twist,
+                (row.v_ref_mps, row.w_ref_radps),
+            )
+        )
+
+    return observe
+
+
+def _each(
+    observers: Sequence[Callable[[TraceRow, Scan], None]],
+) -> Callable[[TraceRow, Scan], None] | None:
+    """One observer calling ``observers`` in order; None when there are none."""
+    if not observers:
+        return None
+    if len(observers) == 1:
+        return observers[0]
+
+    def observe(row: TraceRow, scan: Scan) -> None:
+        for observer in observers:
+            observer(row, scan)
+
+    return observe
 
 
 def episode_via_points(

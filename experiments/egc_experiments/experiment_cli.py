@@ -126,6 +126,7 @@ def check_point(point: RunPoint) -> None:
             world=world,
             start=start,
             half_width_m=profile.half_size_m[1],
+            profile=profile,
         )
     except ValueError as exc:  # JoystickFileError and RouteError are ValueErrors
         raise GridError(f"operator {point.operator!r}: {exc}") from None

@@ -214,6 +214,7 @@ def main(argv: list[str] | None = None) -> int:
             world=world,
             start=start,
             half_width_m=profile.half_size_m[1],
+            profile=profile,
         )
     except (UsageError, ValueError, OSError) as exc:
         print(f"operator-model: error: {exc}", file=sys.stderr)

@@ -215,6 +215,7 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
         world=world,
         start=start,
         half_width_m=profile.half_size_m[1],
+        profile=profile,
     )
     operator = OperatorSide(model, point.mode, start)
     spec = parse_spec(point.link_spec())

@@ -15,6 +15,9 @@ paper's eq. 4; operators know nothing about the robot's speeds.
 - ``sighted`` (``sighted.SightedOperator``) and ``route`` (``route.RouteOperator``): the models
   of the network-delay experiments (DESIGN 10), fed with what the operator view shows
   (``observation``) rather than the true pose.
+- ``careful`` (``careful.CarefulOperator``): the careful driver of DESIGN 13, who plans with
+  clearance on the map, drives smoothly and keeps the footprint 0.2 m from everything; also
+  fed with the operator view.
 - ``ReplayOperator``: a recorded joystick file, played back on the simulated clock. The file
   format is the one the operator process reads (``egc_common.joystick_file``): CSV with header
   ``t_s,x,y[,deadman][,mode][,estop][,reset]``; ``t_s`` non-decreasing seconds from the start,
@@ -39,7 +42,11 @@ from egc_common.kinematics import wrap_angle
 from egc_sim.grid_world import Pose, World
 
 if TYPE_CHECKING:
+    from egc_common.profiles import RobotProfile
+
     from egc_sim.observation import Observation, ObservingOperator
+
+OBSERVING = ("sighted", "route", "careful")  # models fed with the operator view
 
 MODES = ("direct", "shared")
 
@@ -133,16 +140,19 @@ def make_operator(
     half_width_m: float = 0.2,
     sensor: Callable[[float, Pose], Observation] | None = None,
     via: Callable[[], tuple[float, float] | None] | None = None,
+    profile: RobotProfile | None = None,
 ) -> Operator:
     """``forward``, ``goal`` (needs the goal), ``sighted[:K=V,...]`` (the goal),
-    ``route[:K=V,...]`` (the goal, the world and the start) or the path of a joystick file.
+    ``route[:K=V,...]`` (the goal, the world and the start), ``careful[:K=V,...]`` (the goal,
+    the world, the start and the robot ``profile``) or the path of a joystick file.
 
     ``mode`` is what the scripted operators select; a file carries its own per-row mode.
     ``sighted`` and ``route`` observe the operator view (``observation``): with ``sensor`` (a
     plain episode) they are wrapped to sense it at every command, without it they are returned
     as they are for the caller to ``observe``. Their options: ``sighted:reaction_s=0.5,
     noise_std=0.1,...`` (``sighted.SightedParams``), ``route:map=building,reaction_s=...``
-    (``route.RouteParams``; ``map=building`` plans on the map without its furniture).
+    (``route.RouteParams``; ``map=building`` plans on the map without its furniture),
+    ``careful:speed_mps=0.5,clearance_m=0.3,...`` (``careful.CarefulParams``).
     ``seed`` seeds the steering noise; ``half_width_m`` is the robot's (route inflation, sighted
     corridor). ``via`` returns the active via point the robot echoes (the ``goal`` operator
     steers at it; ``sighted`` reads it from its ``sensor``'s observations). Raises ValueError (a
@@ -155,8 +165,10 @@ def make_operator(
             raise ValueError("the goal operator needs a goal")
         return GoalOperator(goal, mode, target=via)
     name, _, options = spec.partition(":")
-    if name in ("sighted", "route"):
-        observing = _make_observing(name, options, goal, mode, seed, world, start, half_width_m)
+    if name in OBSERVING:
+        observing = _make_observing(
+            name, options, goal, mode, seed, world, start, half_width_m, profile
+        )
         if sensor is None:
             return observing
         from egc_sim.observation import Sensing
@@ -167,7 +179,7 @@ def make_operator(
     except JoystickFileError as exc:
         raise JoystickFileError(
             f"operator {spec!r} is neither forward, goal nor a joystick file "
-            f"(nor sighted or route): {exc}"
+            f"(nor sighted, route or careful): {exc}"
         ) from None
 
 
@@ -193,6 +205,7 @@ def _make_observing(
     world: World | None,
     start: Pose | None,
     half_width_m: float,
+    profile: RobotProfile | None = None,
 ) -> ObservingOperator:
     from dataclasses import fields, replace
 
@@ -202,6 +215,8 @@ def _make_observing(
     if goal is None:
         raise ValueError(f"the {name} operator needs a goal")
     opts = _options(name, options)
+    if name == "careful":
+        return _make_careful(opts, goal, mode, world, start, profile)
     building = False
     if name == "route":
         map_choice = opts.pop("map", "full")
@@ -236,3 +251,32 @@ def _make_observing(
     if world is None or start is None:
         raise ValueError("the route operator needs the map and the start")
     return RouteOperator.on_world(world, start, goal, half_width_m, mode, params, building)
+
+
+def _make_careful(
+    opts: dict[str, str],
+    goal: tuple[float, float],
+    mode: str,
+    world: World | None,
+    start: Pose | None,
+    profile: RobotProfile | None,
+) -> ObservingOperator:
+    from dataclasses import fields
+
+    from egc_sim.careful import CarefulOperator, CarefulParams
+
+    known = {f.name for f in fields(CarefulParams)}
+    values: dict[str, float] = {}
+    for key, value in opts.items():
+        if key not in known:
+            raise ValueError(
+                f"operator careful: unknown option {key!r} (known: {', '.join(sorted(known))})"
+            )
+        try:
+            values[key] = float(value)
+        except ValueError:
+            raise ValueError(f"operator careful: {key}={value!r} is not a number") from None
+    params = CarefulParams(**values)
+    if world is None or start is None or profile is None:
+        raise ValueError("the careful operator needs the map, the start and the robot profile")
+    return CarefulOperator.on_world(world, start, goal, profile, mode, params)

@@ -142,7 +142,7 @@ def plan_route(
     return route
 
 
-def _nearest_free(free: BoolGrid, cell: tuple[int, int]) -> tuple[int, int]:
+def nearest_free(free: BoolGrid, cell: tuple[int, int]) -> tuple[int, int]:
     rows, cols = free.shape
     r, c = cell
     if 0 <= r < rows and 0 <= c < cols and free[r, c]:
@@ -166,7 +166,6 @@ def _plan_cells(
     wall_weight: float,
 ) -> npt.NDArray[np.int64]:
     occ = _GRIDS[key]
-    rows, cols = occ.shape
     # Distance (m) from each cell centre to the nearest blocked cell; outside the grid blocks.
     padded = np.pad(~occ, 1, constant_values=False)
     distance = ndimage.distance_transform_edt(padded)[1:-1, 1:-1] * res
@@ -175,12 +174,33 @@ def _plan_cells(
     def cell_of(p: tuple[float, float]) -> tuple[int, int]:
         return math.floor((p[1] - origin[1]) / res), math.floor((p[0] - origin[0]) / res)
 
-    s_cell = _nearest_free(free, cell_of(start))
-    g_cell = _nearest_free(free, cell_of(goal))
-    index = np.full(occ.shape, -1, dtype=np.int64)
+    s_cell = nearest_free(free, cell_of(start))
+    g_cell = nearest_free(free, cell_of(goal))
+    penalty = 1.0 + wall_weight * np.clip(1.0 - distance / wall_m, 0.0, None)
+    cells = grid_path(free, penalty, s_cell, g_cell)
+    if cells is None:
+        raise RouteError(
+            f"no route from ({start[0]:.2f}, {start[1]:.2f}) to ({goal[0]:.2f}, {goal[1]:.2f}) "
+            f"for a robot of half-width {clearance_m:.2f} m on this map"
+        )
+    return cells
+
+
+def grid_path(
+    free: BoolGrid,
+    penalty: npt.NDArray[np.float64],
+    start_cell: tuple[int, int],
+    goal_cell: tuple[int, int],
+) -> npt.NDArray[np.int64] | None:
+    """The cheapest 8-connected path over the ``free`` cells, (K, 2) (row, col) from
+    ``start_cell`` to ``goal_cell`` (both free), or None when they are not connected.
+
+    A step costs its length (in cells) times the mean of ``penalty`` at its two ends (Dijkstra).
+    """
+    rows, cols = free.shape
+    index = np.full(free.shape, -1, dtype=np.int64)
     fr, fc = np.nonzero(free)
     index[fr, fc] = np.arange(len(fr))
-    penalty = 1.0 + wall_weight * np.clip(1.0 - distance / wall_m, 0.0, None)
     src: list[npt.NDArray[np.int64]] = []
     dst: list[npt.NDArray[np.int64]] = []
     weight: list[npt.NDArray[np.float64]] = []
@@ -202,13 +222,10 @@ def _plan_cells(
     graph = coo_matrix(
         (np.concatenate(weight), (np.concatenate(src), np.concatenate(dst))), shape=(n, n)
     ).tocsr()
-    s_index, g_index = int(index[s_cell]), int(index[g_cell])
+    s_index, g_index = int(index[start_cell]), int(index[goal_cell])
     _, predecessors = dijkstra(graph, directed=True, indices=s_index, return_predecessors=True)
     if s_index != g_index and predecessors[g_index] < 0:
-        raise RouteError(
-            f"no route from ({start[0]:.2f}, {start[1]:.2f}) to ({goal[0]:.2f}, {goal[1]:.2f}) "
-            f"for a robot of half-width {clearance_m:.2f} m on this map"
-        )
+        return None
     chain = [g_index]
     while chain[-1] != s_index:
         chain.append(int(predecessors[chain[-1]]))
