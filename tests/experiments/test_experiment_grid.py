@@ -151,7 +151,7 @@ def test_grid_errors_are_one_clear_line(text, message):
         ("world='hallway'\noperator='goal'\nfilter='magic'", "unknown filter 'magic'"),
         ("world='hallway'\noperator='pilot'", "operator 'pilot'"),
         ("world='hallway'\noperator='sighted:speed=1'", "unknown option"),
-        ("world='hallway'\noperator='goal'\nprofile='tank'", "unknown robot profile 'tank'"),
+        ("world='hallway'\noperator='goal'\nprofile='tank'", "unknown profile 'tank'"),
     ],
 )
 def test_unknown_names_are_found_before_running(axes, message):
