@@ -21,6 +21,7 @@ from pathlib import Path
 
 import msgpack
 import pytest
+import zenoh
 from egc_common import keys
 from egc_common.messages import GoalMessage
 from egc_common.transport import loopback_endpoint
@@ -174,7 +175,11 @@ def test_goals_from_an_operator_not_in_control_and_malformed_ones_are_rejected(
     observer.wait_for(
         "alice's via points", lambda: (t := observer.last_telemetry()) and t.goal == VIA[0], 20
     )
-    publisher = observer.session.declare_publisher(keys.goal(ROBOT))
+    # BLOCK, and a pause between payloads: every payload must arrive to be counted (a burst
+    # with a 100 kB one in it can be dropped by a default DROP publisher on a busy machine).
+    publisher = observer.session.declare_publisher(
+        keys.goal(ROBOT), congestion_control=zenoh.CongestionControl.BLOCK
+    )
     try:
         # Mallory is not in control: her route is refused, alice's stays.
         for seq in range(1, 4):
@@ -183,6 +188,7 @@ def test_goals_from_an_operator_not_in_control_and_malformed_ones_are_rejected(
             time.sleep(0.4)
         for payload in MALFORMED:
             publisher.put(payload)
+            time.sleep(0.05)
         time.sleep(1.0)
     finally:
         publisher.undeclare()

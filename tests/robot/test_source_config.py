@@ -54,7 +54,8 @@ def test_the_recipe_parses_with_defaults():
         SourceSpec("dock", "zenoh", 50, 0.5),
         SourceSpec("nav", "ros2", 10, 0.5, "/cmd_vel_nav", "twist"),
     )
-    assert mux.locks == (LockSpec("pause", 200, 1.0, "/pause"), LockSpec("heartbeat", 300, 0.5))
+    # highest priority first, like the sources
+    assert mux.locks == (LockSpec("heartbeat", 300, 0.5), LockSpec("pause", 200, 1.0, "/pause"))
     assert mux.operator_source == mux.sources[0]
     assert operator_priorities(cfg["operator"]) == (("supervisor", 100),)
 
