@@ -279,7 +279,7 @@ def main() -> int:
     args = parser.parse_args()
     rates = [float(r) for r in args.rates.split(",") if r.strip()]
     missed: list[str] = []
-    result: dict[str, Any] = {}
+    result: dict[str, Any] = {"load_before": os.getloadavg()}
 
     if not args.skip_loopback:
         for camera in ("sim", "none"):

@@ -35,9 +35,12 @@ from egc_common.errors import UsageError
 
 Kind = Literal["spawn", "serve_web", "connect", "save", "none"]
 GRPC_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
-# What the --serve-web gRPC server keeps for viewers that connect late (oldest dropped first):
-# 20 Hz telemetry with 720-point scans is ~45 MB a minute, so about 20 minutes of history.
-SERVE_MEMORY_LIMIT = "1GiB"
+# What the --serve-web gRPC server keeps for viewers that connect late (oldest dropped first).
+# The view is live: a viewer that joins needs the last minutes, not the session. The view logs
+# about 8 MB a minute with the camera (compact 20 Hz telemetry, JPEG frames at a few per
+# second), so this is some 4 minutes. Rerun's default, 1 GiB, grew a 40-minute soak's
+# operator from 320 to 922 MB (issue 31) and would have grown it to 1.3 GB.
+SERVE_MEMORY_LIMIT = "32MiB"
 
 
 @dataclass(frozen=True, slots=True)
