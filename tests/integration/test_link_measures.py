@@ -63,7 +63,7 @@ def test_udp_loss_is_counted_from_seq_gaps(port, procs, observer, tmp_path):
     wait_full_speed(observer, timeout_s=20)
     # The UDP link of a udp/ endpoint opens beside the TCP one; a lost handshake datagram
     # delays it by up to 4 s (transport.UDP_HANDSHAKE_TIMEOUT_MS), the data taking the TCP link
-    # (straight to the robot, lossless) meanwhile. Measure once it is there, i.e. once the robot
+    # (the relay's TCP companion, lossless) meanwhile. Measure once it is there, i.e. once the robot
     # counts a loss (a window of the 10 % lossy relay without one: 0.9^200), and after one more
     # second, so that its 1 s window holds none of the TCP stretch: ten 1 s windows of the
     # robot's own loss figure.
