@@ -46,6 +46,11 @@ def test_one_way_delay_is_measured_as_command_age(port, procs, observer, tmp_pat
     assert 90.0 <= latency["p50_ms"] <= 125.0, latency
 
 
+def relay_loss(observer) -> bool:
+    last = observer.last_telemetry()
+    return last is not None and bool(last.link_loss)
+
+
 def test_udp_loss_is_counted_from_seq_gaps(port, procs, observer, tmp_path):
     udp = f"udp/127.0.0.1:{free_port('udp')}"
     start_robot(procs, observer, port, "--listen", udp)
@@ -58,8 +63,11 @@ def test_udp_loss_is_counted_from_seq_gaps(port, procs, observer, tmp_path):
     wait_full_speed(observer, timeout_s=20)
     # The UDP link of a udp/ endpoint opens beside the TCP one; a lost handshake datagram
     # delays it by up to 4 s (transport.UDP_HANDSHAKE_TIMEOUT_MS), the data taking the TCP link
-    # meanwhile. Measure once it is there: ten 1 s windows of the robot's own loss figure.
-    time.sleep(5.0)
+    # (the relay's TCP companion, lossless) meanwhile. Measure once it is there, i.e. once the robot
+    # counts a loss (a window of the 10 % lossy relay without one: 0.9^200), and after one more
+    # second, so that its 1 s window holds none of the TCP stretch: ten 1 s windows of the
+    # robot's own loss figure.
+    observer.wait_for("commands through the lossy relay", lambda: relay_loss(observer), 15)
     windows = []
     for _ in range(10):
         time.sleep(1.0)
