@@ -22,7 +22,7 @@ Measured on this machine (15 s; two emulated runs): path 1.967 m (simulated) and
 (emulated), hold 0.1 s and 0.0 s, clearance 0.3725 m in both, command age p50 106 ms and
 109 ms, 61 and 57-59 interventions; the relay forwarded ~795 up and ~450 down at p50 107 ms.
 The episode was 30 s until the suite had to fit its 10 min (path 4.035 m and 4.039 m, 92 and
-93 interventions, the figures in docs/transport.md); 15 s compares the same things.
+93 interventions); 15 s compares the same things. docs/transport.md has both.
 """
 
 from __future__ import annotations
