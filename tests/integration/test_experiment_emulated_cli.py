@@ -102,4 +102,10 @@ def test_emulated_command_ages_are_the_links_own(tmp_path):
     (row,) = [json.loads(line) for line in (tmp_path / "out/runs.jsonl").read_text().splitlines()]
     applied_ms = row["link"]["up"]["p50_ms"]  # what the relay held the operator's datagrams
     assert 70 < applied_ms < 90
-    assert abs(row["cmd_age_p50_ms"] - applied_ms) < 4.0, (row["cmd_age_p50_ms"], applied_ms)
+    # One kernel, one clock: a command's age is the relay's hold plus the hops and the
+    # processes' scheduling on either side, never less. So the age is at least the hold (2 ms
+    # for the medians of two samplings) and exceeds it by what a busy machine adds (measured:
+    # 1-3 ms quiet, 6.7 ms with both cores busy); a clock estimate's error (Cristian's, up to
+    # 22 ms here) shows on either side.
+    excess = row["cmd_age_p50_ms"] - applied_ms
+    assert -2.0 < excess < 15.0, (row["cmd_age_p50_ms"], applied_ms)
