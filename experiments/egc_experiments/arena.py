@@ -103,11 +103,12 @@ def mrpb_tests(
 
 
 def _route_length(settings: EpisodeSettings) -> float:
-    world = load_world(settings.map, seed=settings.seed)
+    profile = get_profile(settings.profile)
+    world = load_world(settings.map, seed=settings.seed, reach_m=profile.footprint.reach_m)
     start = settings.start or world.start_pose
     goal = settings.goal or world.goal
     assert start is not None and goal is not None
-    half_width = get_profile(settings.profile).half_size_m[1]
+    half_width = profile.half_size_m[1]
     route = plan_route(
         world.occupancy, world.resolution_m, world.origin, start[:2], goal, half_width + 0.1
     )
@@ -747,7 +748,10 @@ def write_assist_figures(
             1, len(path_worlds), figsize=(4.2 * len(path_worlds), 3.2), squeeze=False
         )
         for ax, seed in zip(axes[0], path_worlds, strict=True):
-            world = load_world(f"random:{seed}", seed=seed)
+            used = {r.get("profile") for r in records if r.get("world") == f"random:{seed}"}
+            name = used.pop() if len(used) == 1 else None
+            reach = get_profile(name).footprint.reach_m if name else None
+            world = load_world(f"random:{seed}", seed=seed, reach_m=reach)
             h, w = world.occupancy.shape
             x0, y0 = world.origin
             ax.imshow(

@@ -181,13 +181,13 @@ def run_settings(
     writes it as a ROS 2 log (module docstring).
     """
     try:
-        world = load_world(settings.map, seed=settings.seed)
-    except WorldError as exc:
-        raise UsageError(f"cannot load map {settings.map!r}: {exc}") from None
-    try:
         profile = get_profile(settings.profile)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    try:  # a random world sized for the robot (RandomFieldParams.for_reach)
+        world = load_world(settings.map, seed=settings.seed, reach_m=profile.footprint.reach_m)
+    except WorldError as exc:
+        raise UsageError(f"cannot load map {settings.map!r}: {exc}") from None
     start = settings.start or world.start_pose
     if start is None:
         raise UsageError(f"map {settings.map!r} suggests no start pose: give --start X,Y,YAW")

@@ -103,7 +103,7 @@ def check_point(point: RunPoint) -> None:
     except ProfileError as exc:
         raise GridError(str(exc)) from None
     try:
-        world = load_world(point.world, seed=point.seed)
+        world = load_world(point.world, seed=point.seed, reach_m=profile.footprint.reach_m)
     except WorldError as exc:
         raise GridError(f"world {point.world!r}: {exc}") from None
     start = point.start or world.start_pose

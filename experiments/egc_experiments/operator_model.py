@@ -200,8 +200,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="operator-model: %(message)s", stream=sys.stderr)
     try:
-        world = load_world(args.world, seed=args.seed)
         profile = get_profile(args.profile)
+        world = load_world(args.world, seed=args.seed, reach_m=profile.footprint.reach_m)
         start = parse_pose(args.start) or world.start_pose
         goal = _goal(args.goal) or world.goal
         if start is None:

@@ -192,8 +192,8 @@ def _percentile(values: list[float], q: float) -> float | None:
 def run_simulated(point: RunPoint) -> dict[str, Any]:
     """Run one grid point (module docstring); returns its result line (``RESULT_KEYS`` +)."""
     wall0 = time.perf_counter()
-    world = load_world(point.world, seed=point.seed)
     profile = get_profile(point.profile)
+    world = load_world(point.world, seed=point.seed, reach_m=profile.footprint.reach_m)
     start = point.start or world.start_pose
     goal = point.goal or world.goal
     if start is None or goal is None:

@@ -76,7 +76,7 @@ def open_simulator(
 ) -> Simulator:
     """Load a world (path or built-in name) and place the robot (a clear UsageError if not)."""
     try:
-        world = load_world(world_spec, seed=seed)
+        world = load_world(world_spec, seed=seed, reach_m=profile.footprint.reach_m)
     except (OSError, ValueError) as exc:
         raise UsageError(f"cannot load world {world_spec!r}: {exc}") from None
     kwargs: dict[str, Any] = {"seed": seed}

@@ -1,7 +1,9 @@
 """Seeded random obstacle fields: a walled room, a start on the left, a goal on the right.
 
 Built for judging a filter on worlds nobody tuned it for. ``random_world(seed)`` is a pure
-function of the seed and the parameters. Every world is *solvable*: a disc of radius
+function of the seed and the parameters. The defaults suit robots up to the Jackal's size;
+``RandomFieldParams.for_reach`` scales the whole field for a larger one (a Husky), so that it
+can turn where it starts. Every world is *solvable*: a disc of radius
 ``passage_m`` can travel from start to goal (checked on the grid's distance transform), so a
 robot that never arrives was stopped by its controller, not by the world. ``on_line`` of the
 obstacles are placed across the straight start-goal line, so a naive operator who steers at
@@ -38,6 +40,30 @@ class RandomFieldParams:
     keep_clear_m: float = 0.9
     passage_m: float = 0.5
     goal_tolerance_m: float = 0.3
+
+    @staticmethod
+    def for_reach(reach_m: float) -> RandomFieldParams:
+        """The defaults, every length scaled up (never down) so that a robot whose footprint
+        reaches ``reach_m`` from its centre keeps 0.15 m from the wall while it turns at the
+        start: ``margin_m`` >= reach + the wall + 0.15 m. Robots up to 0.45 m of reach (the
+        Pioneer 3-DX, the Jackal, a TurtleBot 4) get the default worlds, unchanged; a Husky
+        (0.60 m) one 1.21 times as large."""
+        d = RandomFieldParams()
+        scale = max(1.0, (reach_m + _WALL_M + 0.15) / d.margin_m)
+        if scale == 1.0:
+            return d
+        return RandomFieldParams(
+            width_m=d.width_m * scale,
+            height_m=d.height_m * scale,
+            obstacles=d.obstacles,
+            on_line=d.on_line,
+            size_min_m=d.size_min_m * scale,
+            size_max_m=d.size_max_m * scale,
+            margin_m=d.margin_m * scale,
+            keep_clear_m=d.keep_clear_m * scale,
+            passage_m=d.passage_m * scale,
+            goal_tolerance_m=d.goal_tolerance_m,
+        )
 
 
 def _obstacle(rng: np.random.Generator, x: float, y: float, p: RandomFieldParams) -> Shape:

@@ -176,3 +176,28 @@ def test_the_world_id_names_the_map_frame_whatever_the_file():
     a, b = load_world(names[0]), load_world(names[0])
     assert world_id(a) == world_id(b) and world_id(a).startswith("grid:")
     assert world_id(load_world(names[1])) != world_id(a)
+
+
+def test_random_worlds_are_sized_for_a_large_robot():
+    """A Husky (0.60 m of reach) could not turn where the default field starts it (7 mm from
+    the wall at the worst of 30 seeds): its worlds are scaled so it keeps 0.15 m turning there.
+    Robots up to 0.45 m of reach get the default worlds, cell for cell."""
+    from egc_common.profiles import get_profile
+    from egc_sim.collision import FootprintChecker
+
+    assert RandomFieldParams.for_reach(0.3) == RandomFieldParams()
+    for name in ("pioneer3dx", "jackal", "turtlebot4"):
+        reach = get_profile(name).footprint.reach_m
+        assert np.array_equal(
+            load_world("random:3", reach_m=reach).occupancy, random_world(3).occupancy
+        )
+    husky = get_profile("husky")
+    params = RandomFieldParams.for_reach(husky.footprint.reach_m)
+    assert params.width_m > RandomFieldParams().width_m
+    for seed in range(7000, 7030):
+        world = load_world(f"random:{seed}", reach_m=husky.footprint.reach_m)
+        x, y, _ = world.start_pose
+        checker = FootprintChecker(world, husky.footprint)
+        # every heading at the start: the robot can turn in place there
+        turning = min(checker.clearance(x, y, a) for a in np.linspace(-math.pi, math.pi, 73))
+        assert turning >= 0.1, (seed, turning)
