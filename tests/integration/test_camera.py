@@ -90,7 +90,11 @@ def test_the_simulated_camera_streams_decodable_h264_at_the_asked_rate(procs, po
     assert np.diff(stamps).mean() >= 0.18 * S
     assert np.median(np.diff(stamps)) <= 0.5 * S
     keys = stamps[[f.key for f in frames]]
-    assert np.diff(keys).max() <= 1.05 * S  # a keyframe at least every second (+ one tick)
+    # A keyframe every second: at the first frame captured a second or more after the last
+    # one, so up to one frame period (0.2 s at 5 frames/s) more when a capture runs late on
+    # a busy machine (1.09 s once, with both cores busy).
+    assert 0.9 * S <= np.median(np.diff(keys)) <= 1.05 * S
+    assert np.diff(keys).max() <= 1.2 * S
     summary = json.loads((tmp_path / "robot.json").read_text())
     camera = summary["camera"]
     assert set(camera) == {"codec", "width", "height", "frames_sent", "fps", "kbps"}

@@ -101,7 +101,7 @@ def test_emulated_command_ages_are_the_links_own(tmp_path):
     assert proc.returncode == 0, proc.stderr
     (row,) = [json.loads(line) for line in (tmp_path / "out/runs.jsonl").read_text().splitlines()]
     applied_ms = row["link"]["up"]["p50_ms"]  # what the relay held the operator's datagrams
-    assert 70 < applied_ms < 90
+    assert 70 < applied_ms < 100  # 80 ms and its jitter, and the relay's own lateness when busy
     # One kernel, one clock: a command's age is the relay's hold plus the hops and the
     # processes' scheduling on either side, never less. So the age is at least the hold (2 ms
     # for the medians of two samplings) and exceeds it by what a busy machine adds (measured:

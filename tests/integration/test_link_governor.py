@@ -44,7 +44,8 @@ def test_direct_mode_through_a_300_ms_round_trip_is_capped_by_the_formula(
     def capped() -> list[Telemetry]:
         return [t for t in observer.telemetry(since) if t.limiter == "latency"]
 
-    observer.wait_for("15 more capped cycles", lambda: len(capped()) >= 15, 10)
+    # 30 s: a machine busy enough to hold the robot for a link gap (it resumes by itself)
+    observer.wait_for("15 more capped cycles", lambda: len(capped()) >= 15, 30)
     for t in capped():
         assert t.mode == "direct" and t.state == "DRIVING"
         tau_s = t.loop_delay_ms / 1e3
