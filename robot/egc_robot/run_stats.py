@@ -27,6 +27,11 @@
   late each fixed-rate cycle started after its deadline, waiting for the node's lock
   included), and ``loop_overrun_p99`` (``loop_late_ms`` p99 over the period: above 0.5 the
   loop missed its period by more than half in more than 1 % of its cycles; ``bench fleet``).
+
+Memory stays bounded however long the robot runs: each series keeps at most ``SERIES_CAP``
+samples (``_Series``: every value while it fits, then every other one, evenly in time), with
+its count and maximum exact; the timeline keeps an hour. A soak with lists that grew with every
+command grew the robot by 34 MB an hour (issue 31).
 """
 
 from __future__ import annotations
@@ -40,8 +45,47 @@ from egc_common.messages import Odometry, Telemetry
 
 from egc_robot.pipeline import INTERVENING_NAMES
 
-_MAX_LATENCIES = 1_000_000
 _MAX_TIMELINE_S = 3600
+SERIES_CAP = 100_000  # samples kept per series: 0.8 MB; 33 min of 50 Hz commands, exact
+
+
+class _Series:
+    """Samples for percentiles in bounded memory: all of them up to ``cap``; past it, every
+    other kept sample is dropped and only every 2nd (then 4th, ...) new one is kept, so the
+    kept ones stay evenly spread over the run. ``n`` and ``max`` are exact."""
+
+    def __init__(self, cap: int = SERIES_CAP) -> None:
+        self._cap = max(2, cap)
+        self._buf = np.empty(min(1024, self._cap))
+        self._len = 0
+        self._stride = 1
+        self._skipped = 0
+        self.n = 0
+        self.max = -math.inf
+
+    def add(self, value: float) -> None:
+        self.n += 1
+        self.max = max(self.max, value)
+        self._skipped += 1
+        if self._skipped < self._stride:
+            return
+        self._skipped = 0
+        if self._len == self._buf.size:
+            if self._buf.size < self._cap:
+                grown = np.empty(min(2 * self._buf.size, self._cap))
+                grown[: self._len] = self._buf
+                self._buf = grown
+            else:
+                kept = self._buf[: self._len : 2]
+                self._len = kept.size
+                self._buf[: self._len] = kept
+                self._stride *= 2
+        self._buf[self._len] = value
+        self._len += 1
+
+    @property
+    def values(self) -> np.ndarray:
+        return self._buf[: self._len]
 
 
 class RunStats:
@@ -52,7 +96,7 @@ class RunStats:
         self.collisions = 0
         self.cycles = 0
         self.states: Counter[str] = Counter()
-        self._latencies_ms: list[float] = []
+        self._latencies_ms = _Series()
         self._pose: tuple[float, float] | None = None
         self._collided = False
         self._limiting = False
@@ -60,10 +104,10 @@ class RunStats:
         self.hold_events = 0
         self.latency_limited_s = 0.0
         self._previous: Telemetry | None = None
-        self._loop_delay_ms: list[float] = []
-        self._view_age_ms: list[float] = []
-        self._camera_age_ms: list[float] = []
-        self._downlink_kbps: list[float] = []
+        self._loop_delay_ms = _Series()
+        self._view_age_ms = _Series()
+        self._camera_age_ms = _Series()
+        self._downlink_kbps = _Series()
         self._rate_second: int | None = None
         self._camera_frames: int | None = None
         self._ages_second: int | None = None
@@ -72,7 +116,7 @@ class RunStats:
         self.telemetry_bytes = 0
         self.operator_lost = 0
         self._timeline: dict[int, dict[str, float]] = {}
-        self._loop_late_ms: list[float] = []
+        self._loop_late_ms = _Series()
         self._loop_period_ns: int | None = None
 
     def on_cycle(self, telemetry: Telemetry) -> None:
@@ -89,11 +133,11 @@ class RunStats:
         if telemetry.state == "HOLD" and (previous is None or previous.state != "HOLD"):
             self.hold_events += 1
         self._previous = telemetry
-        if telemetry.state == "DRIVING" and len(self._loop_delay_ms) < _MAX_LATENCIES:
+        if telemetry.state == "DRIVING":
             if telemetry.loop_delay_ms is not None:
-                self._loop_delay_ms.append(telemetry.loop_delay_ms)
+                self._loop_delay_ms.add(telemetry.loop_delay_ms)
             if telemetry.view_age_ms is not None:
-                self._view_age_ms.append(telemetry.view_age_ms)
+                self._view_age_ms.add(telemetry.view_age_ms)
                 entry = self._second(telemetry.stamp_ns)
                 if entry is not None:
                     age = max(entry.get("view_age_ms", 0.0), telemetry.view_age_ms)
@@ -118,8 +162,7 @@ class RunStats:
 
     def on_camera_age(self, age_ms: float, now_ns: int | None = None) -> None:
         """An accepted command's ``camera_age_ms`` (DESIGN 12), received at ``now_ns``."""
-        if len(self._camera_age_ms) < _MAX_LATENCIES:
-            self._camera_age_ms.append(float(age_ms))
+        self._camera_age_ms.add(float(age_ms))
         entry = None if now_ns is None else self._second(now_ns)
         if entry is not None:
             entry["camera_age_ms"] = min(entry.get("camera_age_ms", math.inf), float(age_ms))
@@ -137,9 +180,9 @@ class RunStats:
         if self._rate_second is None:
             self._rate_second = second + 1
             self._camera_frames = camera_frames
-        elif second > self._rate_second and len(self._downlink_kbps) < _MAX_LATENCIES:
+        elif second > self._rate_second:
             self._rate_second = second
-            self._downlink_kbps.append(kbps)
+            self._downlink_kbps.add(kbps)
             entry = self._second(now_ns)
             if entry is not None:
                 entry["kbps"] = round(kbps, 1)
@@ -180,13 +223,11 @@ class RunStats:
     def on_loop_start(self, late_ns: int, period_ns: int) -> None:
         """A fixed-rate cycle started ``late_ns`` after its deadline (period ``period_ns``)."""
         self._loop_period_ns = period_ns
-        if len(self._loop_late_ms) < _MAX_LATENCIES:
-            self._loop_late_ms.append(max(0, late_ns) / 1e6)
+        self._loop_late_ms.add(max(0, late_ns) / 1e6)
 
     def on_latency(self, latency_ns: int, now_ns: int | None = None) -> None:
         """An accepted command's latency (its age on arrival), received at ``now_ns``."""
-        if len(self._latencies_ms) < _MAX_LATENCIES:
-            self._latencies_ms.append(latency_ns / 1e6)
+        self._latencies_ms.add(latency_ns / 1e6)
         entry = None if now_ns is None else self._second(now_ns)
         if entry is not None:
             entry["cmd_age_ms"] = max(entry.get("cmd_age_ms", 0.0), round(latency_ns / 1e6, 1))
@@ -227,17 +268,18 @@ class RunStats:
         return {"loop_period_ms": period_ms, "loop_late_ms": late, "loop_overrun_p99": overrun}
 
 
-def _rate_summary(values: list[float]) -> dict[str, float | None]:
+def _rate_summary(series: _Series) -> dict[str, float | None]:
     """DESIGN 12's ``downlink_kbps``: ``{"p50", "max"}`` kbit/s (None before a whole second)."""
-    if not values:
+    if not series.n:
         return {"p50": None, "max": None}
-    arr = np.asarray(values, dtype=np.float64)
-    return {"p50": round(float(np.percentile(arr, 50)), 1), "max": round(float(arr.max()), 1)}
+    p50 = float(np.percentile(series.values, 50))
+    return {"p50": round(p50, 1), "max": round(series.max, 1)}
 
 
-def _percentiles(values: list[float]) -> dict[str, float | int | None]:
-    arr = np.asarray(values, dtype=np.float64)
-    out: dict[str, float | int | None] = {"n": int(arr.size)}
-    for name, q in (("p50", 50), ("p90", 90), ("p99", 99), ("max", 100)):
+def _percentiles(series: _Series) -> dict[str, float | int | None]:
+    arr = series.values
+    out: dict[str, float | int | None] = {"n": series.n}
+    for name, q in (("p50", 50), ("p90", 90), ("p99", 99)):
         out[f"{name}_ms"] = float(np.percentile(arr, q)) if arr.size else None
+    out["max_ms"] = series.max if series.n else None
     return out

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from egc_common.messages import Odometry, Telemetry
 from egc_robot.run_stats import RunStats
@@ -78,3 +79,25 @@ def test_the_fixed_rate_loop_s_lateness_against_its_period():
     assert s["loop_late_ms"]["p50_ms"] == pytest.approx(1.0)
     assert s["loop_overrun_p99"] == pytest.approx(s["loop_late_ms"]["p99_ms"] / 50.0, abs=1e-3)
     assert s["loop_overrun_p99"] > 0.5  # 2 % of the cycles more than half a period late
+
+
+def test_a_long_run_keeps_bounded_samples_with_exact_count_and_max():
+    """Five hours of 50 Hz command latencies: the series keeps at most its cap, evenly spread
+    (the percentiles of a slow ramp stay where the ramp's are), and n and max are exact."""
+    from egc_robot.run_stats import SERIES_CAP, _Series
+
+    series = _Series()
+    n = 5 * 3600 * 50
+    ramp = np.linspace(0.0, 100.0, n)  # ms; the true p50 is 50, p90 90
+    for value in ramp:
+        series.add(float(value))
+    assert series.n == n and series.max == 100.0
+    assert SERIES_CAP // 2 <= series.values.size <= SERIES_CAP
+    assert np.percentile(series.values, 50) == pytest.approx(50.0, abs=0.05)
+    assert np.percentile(series.values, 90) == pytest.approx(90.0, abs=0.05)
+    small = _Series(cap=8)
+    for value in range(100):
+        small.add(float(value))
+    assert small.values.size <= 8 and small.n == 100 and small.max == 99.0
+    assert np.all(np.diff(small.values) > 0)  # in order, spread over the whole run
+    assert small.values[-1] >= 80.0 and small.values[0] <= 10.0
