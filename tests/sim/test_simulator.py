@@ -247,3 +247,52 @@ def test_bad_starts_and_steps():
         sim.step(0.1, 0.0, 0.0)
     with pytest.raises(TypeError, match="Footprint"):
         FootprintChecker(grid_world(boxed_room(40.0, 40.0), 1.0), 1.0)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("profile_name", ["jackal", "husky"])
+def test_skipped_collision_checks_change_nothing(profile_name, monkeypatch):
+    """The clearance floor (module docstring) skips exact checks only where they could change
+    nothing: the same drive with every sub-step checked exactly gives the same poses, the same
+    running minimum after every step and the same contact, with far fewer exact checks."""
+    from egc_common.profiles import get_profile
+    from egc_sim import simulator as simulator_module
+
+    profile = get_profile(profile_name)
+    world = load_world("hallway")
+    calls = {"n": 0}
+    exact = FootprintChecker.clearance
+
+    def counted(self, *args, **kwargs):
+        calls["n"] += 1
+        return exact(self, *args, **kwargs)
+
+    monkeypatch.setattr(FootprintChecker, "clearance", counted)
+
+    def drive() -> tuple[list, int]:
+        """Wander (arcs; turning in place before walls, grazing them), then into a wall."""
+        calls["n"] = 0
+        rng = np.random.default_rng(1)
+        sim = Simulator(world, profile, seed=3)
+        trace = []
+        for i in range(600):
+            if i % 20 == 0:
+                turn = rng.uniform(-0.5, 0.5) * profile.w_max_radps
+            scan = sim.scan()
+            front = float(scan.ranges_m[np.abs(scan.angles_rad) < 0.6].min())
+            if i >= 500:
+                v, w = profile.v_max_mps, 0.0
+            elif front < 0.5 + profile.footprint.reach_m:
+                v, w = 0.0, 0.7 * profile.w_max_radps
+            else:
+                v, w = 0.7 * profile.v_max_mps, turn
+            sim.step(v, w, 0.05)
+            trace.append((sim.pose, sim.min_clearance_m, sim.in_contact, sim.twist))
+        return trace, calls["n"]
+
+    with_floor, n_floor = drive()
+    monkeypatch.setattr(simulator_module, "_FLOOR_LOOKAHEAD_M", 0.0)  # no sub-step skipped
+    every_step, n_exact = drive()
+    assert with_floor == every_step
+    first_contact = next(i for i, row in enumerate(every_step) if row[2])
+    assert every_step[first_contact - 1][1] < 0.05  # it grazed a wall before it hit one
+    assert n_floor < 0.7 * n_exact
