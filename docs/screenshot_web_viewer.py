@@ -65,6 +65,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import websocket  # websocket-client (test extra): the DevTools protocol runs over a websocket
+from egc_common.child_process import die_with_parent
 from egc_common.messages import Telemetry
 from PIL import Image, ImageChops
 
@@ -367,6 +368,14 @@ def record_predictive_run(
     return path, run
 
 
+def rerun_binary() -> str:
+    """The viewer binary of the installed rerun-sdk, run directly (``python -m rerun`` would
+    run it as a grandchild, out of reach of ``die_with_parent``)."""
+    import rerun_cli
+
+    return str(Path(rerun_cli.__file__).with_name("rerun"))
+
+
 def find_chromium() -> str | None:
     """Path of a Chromium binary on PATH, or None."""
     for name in ("chromium", "chromium-browser", "google-chrome"):
@@ -400,11 +409,18 @@ def _wait_http(url: str, timeout_s: float) -> bytes:
 def _process(cmd: list[str], log: Path) -> Iterator[subprocess.Popen[bytes]]:
     """Run ``cmd`` in its own process group with output to ``log``; end that group on exit.
 
-    The group matters: ``python -m rerun`` runs the viewer binary as a child, which would
-    outlive its parent if only the parent were terminated.
+    The group matters: Chromium's helpers would outlive it if only Chromium were terminated.
+    The child also dies with this process (``die_with_parent``): a run killed from outside
+    (the suite's budget) leaves no viewer or browser behind.
     """
     with log.open("wb") as out:
-        proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
+        proc = subprocess.Popen(
+            cmd,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+            preexec_fn=die_with_parent,
+        )
         try:
             yield proc
         finally:
@@ -420,7 +436,7 @@ def _process(cmd: list[str], log: Path) -> Iterator[subprocess.Popen[bytes]]:
 def serve_recording(rrd: Path, workdir: Path) -> Iterator[str]:
     """Serve ``rrd`` through the bundled web viewer; yields the URL that opens it."""
     web_port, grpc_port = free_port(), free_port()
-    cmd = [sys.executable, "-m", "rerun", "--serve-web", "--bind", "127.0.0.1"]
+    cmd = [rerun_binary(), "--serve-web", "--bind", "127.0.0.1"]
     cmd += ["--web-viewer-port", str(web_port), "--port", str(grpc_port), str(rrd)]
     with _process(cmd, workdir / "rerun.log"):
         _wait_http(f"http://127.0.0.1:{web_port}/", 30)

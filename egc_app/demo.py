@@ -26,7 +26,6 @@ distance, interventions, collisions, command latency percentiles.
 from __future__ import annotations
 
 import argparse
-import ctypes
 import json
 import os
 import signal
@@ -39,6 +38,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from egc_common.child_process import die_with_parent
 from egc_common.cli_args import PROFILE_HELP, check_writable
 from egc_common.errors import UsageError
 from egc_common.profiles import get_profile
@@ -50,7 +50,6 @@ from egc_operator.command_source import load_script, script_names
 from egc_sim.bridge import open_simulator
 
 STOP_TIMEOUT_S = 10.0
-_PR_SET_PDEATHSIG = 1
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -102,20 +101,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _die_with_parent() -> None:
-    """In the child: receive SIGTERM when the demo process dies (Linux), so no orphans."""
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
-    except (OSError, AttributeError):
-        pass
-
-
 def _start(args: list[str], env: dict[str, str] | None = None) -> subprocess.Popen[bytes]:
     return subprocess.Popen(
         [sys.executable, "-m", "egc_app.cli", *args],
         stdin=subprocess.DEVNULL,
-        preexec_fn=_die_with_parent,
+        preexec_fn=die_with_parent,
         env=env,
     )
 

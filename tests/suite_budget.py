@@ -7,6 +7,8 @@ target sets it), the process that reports (the xdist controller, which hears eve
 logstart and logfinish, or the only process with ``-n 0``) keeps the tests that have started and
 not finished. When the budget is spent it prints them, with how long each has been running, and
 interrupts itself (SIGINT): pytest then prints its summary of what failed so far and exits 2.
+Whatever the interrupted tests had started (servers in their own sessions, a browser) would
+outlive the run; the processes below this one when the budget ran out are killed at its end.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ class SuiteBudget:
         self._out = os.dup(1)
         self._timer = threading.Timer(budget_s, self._expire)
         self._timer.daemon = True
+        self._left_behind: list[tuple[int, str]] = []
 
     def pytest_sessionstart(self) -> None:
         self._timer.start()
@@ -43,6 +46,10 @@ class SuiteBudget:
     def pytest_unconfigure(self) -> None:
         self._timer.cancel()
         os.close(self._out)
+        for pid, started in self._left_behind:
+            if _start_time(pid) == started:  # the same process, not a reused pid
+                with contextlib.suppress(OSError):
+                    os.kill(pid, signal.SIGKILL)
 
     def pytest_collection_finish(self, session: pytest.Session) -> None:
         if session.items:  # -n 0; the xdist controller collects nothing itself
@@ -88,7 +95,37 @@ class SuiteBudget:
         with contextlib.suppress(Exception):  # whatever capturing holds sys.stdout now
             sys.stdout.flush()
         os.write(self._out, f"\n{'!' * 30} {text}\n".encode())
+        self._left_behind = [(pid, _start_time(pid)) for pid in descendants(os.getpid())]
         os.kill(os.getpid(), signal.SIGINT)
+
+
+def _stat_fields(pid: int) -> list[str]:
+    """/proc/PID/stat from the field after the command name on ([] if gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rpartition(")")[2].split()
+    except OSError:
+        return []
+
+
+def _start_time(pid: int) -> str:
+    fields = _stat_fields(pid)
+    return fields[19] if len(fields) > 19 else ""
+
+
+def descendants(root: int) -> list[int]:
+    """Every process below ``root`` (Linux /proc; none elsewhere)."""
+    children: dict[int, list[int]] = {}
+    with contextlib.suppress(OSError):
+        for name in os.listdir("/proc"):
+            if name.isdigit() and (fields := _stat_fields(int(name))):
+                children.setdefault(int(fields[1]), []).append(int(name))
+    found, todo = [], [root]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            found.append(child)
+            todo.append(child)
+    return found
 
 
 def configure(config: pytest.Config) -> None:

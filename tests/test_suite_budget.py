@@ -60,12 +60,19 @@ def test_a_hanging_test_ends_the_run_with_its_name_and_the_summary(tmp_path: Pat
     (tmp_path / "test_hangs.py").write_text(
         textwrap.dedent(
             """
-            import time
+            import os, subprocess, sys, time
 
             def test_fails():
                 assert 1 == 2
 
             def test_hangs():
+                # A server in its own session, as the screenshot test's viewer and browser are.
+                server = subprocess.Popen(
+                    [sys.executable, "-c", "import time; time.sleep(600)"],
+                    start_new_session=True,
+                )
+                with open(os.environ["SERVER_PID_FILE"], "w") as f:
+                    f.write(str(server.pid))
                 time.sleep(600)
 
             def test_never_reached():
@@ -76,6 +83,7 @@ def test_a_hanging_test_ends_the_run_with_its_name_and_the_summary(tmp_path: Pat
     env = {
         **os.environ,
         BUDGET_ENV: "10",
+        "SERVER_PID_FILE": str(tmp_path / "server.pid"),
         "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
     }
     proc = subprocess.run(
@@ -91,3 +99,13 @@ def test_a_hanging_test_ends_the_run_with_its_name_and_the_summary(tmp_path: Pat
     assert "used up its budget of 10 s" in out and "after 1 of 3 tests" in out, out
     assert "test_hangs.py::test_hangs (for " in out, out
     assert "FAILED test_hangs.py::test_fails" in out, out  # the summary of what failed so far
+    server = int((tmp_path / "server.pid").read_text())
+    assert _state(server) in ("gone", "Z"), "the hanging test's server outlived the run"
+
+
+def _state(pid: int) -> str:
+    """A process's state letter from /proc ("gone" when there is none)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()[0]
+    except OSError:
+        return "gone"

@@ -7,7 +7,6 @@ import os
 import signal
 import socket
 import subprocess
-import sys
 import time
 import urllib.request
 import warnings
@@ -15,6 +14,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+import rerun_cli
+from egc_common.child_process import die_with_parent
 from egc_common.errors import UsageError
 from egc_common.transport import free_tcp_port
 from egc_operator import view_blueprint as paths
@@ -23,6 +24,8 @@ from egc_operator.viewer_target import ViewerTarget, choose_target
 
 from tests.view.conftest import telemetry
 from tests.view.rrd import read_recording
+
+RERUN_BINARY = str(Path(rerun_cli.__file__).with_name("rerun"))
 
 HEADLESS: dict[str, str] = {}
 
@@ -161,10 +164,11 @@ def _start_saving_server(received: Path, attempts: int = 3) -> tuple[subprocess.
     for _ in range(attempts):
         port = free_tcp_port()
         server = subprocess.Popen(
-            [sys.executable, "-m", "rerun", "--port", str(port), "--save", str(received)],
+            [RERUN_BINARY, "--port", str(port), "--save", str(received)],
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
-            start_new_session=True,  # `python -m rerun` runs the binary as a child: end both
+            start_new_session=True,
+            preexec_fn=die_with_parent,  # nothing left behind if this worker is killed
         )
         _wait_for(lambda: _listening(port) or server.poll() is not None)  # noqa: B023
         time.sleep(0.3)  # a server that lost the bind race exits right after
