@@ -222,26 +222,44 @@ class InputVerdict:
 
 
 @dataclass(frozen=True, slots=True)
+class CycleFacts:
+    """What a cycle's statistics need (``RunStats.on_cycle``), without its whole telemetry: the
+    same values the telemetry carries under the same names."""
+
+    stamp_ns: int
+    state: str
+    limiter: str
+    loop_delay_ms: float
+    view_age_ms: float | None
+
+
+@dataclass(frozen=True, slots=True)
 class CycleOutput:
     """One cycle's base command, with its telemetry built on first use.
 
     The telemetry is a snapshot of the cycle (every value is the one when ``step`` returns) but
     is only assembled when asked for, so that the robot can send the base command first: the
     controller assembles it itself before anything that could change those values (its next
-    input or cycle), if nobody asked for it by then.
+    input or cycle), if nobody asked for it by then, unless told that nobody will
+    (``RobotController.skip_telemetry``: the robot sends telemetry at ``telemetry_hz``, not
+    every cycle, and a telemetry costs about half of what the cycle itself does).
     """
 
     base: BaseCommand
     state_changed: StateMessage | None
     result: PipelineResult | None
+    facts: CycleFacts
     _build: Callable[..., Telemetry] = field(repr=False, compare=False)
     _args: tuple[Any, ...] = field(repr=False, compare=False)
     _telemetry: Telemetry | None = field(default=None, init=False, repr=False, compare=False)
+    _skipped: bool = field(default=False, init=False, repr=False, compare=False)
 
     @property
     def telemetry(self) -> Telemetry:
         telemetry = self._telemetry
         if telemetry is None:
+            if self._skipped:
+                raise RuntimeError("this cycle's telemetry was skipped: it is no longer known")
             telemetry = self._build(*self._args)
             object.__setattr__(self, "_telemetry", telemetry)
         return telemetry
@@ -842,10 +860,18 @@ class RobotController:
         else:
             shown_filter = filter_name if cmd is not None and cmd.mode == "shared" else "none"
         report = None if verdict is None else self._source_report(verdict, feed, now_ns)
+        facts = CycleFacts(
+            now_ns,
+            self.state.value,
+            limiter.value,
+            self._link.loop_delay_s(now_ns) * 1e3,
+            self._link.view_age_ms,
+        )
         out = CycleOutput(
             base,
             self.state_message(now_ns) if changed else None,
             result,
+            facts,
             self._telemetry,
             (now_ns, cmd, fresh, v, w, limiter, result, v_lim, w_lim, shown_filter, report),
         )
@@ -967,6 +993,12 @@ class RobotController:
         if active is None or pose is None:
             return None
         return to_robot_frame(active, pose)
+
+    def skip_telemetry(self, out: CycleOutput) -> None:
+        """Nobody will ask for ``out``'s telemetry: it is not built (asking raises)."""
+        object.__setattr__(out, "_skipped", True)
+        if self._unreported is out:
+            self._unreported = None
 
     def _report(self) -> None:
         """Build the last cycle's telemetry before the state it reports changes."""

@@ -90,6 +90,11 @@ class LinkStats:
         if view_age_ms is not None:
             self._view_age_ms = float(view_age_ms)
 
+    @property
+    def view_age_ms(self) -> float | None:
+        """The operator's newest report of its view's age (as ``figures``)."""
+        return self._view_age_ms
+
     def loop_delay_s(self, now_ns: int) -> float:
         """The loop delay tau at ``now_ns``, as ``figures(now_ns).loop_delay_s``.
 

@@ -38,15 +38,31 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
-from egc_common.messages import Odometry, Telemetry
+from egc_common.messages import Odometry
 
 from egc_robot.pipeline import INTERVENING_NAMES
 
 _MAX_TIMELINE_S = 3600
 SERIES_CAP = 100_000  # samples kept per series: 0.8 MB; 33 min of 50 Hz commands, exact
+
+
+class CycleRecord(Protocol):
+    """What ``RunStats.on_cycle`` reads of a cycle: a ``Telemetry`` or the controller's
+    ``CycleFacts`` (the same names)."""
+
+    @property
+    def stamp_ns(self) -> int: ...
+    @property
+    def state(self) -> str: ...
+    @property
+    def limiter(self) -> str: ...
+    @property
+    def loop_delay_ms(self) -> float | None: ...
+    @property
+    def view_age_ms(self) -> float | None: ...
 
 
 class _Series:
@@ -103,7 +119,7 @@ class RunStats:
         self.seconds_by_state: dict[str, float] = {}
         self.hold_events = 0
         self.latency_limited_s = 0.0
-        self._previous: Telemetry | None = None
+        self._previous: CycleRecord | None = None
         self._loop_delay_ms = _Series()
         self._view_age_ms = _Series()
         self._camera_age_ms = _Series()
@@ -119,7 +135,7 @@ class RunStats:
         self._loop_late_ms = _Series()
         self._loop_period_ns: int | None = None
 
-    def on_cycle(self, telemetry: Telemetry) -> None:
+    def on_cycle(self, telemetry: CycleRecord) -> None:
         self.cycles += 1
         self.states[telemetry.state] += 1
         previous = self._previous

@@ -583,11 +583,11 @@ class RobotNode:
             camera.set_allotment(*allotment)
             self._allotment = allotment
 
-    def _publish_telemetry(self, out: CycleOutput, now: int) -> None:
+    def _publish_telemetry(self, out: CycleOutput, now: int) -> bool:
         """The cycle's telemetry, if one is due (``telemetry_hz`` as the plan says)."""
         due = self._next_telemetry_ns
         if due is not None and now < due - _TELEMETRY_SLACK_NS:
-            return
+            return False
         p = self._plan
         state = self._budget
         t = replace(
@@ -612,17 +612,19 @@ class RobotNode:
         self._overhead_bytes += 0.1 * (len(payload) - scan_bytes - self._overhead_bytes)
         period = round(1e9 / p.telemetry_hz)
         self._next_telemetry_ns = max((now if due is None else due) + period, now + period // 2)
+        return True
 
     def _cycle(self, now: int) -> None:
         self._last_cycle_ns = now
         out = self._controller.step(now)
         self._driver.send(out.base)
         self._replan(now)
-        self._publish_telemetry(out, now)
+        if not self._publish_telemetry(out, now):
+            self._controller.skip_telemetry(out)
         if self._recorder is not None:
             self._recorder.on_base_command(out.base)
         if self._stats is not None:
-            self._stats.on_cycle(out.telemetry)
+            self._stats.on_cycle(out.facts)
         if out.state_changed is not None:
             changed = out.state_changed
             log.info(

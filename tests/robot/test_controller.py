@@ -352,3 +352,30 @@ def test_telemetry_says_which_filter_ran():
     assert rig.drive(1.0).telemetry.filter == "egc"
     rig.send(x=1.0, mode="direct")
     assert rig.cycle().telemetry.filter == "none"
+
+
+def test_a_skipped_telemetry_is_never_built_and_the_facts_match_a_built_one(monkeypatch):
+    """The robot sends telemetry at telemetry_hz, not every cycle: a cycle whose telemetry is
+    skipped costs no telemetry, cannot be asked for it later (its state is gone) and still
+    gives the statistics the values a telemetry would have carried."""
+    rig = driving_rig()
+    built = []
+    build = RobotController._telemetry
+
+    def counted(self, *args):
+        built.append(args[0])
+        return build(self, *args)
+
+    monkeypatch.setattr(RobotController, "_telemetry", counted)
+    skipped = rig.drive(1.0, cycles=1)
+    rig.c.skip_telemetry(skipped)
+    rig.send(x=0.5, view_age_ms=120)  # an input: would build the last cycle's telemetry
+    kept = rig.cycle()
+    assert built == []
+    with pytest.raises(RuntimeError, match="skipped"):
+        skipped.telemetry  # noqa: B018
+    t = kept.telemetry
+    facts = kept.facts
+    assert built == [kept.base.stamp_ns]
+    assert (facts.stamp_ns, facts.state, facts.limiter) == (t.stamp_ns, t.state, t.limiter)
+    assert facts.loop_delay_ms == t.loop_delay_ms and facts.view_age_ms == t.view_age_ms == 120
