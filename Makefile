@@ -38,9 +38,10 @@ lint: venv
 typecheck: venv
 	$(BIN)/mypy
 
-# The whole suite within SUITE_BUDGET_S (it takes 5-6 min on 2 cores; CI allows 90): past that,
-# it stops, names the tests then running and prints its summary (tests/suite_budget.py).
-SUITE_BUDGET_S ?= 1500
+# The whole suite within SUITE_BUDGET_S (12-15 min on 2 quiet cores, 25 min and more when other
+# work keeps both busy; CI allows 90): past that, it stops, names the tests then running and
+# prints its summary (tests/suite_budget.py). A guard against hangs, not a speed target.
+SUITE_BUDGET_S ?= 2700
 pytest: venv
 	EGC_SUITE_BUDGET_S=$(SUITE_BUDGET_S) $(BIN)/pytest -n 2 --dist loadgroup
 
