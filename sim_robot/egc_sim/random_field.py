@@ -13,7 +13,7 @@ the goal (``operators.GoalOperator``) meets at least one of them.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import ndimage
@@ -52,18 +52,9 @@ class RandomFieldParams:
         scale = max(1.0, (reach_m + _WALL_M + 0.15) / d.margin_m)
         if scale == 1.0:
             return d
-        return RandomFieldParams(
-            width_m=d.width_m * scale,
-            height_m=d.height_m * scale,
-            obstacles=d.obstacles,
-            on_line=d.on_line,
-            size_min_m=d.size_min_m * scale,
-            size_max_m=d.size_max_m * scale,
-            margin_m=d.margin_m * scale,
-            keep_clear_m=d.keep_clear_m * scale,
-            passage_m=d.passage_m * scale,
-            goal_tolerance_m=d.goal_tolerance_m,
-        )
+        lengths = ("width_m", "height_m", "size_min_m", "size_max_m", "margin_m")
+        lengths += ("keep_clear_m", "passage_m")
+        return replace(d, **{name: getattr(d, name) * scale for name in lengths})
 
 
 def _obstacle(rng: np.random.Generator, x: float, y: float, p: RandomFieldParams) -> Shape:
