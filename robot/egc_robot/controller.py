@@ -790,14 +790,9 @@ class RobotController:
                 )
         filter_name = self._filter_for(cmd) if feed is None else cfg.pipeline.filter
         if state is State.DRIVING and feed is not None and scan is not None:
-            if filter_name != self._memory_filter:
-                self._filter_memory, self._memory_filter = None, filter_name
-            pipeline = cfg.pipeline
-            if scan.no_return_is_free and cfg.pipeline_if_free is not None:
-                pipeline = cfg.pipeline_if_free
             # The source's velocity as it is (no eq. 4), through the same filter and sweep.
             result = filter_velocity(
-                pipeline,
+                self._pipeline_for(filter_name, scan),
                 feed.v_mps,
                 feed.w_radps,
                 "shared",
@@ -809,22 +804,12 @@ class RobotController:
                 memory=self._filter_memory,
                 loop_delay_s=tau_s,  # the source's own (cbf's delay-aware margin, DESIGN 13)
             )
-            self._filter_memory = result.memory
-            v, w, limiter = result.v_cmd_mps, result.w_cmd_radps, result.limiter
-            if v_lim is not None:
-                v, w, capped = govern(v, w, v_lim, math.inf if w_lim is None else w_lim)
-                if capped:
-                    limiter = Limiter.LATENCY
+            v, w, limiter = self._governed(result, v_lim, w_lim)
         elif state is State.DRIVING and cmd is not None and scan is not None:
             self._last_drive_epoch = self._control_epoch
             self._last_drive_ns = self._command_rx_ns  # the gap is timed from this command
-            if filter_name != self._memory_filter:
-                self._filter_memory, self._memory_filter = None, filter_name
-            pipeline = cfg.pipeline
-            if scan.no_return_is_free and cfg.pipeline_if_free is not None:
-                pipeline = cfg.pipeline_if_free
             result = step_command(
-                pipeline,
+                self._pipeline_for(filter_name, scan),
                 cmd.x,
                 cmd.y,
                 cmd.mode,
@@ -837,12 +822,7 @@ class RobotController:
                 memory=self._filter_memory,
                 loop_delay_s=tau_s,
             )
-            self._filter_memory = result.memory
-            v, w, limiter = result.v_cmd_mps, result.w_cmd_radps, result.limiter
-            if v_lim is not None:
-                v, w, capped = govern(v, w, v_lim, math.inf if w_lim is None else w_lim)
-                if capped:
-                    limiter = Limiter.LATENCY
+            v, w, limiter = self._governed(result, v_lim, w_lim)
         elif state is State.ESTOP:
             self._filter_memory = None
             v, w, limiter = 0.0, 0.0, Limiter.ESTOP
@@ -999,6 +979,28 @@ class RobotController:
         object.__setattr__(out, "_skipped", True)
         if self._unreported is out:
             self._unreported = None
+
+    def _pipeline_for(self, filter_name: str, scan: _Scan) -> PipelineConfig:
+        """The pipeline for this cycle's scan (``pipeline_if_free`` when no return means free
+        space); a filter other than last cycle's starts without its memory."""
+        if filter_name != self._memory_filter:
+            self._filter_memory, self._memory_filter = None, filter_name
+        cfg = self.config
+        if scan.no_return_is_free and cfg.pipeline_if_free is not None:
+            return cfg.pipeline_if_free
+        return cfg.pipeline
+
+    def _governed(
+        self, result: PipelineResult, v_lim: float | None, w_lim: float | None
+    ) -> tuple[float, float, Limiter]:
+        """Keep the filter's memory; the command within the latency governor's caps."""
+        self._filter_memory = result.memory
+        v, w, limiter = result.v_cmd_mps, result.w_cmd_radps, result.limiter
+        if v_lim is not None:
+            v, w, capped = govern(v, w, v_lim, math.inf if w_lim is None else w_lim)
+            if capped:
+                limiter = Limiter.LATENCY
+        return v, w, limiter
 
     def _report(self) -> None:
         """Build the last cycle's telemetry before the state it reports changes."""

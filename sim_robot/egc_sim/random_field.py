@@ -52,9 +52,8 @@ class RandomFieldParams:
         scale = max(1.0, (reach_m + _WALL_M + 0.15) / d.margin_m)
         if scale == 1.0:
             return d
-        lengths = ("width_m", "height_m", "size_min_m", "size_max_m", "margin_m")
-        lengths += ("keep_clear_m", "passage_m")
-        return replace(d, **{name: getattr(d, name) * scale for name in lengths})
+        lengths = "width_m height_m size_min_m size_max_m margin_m keep_clear_m passage_m"
+        return replace(d, **{name: getattr(d, name) * scale for name in lengths.split()})
 
 
 def _obstacle(rng: np.random.Generator, x: float, y: float, p: RandomFieldParams) -> Shape:
