@@ -584,7 +584,8 @@ class RobotNode:
             self._allotment = allotment
 
     def _publish_telemetry(self, out: CycleOutput, now: int) -> bool:
-        """The cycle's telemetry, if one is due (``telemetry_hz`` as the plan says)."""
+        """Send the cycle's telemetry if one is due (``telemetry_hz`` as the plan says); whether
+        it did."""
         due = self._next_telemetry_ns
         if due is not None and now < due - _TELEMETRY_SLACK_NS:
             return False
