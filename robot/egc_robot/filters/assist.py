@@ -270,6 +270,14 @@ class AssistParams:
     detour_half_width_m: float = 0.381
     # Half width (m) of the way to the via point that wall following checks (entry, leave).
     way_half_width_m: float = 0.2405
+    # Narrow detour, when no heading has the comfortable way above (dense clutter): headings
+    # ``squeeze_step_rad`` apart whose way is clear at ``squeeze_half_width_m`` (half the
+    # footprint's width + the footprint sweep's 3 cm margin: the narrowest way the sweep lets
+    # through); steer into the clear run nearest the via point, by up to half its width
+    # but at most ``squeeze_centre_max_rad`` past its near edge (0 step: no narrow detours).
+    squeeze_half_width_m: float = 0.2205
+    squeeze_step_rad: float = math.radians(1.0)
+    squeeze_centre_max_rad: float = math.radians(10.0)
     # A via point closer than this (m) gives no direction: joystick plus avoidance.
     goal_min_m: float = 0.05
     # dt larger than this (s) counts as this (a resumed link does not jump the confidence).
@@ -332,6 +340,8 @@ class AssistParams:
             "front_turn_rad",
             "wall_correction_max_rad",
             "wall_lost_turn_rad",
+            "squeeze_step_rad",
+            "squeeze_centre_max_rad",
         ):
             if getattr(self, name) > math.pi:
                 raise ValueError(f"assist.{name} must be in [0, pi]")
@@ -346,6 +356,7 @@ class AssistParams:
             "faraway_m": r_max + 2.0 * length,
             "corridor_half_width_m": 0.75 * profile.width_m,
             "way_half_width_m": 0.5 * profile.width_m + 0.05,
+            "squeeze_half_width_m": 0.5 * profile.width_m + 0.03,
             "wall_distance_m": 0.5 * (profile.r_min_m + r_max),
             "wall_range_m": r_max + length,
             "block_m": r_max + length,
@@ -632,6 +643,51 @@ def _free_heading(
     return None
 
 
+def _narrow_heading(
+    obstacles: ObstaclePoints, bearing: float, params: AssistParams, prefer: float
+) -> float | None:
+    """The narrow detour (``squeeze_*``): None when no heading within ``detour_max_rad`` of
+    ``bearing`` has its way clear at ``squeeze_half_width_m`` for ``block_m``. Otherwise the
+    run of clear headings nearest ``bearing`` (a tie: the side ``prefer``), and in it the
+    heading half its width, at most ``squeeze_centre_max_rad``, past its near edge: through
+    the middle of a narrow gap, not along one of its sides (a gap little wider than the robot
+    leaves it centimetres either side, and the sweep stops a robot that grazes one)."""
+    if params.squeeze_step_rad <= 0.0 or params.detour_max_rad <= 0.0:
+        return None
+    n = int(params.detour_max_rad / params.squeeze_step_rad)
+    offsets = np.arange(-n, n + 1) * params.squeeze_step_rad
+    if len(obstacles) == 0:
+        return _wrap(bearing)
+    near = (obstacles.r2 <= params.block_m * params.block_m) & (obstacles.x > -params.block_m)
+    x, y = obstacles.x[near], obstacles.y[near]
+    headings = bearing + offsets
+    c, s = np.cos(headings)[:, None], np.sin(headings)[:, None]
+    u = x[None, :] * c + y[None, :] * s
+    v = -x[None, :] * s + y[None, :] * c
+    hit = (u > 0.0) & (u <= params.block_m) & (np.abs(v) <= params.squeeze_half_width_m)
+    clear = ~hit.any(axis=1)
+    if not bool(clear.any()):
+        return None
+    # Runs of clear headings: [first, last] index pairs.
+    edges = np.diff(np.concatenate(([0], clear.astype(np.int8), [0])))
+    firsts, lasts = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    best: tuple[float, float, float] | None = None  # (distance, side rank, heading)
+    for a, b in zip(firsts.tolist(), lasts.tolist(), strict=True):
+        lo, hi = float(offsets[a]), float(offsets[b])
+        half = min(0.5 * (hi - lo), params.squeeze_centre_max_rad)
+        if lo <= 0.0 <= hi:  # the via point's own direction is in the run
+            distance, off = 0.0, _clip(0.0, lo + half, hi - half)
+        elif lo > 0.0:
+            distance, off = lo, lo + half
+        else:
+            distance, off = -hi, hi - half
+        rank = 0.0 if prefer == 0.0 or math.copysign(1.0, off) == prefer else 1.0
+        if best is None or (distance, rank) < best[:2]:
+            best = (distance, rank, off)
+    assert best is not None
+    return _wrap(bearing + best[2])
+
+
 def _avoid(
     theta: float,
     levels: tuple[int | None, int | None, int | None],
@@ -856,7 +912,16 @@ def assist_step(
                 obs, bearing, min(distance, params.block_m), params.way_half_width_m
             )
             if front is not None and front <= INTERMEDIATE and blocked and abs(bearing) < _HALF_PI:
-                detour_heading = _free_heading(obs, bearing, params, memory.detour)
+                wide = _free_heading(obs, bearing, params, memory.detour)
+                narrow = _narrow_heading(obs, bearing, params, memory.detour)
+                # The way nearest the via point that the robot fits through; the comfortable
+                # one when it is as near (module docstring, "Narrow detour").
+                if narrow is not None and (
+                    wide is None or abs(_wrap(narrow - bearing)) < abs(_wrap(wide - bearing))
+                ):
+                    detour_heading = narrow
+                else:
+                    detour_heading = wide
                 if detour_heading is None:
                     side = _choose_wall_side(obs, bearing, params, memory, now_ns)
                     wall = (side, distance)
