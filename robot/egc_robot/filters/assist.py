@@ -90,6 +90,19 @@ How each part maps to the paper
   detours and the retreat limit below, 408/500 without; no contact either way. The tangent
   follower alone wandered round obstacle clusters and along the room's walls until the time ran
   out. ``detour_max_rad`` = 0 turns detours off.
+- **Narrow detour** (deviation, issue 28): in dense clutter whose gaps are 1.2-1.5 x the
+  footprint's width W no heading has the comfortable way above (2 W wide), and the robot
+  wall-followed round the first obstacles for the whole episode (Jackal, ``goal`` operator,
+  via point at the goal: 0 of 30 ``clutter`` worlds). The detour also considers the headings,
+  ``squeeze_step_rad`` (1 deg) apart within ``detour_max_rad``, whose way is clear for
+  ``block_m`` at ``squeeze_half_width_m`` (W / 2 + the footprint sweep's 3 cm margin: the
+  narrowest way the sweep lets through); of their runs it takes the one nearest the via point
+  and aims half its width (at most ``squeeze_centre_max_rad``) past its near edge, so through
+  the middle of a narrow gap. The narrow way is taken only when it is nearer the via point
+  than the comfortable one. A straight strip is a conservative test of an oblique gap: a gap g
+  crossed at angle a is only g cos(a) wide. Measured (``docs/assist.md``, notes): Jackal
+  ``clutter:0-29`` 0/30 -> 5/30 (5 of the 9 cylinder fields, none of the 21 baffle worlds),
+  ``random:1000-1029`` 26/30 -> 27/30, 0 collisions. ``squeeze_step_rad`` = 0 turns it off.
 - **Wall following** (sec. V: "an obstacle in front while moving toward a target destination ...
   rotate to align with and then move parallel to the wall"). Entered when heading for the via
   point (rule ``goal``) with FRONT active at CLOSE or INTERMEDIATE, the corridor towards the via
