@@ -13,7 +13,7 @@ an intervention), the suite files and the worker processes ``egc_experiments.epi
 - ``--filter egc`` runs the robot's pipeline with the EGC filter and the scripted operators
   select ``shared`` mode; ``--filter none`` turns the filter off and they select ``direct``.
 - ``--map`` takes a map.yaml, a .toml or .npy world, or a built-in name (``hallway``,
-  ``office02``, ``random:SEED``); ``--start``/``--goal``/``--goal-tolerance`` default to the
+  ``office02``, ``random:SEED``, ``clutter:SEED``); ``--start``/``--goal``/``--goal-tolerance`` default to the
   world's own where it has them.
 - ``--via`` gives the filter its via points (DESIGN 7): ``goal`` (the default), ``route`` or
   ``none``.
@@ -58,7 +58,11 @@ from egc_sim.episode_bag import BagError, check_bag_path
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--map", help="map.yaml, .toml or .npy world, or a built-in name")
+    parser.add_argument(
+        "--map",
+        help="map.yaml, .toml or .npy world, or a built-in name (hallway, office02, "
+        "random:SEED, clutter:SEED)",
+    )
     parser.add_argument("--start", help="start pose X,Y,YAW (m, m, rad); default: the map's")
     parser.add_argument("--goal", help="goal X,Y (m); default: the map's")
     parser.add_argument(

@@ -104,7 +104,12 @@ def mrpb_tests(
 
 def _route_length(settings: EpisodeSettings) -> float:
     profile = get_profile(settings.profile)
-    world = load_world(settings.map, seed=settings.seed, reach_m=profile.footprint.reach_m)
+    world = load_world(
+        settings.map,
+        seed=settings.seed,
+        reach_m=profile.footprint.reach_m,
+        footprint=profile.footprint,
+    )
     start = settings.start or world.start_pose
     goal = settings.goal or world.goal
     assert start is not None and goal is not None

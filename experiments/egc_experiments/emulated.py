@@ -372,7 +372,9 @@ def run_emulated(point: RunPoint, workdir: Path, use_netns: bool | None = None) 
     wall0 = time.perf_counter()
     workdir.mkdir(parents=True, exist_ok=True)
     profile = get_profile(point.profile)
-    world = load_world(point.world, seed=point.seed, reach_m=profile.footprint.reach_m)
+    world = load_world(
+        point.world, seed=point.seed, reach_m=profile.footprint.reach_m, footprint=profile.footprint
+    )
     start = point.start or world.start_pose
     goal = point.goal or world.goal
     if start is None or goal is None:

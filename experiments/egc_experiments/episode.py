@@ -185,7 +185,12 @@ def run_settings(
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     try:  # a random world sized for the robot (RandomFieldParams.for_reach)
-        world = load_world(settings.map, seed=settings.seed, reach_m=profile.footprint.reach_m)
+        world = load_world(
+            settings.map,
+            seed=settings.seed,
+            reach_m=profile.footprint.reach_m,
+            footprint=profile.footprint,
+        )
     except WorldError as exc:
         raise UsageError(f"cannot load map {settings.map!r}: {exc}") from None
     start = settings.start or world.start_pose

@@ -103,7 +103,12 @@ def check_point(point: RunPoint) -> None:
     except ProfileError as exc:
         raise GridError(str(exc)) from None
     try:
-        world = load_world(point.world, seed=point.seed, reach_m=profile.footprint.reach_m)
+        world = load_world(
+            point.world,
+            seed=point.seed,
+            reach_m=profile.footprint.reach_m,
+            footprint=profile.footprint,
+        )
     except WorldError as exc:
         raise GridError(f"world {point.world!r}: {exc}") from None
     start = point.start or world.start_pose

@@ -201,7 +201,12 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="operator-model: %(message)s", stream=sys.stderr)
     try:
         profile = get_profile(args.profile)
-        world = load_world(args.world, seed=args.seed, reach_m=profile.footprint.reach_m)
+        world = load_world(
+            args.world,
+            seed=args.seed,
+            reach_m=profile.footprint.reach_m,
+            footprint=profile.footprint,
+        )
         start = parse_pose(args.start) or world.start_pose
         goal = _goal(args.goal) or world.goal
         if start is None:

@@ -193,7 +193,9 @@ def run_simulated(point: RunPoint) -> dict[str, Any]:
     """Run one grid point (module docstring); returns its result line (``RESULT_KEYS`` +)."""
     wall0 = time.perf_counter()
     profile = get_profile(point.profile)
-    world = load_world(point.world, seed=point.seed, reach_m=profile.footprint.reach_m)
+    world = load_world(
+        point.world, seed=point.seed, reach_m=profile.footprint.reach_m, footprint=profile.footprint
+    )
     start = point.start or world.start_pose
     goal = point.goal or world.goal
     if start is None or goal is None:

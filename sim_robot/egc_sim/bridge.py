@@ -76,7 +76,9 @@ def open_simulator(
 ) -> Simulator:
     """Load a world (path or built-in name) and place the robot (a clear UsageError if not)."""
     try:
-        world = load_world(world_spec, seed=seed, reach_m=profile.footprint.reach_m)
+        world = load_world(
+            world_spec, seed=seed, reach_m=profile.footprint.reach_m, footprint=profile.footprint
+        )
     except (OSError, ValueError) as exc:
         raise UsageError(f"cannot load world {world_spec!r}: {exc}") from None
     kwargs: dict[str, Any] = {"seed": seed}

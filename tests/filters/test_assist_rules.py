@@ -399,6 +399,32 @@ def test_a_detour_ends_once_the_way_to_the_via_point_is_clear():
     assert r.rule == "goal" and r.heading_rad == pytest.approx(math.atan2(-0.3, 2.5))
 
 
+def test_a_narrow_detour_goes_through_the_middle_of_a_gap_little_wider_than_the_robot():
+    """Dense clutter (issue 28): a wall across the way with one gap of 1.3 footprint widths,
+    off the via point's line. No heading near it has the comfortable way (a width of margin),
+    so the assistant steers through the gap: the way nearest the via point that the robot
+    fits through at the sweep's margin, aimed at the middle of the clear run of headings."""
+    gap, centre = 1.3 * P.width_m, 0.2
+    wall = np.vstack(
+        [
+            line(0.6, -1.5, 0.6, centre - 0.5 * gap, 150),
+            line(0.6, centre + 0.5 * gap, 0.6, 1.5, 150),
+        ]
+    )
+    r = run(1.0, 0.0, wall, goal=(3.0, 0.0))
+    assert r.rule == "detour" and r.memory.wall_side is None
+    assert r.heading_rad == pytest.approx(math.atan2(centre, 0.6), abs=math.radians(2.0))
+    assert corridor_clear(
+        obstacle_points(wall), r.heading_rad, PARAMS.block_m, PARAMS.squeeze_half_width_m
+    )
+    assert not _clear(wall, r.heading_rad)  # no comfortable way through it
+    # Narrow detours off (squeeze_step_rad 0): the comfortable way round the wall, as before.
+    off = replace(PARAMS, squeeze_step_rad=0.0)
+    wide = run(1.0, 0.0, wall, goal=(3.0, 0.0), params=off)
+    assert wide.rule == "detour" and abs(wide.heading_rad) > math.radians(45.0)
+    assert _clear(wall, wide.heading_rad)
+
+
 # -- wall following -------------------------------------------------------------------------------
 
 # Wall following on its own: the scenes above have a detour, so these tests turn detours off.
