@@ -614,7 +614,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         made = _made_now(args, argv, scale)
         old = json.loads((out / MADE).read_text()) if (out / MADE).exists() else None
         if args.reuse and old and (old["code"], old["scale"]) == (made["code"], made["scale"]):
-            made["wall_s"] = old.get("wall_s", {})
+            # The results' own history: when their making started, and its time so far.
+            for key in ("started", "load_start", "wall_s"):
+                made[key] = old.get(key, made[key])
             _log(f"reusing the results in {out} (sources {made['code']})")
         else:
             if args.reuse and old:
