@@ -2,7 +2,7 @@
 (issue 28 item 4; DESIGN 13), made by one command:
 
     python -m egc_experiments.intervention --out docs/intervention [--quick] [--jobs N]
-        [--reuse] [--cache DIR] [--worlds 20] [--dwa-worlds 10] [--careful-worlds 20]
+        [--reuse] [--cache DIR] [--worlds 10] [--dwa-worlds 5] [--careful-worlds 20]
         [--first-world 6000] [--delays 0,500]
 
 It composes the pieces that measure each part, and reimplements none of them:
@@ -33,8 +33,10 @@ Seeds: random worlds from 6000 on by default, held out: cbf's parameters were se
 0-1019, the careful-log default is 5000 on, the sweeps of issues 28 and 29 use 7000-8599.
 
 ``--reuse`` keeps the results already in OUT when they were made by the same sources (a hash of
-the robot, simulator, common and experiment code) and the same scale, and runs only what is
-missing (a stopped run goes on); without it every part runs again. ``--quick`` is a tiny scale
+the robot, simulator, common and experiment code) and runs only what is missing (a stopped run
+goes on): the careful drives and the bench when their scale is the same, every closed-loop
+episode of the grid (a smaller scale reuses what a larger one ran); without it every part runs
+again. ``--quick`` is a tiny scale
 for the test (1 careful world, 1 world per closed-loop cell, short episodes, few bench calls).
 """
 
@@ -61,7 +63,7 @@ from egc_robot.pipeline import FILTERS
 
 from egc_experiments import arena, careful_logs
 from egc_experiments.bench_results import commit_record, machine_record
-from egc_experiments.experiment_cli import check_point, run_grid
+from egc_experiments.experiment_cli import check_point, run_grid, run_key
 from egc_experiments.grid import GridError, load_grid
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -118,7 +120,9 @@ class Scale:
         return range(self.first_world, self.first_world + n)
 
 
-FULL = Scale(20, 20, 10, 6000, (0.0, 500.0), 150.0, 30.0, 2000)
+# 20 worlds per cell (dwa 10) did not finish in 45 min at --jobs 1 on the 2 shared cores at load
+# 10-12 (222 of 440 episodes): 10 (dwa 5) is the default.
+FULL = Scale(20, 10, 5, 6000, (0.0, 500.0), 150.0, 30.0, 2000)
 QUICK = Scale(1, 1, 1, 6000, (0.0, 500.0), 20.0, 8.0, 20)
 
 
@@ -423,6 +427,8 @@ def write_page(page: Path, out: Path, made: dict[str, Any]) -> None:
     scale = Scale(**{**made["scale"], "delays_ms": tuple(made["scale"]["delays_ms"])})
     filters = made["filters"]
     careful, mapping1, closed, bench = read_parts(out)
+    grid = {run_key("simulated", p) for p in load_grid(out / GRID).points}
+    closed = [r for r in closed if r.get("key") in grid]
     drives = read_jsonl(out / CAREFUL_DRIVES)
     kept = [r for r in drives if r.get("log")]
     rel = os.path.relpath(out, page.parent)
@@ -586,12 +592,32 @@ def _made_now(args: argparse.Namespace, argv: Sequence[str], scale: Scale) -> di
     }
 
 
-def _clear(out: Path) -> None:
-    """A fresh run: this command's own files in OUT go (nothing else there is touched)."""
-    for name in (CAREFUL_DRIVES, CAREFUL, MAPPING, BENCH, GRID, MADE):
-        (out / name).unlink(missing_ok=True)
-    for name in ("runs.jsonl", "errors.log"):
-        (out / CLOSED / name).unlink(missing_ok=True)
+PARTS = ("careful", "mapping1", "closed loop", "bench")
+PART_FILES = {
+    "careful": (CAREFUL_DRIVES, CAREFUL),
+    "mapping1": (MAPPING,),
+    "closed loop": (GRID, f"{CLOSED}/runs.jsonl", f"{CLOSED}/errors.log"),
+    "bench": (BENCH,),
+}
+
+
+def stale_parts(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
+    """The parts whose results in OUT another scale made (same sources). The closed loop is
+    never stale: its runs are keyed by their whole run point, and the page reads only the
+    grid's own (a smaller scale reuses what a larger one ran)."""
+    stale = []
+    if (old["careful_worlds"], old["first_world"]) != (new["careful_worlds"], new["first_world"]):
+        stale.append("careful")
+    if old["bench_repeats"] != new["bench_repeats"]:
+        stale.append("bench")
+    return stale
+
+
+def _clear(out: Path, parts: Iterable[str]) -> None:
+    """This command's own files of ``parts`` in OUT go (nothing else there is touched)."""
+    for part in parts:
+        for name in PART_FILES[part]:
+            (out / name).unlink(missing_ok=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -613,15 +639,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         page = Path(args.page) if args.page else out.with_suffix(".md")
         made = _made_now(args, argv, scale)
         old = json.loads((out / MADE).read_text()) if (out / MADE).exists() else None
-        if args.reuse and old and (old["code"], old["scale"]) == (made["code"], made["scale"]):
+        if args.reuse and old and old["code"] == made["code"]:
             # The results' own history: when their making started, and its time so far.
             for key in ("started", "load_start", "wall_s"):
                 made[key] = old.get(key, made[key])
+            _clear(out, stale_parts(old["scale"], made["scale"]))
             _log(f"reusing the results in {out} (sources {made['code']})")
         else:
             if args.reuse and old:
-                _log("the results in OUT were made by other sources or another scale: rerunning")
-            _clear(out)
+                _log("the results in OUT were made by other sources: rerunning")
+            _clear(out, PARTS)
         (out / MADE).write_text(json.dumps(made, indent=2) + "\n", encoding="utf-8")
         cache = Path(args.cache) if args.cache else Path(tempfile.mkdtemp(prefix="intervention-"))
         if not args.cache:
