@@ -120,8 +120,8 @@ class Scale:
         return range(self.first_world, self.first_world + n)
 
 
-# 20 worlds per cell (dwa 10) did not finish in 45 min at --jobs 1 on the 2 shared cores at load
-# 10-12 (222 of 440 episodes): 10 (dwa 5) is the default.
+# 20 worlds per cell (dwa 10) had made 222 of its 440 episodes after 30 min at --jobs 1 on the 2
+# shared cores at load 10-12, with more than 45 min to go: 10 (dwa 5) is the default.
 FULL = Scale(20, 10, 5, 6000, (0.0, 500.0), 150.0, 30.0, 2000)
 QUICK = Scale(1, 1, 1, 6000, (0.0, 500.0), 20.0, 8.0, 20)
 
@@ -317,6 +317,15 @@ def read_parts(
     )
 
 
+def grid_runs(out: Path, rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The episodes of OUT/grid.toml, one per run point in grid order (the last line of a key
+    wins, as in ``egc-teleop experiment``'s resume; a larger scale's other episodes are left
+    out)."""
+    by_key = {r["key"]: r for r in rows if isinstance(r.get("key"), str)}
+    keys = [run_key("simulated", p) for p in load_grid(out / GRID).points]
+    return [by_key[k] for k in keys if k in by_key]
+
+
 # ---------------------------------------------------------------------------------------------
 # Running the parts (IO)
 
@@ -427,8 +436,7 @@ def write_page(page: Path, out: Path, made: dict[str, Any]) -> None:
     scale = Scale(**{**made["scale"], "delays_ms": tuple(made["scale"]["delays_ms"])})
     filters = made["filters"]
     careful, mapping1, closed, bench = read_parts(out)
-    grid = {run_key("simulated", p) for p in load_grid(out / GRID).points}
-    closed = [r for r in closed if r.get("key") in grid]
+    closed = grid_runs(out, closed)
     drives = read_jsonl(out / CAREFUL_DRIVES)
     kept = [r for r in drives if r.get("log")]
     rel = os.path.relpath(out, page.parent)
@@ -510,7 +518,8 @@ def write_page(page: Path, out: Path, made: dict[str, Any]) -> None:
         + (f". {made['note']}" if made.get("note") else ""),
         "- the MCAP logs are data and stay out of git: the command makes them again, the same "
         "bytes for the same seeds; `--reuse` keeps the results in "
-        f"`{rel}/` that the same sources and scale made and runs only what is missing.",
+        f"`{rel}/` that the same sources made (the careful drives and the bench at the same "
+        "scale, every episode of the grid) and runs only what is missing.",
         "",
     ]
     page.write_text("\n".join(lines), encoding="utf-8")
