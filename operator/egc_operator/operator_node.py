@@ -641,11 +641,28 @@ class OperatorNode:
         """Stopped (a --duration, a signal) with the deadman held: one last command releases it,
         so the robot holds because the operator let go, before the liveliness token goes (it
         would otherwise see an operator lost while driving)."""
+        frame_ns = None if self._camera is None else _camera_stamp(self._camera)
         with self._lock:
             stamp = self._sync.robot_now(self._clock())
+            shown = self._telemetry
+            synchronised = self._sync.synchronised
+        # Its ages on its own stamp, as every command's (not the last command's: older by up
+        # to a period, they would say the view was fresher than it was).
+        age = view_age_ms(stamp, synchronised, None if shown is None else shown.stamp_ns)
+        camera_age = None
+        if frame_ns is not None and age is not None:
+            camera_age = view_age_ms(stamp, synchronised, frame_ns)
         try:
             release = replace(
-                last, seq=last.seq + 1, stamp_ns=stamp, x=0.0, y=0.0, deadman=False, estop=False
+                last,
+                seq=last.seq + 1,
+                stamp_ns=stamp,
+                x=0.0,
+                y=0.0,
+                deadman=False,
+                estop=False,
+                view_age_ms=age,
+                camera_age_ms=camera_age,
             )
             self._publisher.put(release.encode())
             self.published += 1
