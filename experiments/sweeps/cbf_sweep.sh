@@ -23,3 +23,15 @@ reuse=()
   --worlds 500 --first-world 8000 --jobs "$jobs" --no-figures --quiet "${reuse[@]}"
 "$py" -m egc_app.cli experiment --grid experiments/grids/cbf-sweep-delay.toml \
   --out "$out/delay" --jobs "$jobs"
+# 3. dense clutter: cbf and the goal operator (it steers straight at the goal, into the clutter:
+#    cbf must stop it), held-out seeds 9100-9699, 90 s at most, stalled after 15 s standing still.
+suite=$out/clutter/suite.jsonl
+mkdir -p "$out/clutter"
+"$py" -c 'import json, sys
+for seed in range(9100, 9700):
+    print(json.dumps({"map": f"clutter:{seed}", "operator": "goal", "filter": "cbf", "profile": "jackal",
+                      "via": "goal", "max_time": 90, "stall_time": 15, "seed": seed}))' > "$suite"
+if [ ! -s "$out/clutter/runs.jsonl" ] || [ "$(wc -l < "$out/clutter/runs.jsonl")" -lt 600 ]; then
+  "$py" -m egc_app.cli episode --batch "$suite" --jobs "$jobs" --out "$out/clutter/runs.jsonl"
+fi
+"$py" experiments/sweeps/cbf_sweep_table.py "$out" > "${out%/}.md"
