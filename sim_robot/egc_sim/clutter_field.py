@@ -16,7 +16,7 @@ The seed picks one of two kinds:
   opening a short corridor of that width.
 
 Every world is *solvable*: a disc of the robot's half width + ``passage_margin_m`` links start
-and goal on the grid's distance transform (``random_field._solvable``'s check), and the
+and goal on the grid's distance transform (``field_world.linked``, as for the random worlds), and the
 straight start-goal line is blocked for that disc at least once, so a goal-seeking operator
 (``operators.GoalOperator``) must be helped through. Start on the left, goal on the right,
 both ``margin_m`` from the side walls so the robot can turn where it starts.
@@ -28,8 +28,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
+from egc_sim.field_world import clearance_m, field_world, linked
 from egc_sim.grid_world import World, WorldError
 from egc_sim.shapes import Circle, Polygon, Shape, rasterise
 
@@ -173,27 +173,6 @@ def _baffles(rng: np.random.Generator, p: ClutterParams) -> list[Shape]:
     return shapes
 
 
-def _clearance(occupancy: np.ndarray, resolution_m: float) -> np.ndarray:
-    return np.asarray(ndimage.distance_transform_edt(~occupancy)) * resolution_m
-
-
-def _cell(xy: tuple[float, float], resolution_m: float) -> tuple[int, int]:
-    return int(xy[1] / resolution_m), int(xy[0] / resolution_m)
-
-
-def linked(
-    clearance_m: np.ndarray,
-    radius_m: float,
-    start: tuple[float, float],
-    goal: tuple[float, float],
-    resolution_m: float,
-) -> bool:
-    """Whether a disc of ``radius_m`` can travel from start to goal on the clearance grid."""
-    labels, _ = ndimage.label(clearance_m >= radius_m)
-    a, b = labels[_cell(start, resolution_m)], labels[_cell(goal, resolution_m)]
-    return bool(a != 0 and a == b)
-
-
 def line_blocked(
     clearance_m: np.ndarray,
     radius_m: float,
@@ -231,20 +210,9 @@ def clutter_world(seed: int, params: ClutterParams | None = None) -> World:
         )
         inner = _cylinders(rng, p) if kind == "cylinders" else _baffles(rng, p)
         occupancy = rasterise([*_room(p), *inner], rows, cols, res, (0.0, 0.0))
-        clearance = _clearance(occupancy, res)
+        clearance = clearance_m(occupancy, res)
         if linked(clearance, p.passage_m, start, goal, res) and line_blocked(
             clearance, p.passage_m, start, goal, res
         ):
-            yaw = math.atan2(goal[1] - start[1], goal[0] - start[0])
-            return World(
-                name=f"clutter:{seed}",
-                occupancy=occupancy,
-                unknown=np.zeros_like(occupancy),
-                resolution_m=res,
-                origin_x_m=0.0,
-                origin_y_m=0.0,
-                start_pose=(start[0], start[1], yaw),
-                goal=goal,
-                goal_tolerance_m=p.goal_tolerance_m,
-            )
+            return field_world(f"clutter:{seed}", occupancy, res, start, goal, p.goal_tolerance_m)
     raise WorldError(f"no solvable clutter world found for seed {seed} in {_ATTEMPTS} attempts")

@@ -16,8 +16,8 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import ndimage
 
+from egc_sim.field_world import clearance_m, field_world, linked
 from egc_sim.grid_world import World, WorldError
 from egc_sim.shapes import Circle, Polygon, Segment, Shape, rasterise
 
@@ -77,20 +77,6 @@ def _walls(w: float, h: float) -> list[Shape]:
     ]
 
 
-def _solvable(
-    occupancy: np.ndarray,
-    p: RandomFieldParams,
-    start: tuple[float, float],
-    goal: tuple[float, float],
-) -> bool:
-    clearance = ndimage.distance_transform_edt(~occupancy) * p.resolution_m
-    passable = clearance >= p.passage_m
-    labels, _ = ndimage.label(passable)
-    cells = [(int(y / p.resolution_m), int(x / p.resolution_m)) for x, y in (start, goal)]
-    ids = [labels[r, c] for r, c in cells]
-    return bool(ids[0] != 0 and ids[0] == ids[1])
-
-
 def random_world(seed: int, params: RandomFieldParams | None = None) -> World:
     """A solvable random field for ``seed`` (module docstring); WorldError if none is found."""
     p = params or RandomFieldParams()
@@ -120,17 +106,6 @@ def random_world(seed: int, params: RandomFieldParams | None = None) -> World:
             shapes.append(_obstacle(rng, x, y, p))
             placed += 1
         occupancy = rasterise(shapes, rows, cols, res, (0.0, 0.0))
-        if _solvable(occupancy, p, start, goal):
-            yaw = math.atan2(goal[1] - start[1], goal[0] - start[0])
-            return World(
-                name=f"random:{seed}",
-                occupancy=occupancy,
-                unknown=np.zeros_like(occupancy),
-                resolution_m=res,
-                origin_x_m=0.0,
-                origin_y_m=0.0,
-                start_pose=(start[0], start[1], yaw),
-                goal=goal,
-                goal_tolerance_m=p.goal_tolerance_m,
-            )
+        if linked(clearance_m(occupancy, res), p.passage_m, start, goal, res):
+            return field_world(f"random:{seed}", occupancy, res, start, goal, p.goal_tolerance_m)
     raise WorldError(f"no solvable random world found for seed {seed} in {_ATTEMPTS} attempts")

@@ -13,9 +13,9 @@ from egc_sim.clutter_field import (
     ClutterParams,
     clutter_world,
     line_blocked,
-    linked,
 )
 from egc_sim.collision import FootprintChecker
+from egc_sim.field_world import linked
 from egc_sim.grid_world import World
 from egc_sim.worlds import WorldError, builtin_names, load_world
 from scipy import ndimage
