@@ -110,7 +110,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 import numpy.typing as npt
-from egc_common.footprint import Footprint, closest_boundary_points, signed_distance
+from egc_common.footprint import Footprint, closest_boundary_xy, signed_distance
 from egc_common.profiles import RobotProfile
 from egc_common.scan import MAX_ABS_COORD_M, ObstaclePoints, obstacle_points
 
@@ -374,12 +374,8 @@ def cbf_filter(
         )  # fmt: skip
     rounds_total = 0
     for attempt in range(_MAX_COVERS + 1):
-        a_all = np.concatenate((rows.a, rows.gain * rows.a))  # (S) then (C)
-        b_all = np.concatenate((rows.b, rows.gain * rows.b))
-        c_all = np.concatenate((rows.c_state, rows.c_cmd))
-        short = np.concatenate((rows.short_state, rows.short_cmd))
         v_out, w_out, rounds, case, working = _solve(
-            a_all, b_all, c_all, short, v0, w0, sv, sw, profile, params.points_considered
+            rows.a, rows.b, rows.c, rows.short, v0, w0, sv, sw, profile, params.points_considered
         )
         rounds_total += rounds
         if case is not CbfCase.SOLVED or (cover[0] <= v_out <= cover[1] and abs(w_out) <= cover[2]):
@@ -399,7 +395,7 @@ def cbf_filter(
     # A stop computed as the projection onto a line through the origin comes out as 1e-17.
     v_out = 0.0 if abs(v_out) <= _SAME else v_out
     w_out = 0.0 if abs(w_out) <= _SAME else w_out
-    found = _Working(rows, a_all, b_all, c_all, working, v_out, w_out)
+    found = _Working(rows, working, v_out, w_out)
     modified = bool(v_out != v0 or w_out != w0)
     return CbfResult(
         v_out, w_out, modified, case, params.margin_m, tau, k_now, rows.n, rounds_total, found,
@@ -412,49 +408,44 @@ class _Working:
     """The solver's rows and answer, kept for ``CbfResult.tight``."""
 
     rows: _Rows
-    a: FloatArray  # every row, (S) then (C)
-    b: FloatArray
-    c: FloatArray
     working: IntArray  # the rows the solver took (each violated by the command or an answer)
     v: float
     w: float
 
     def tight(self) -> TightRows:
-        wc = self.c[self.working]
-        gap = self.a[self.working] * self.v + self.b[self.working] * self.w - wc
-        violated = self.a[self.working] * self.rows.v0 + self.b[self.working] * self.rows.w0 < wc
+        a, b, c = self.rows.a, self.rows.b, self.rows.c
+        wc = c[self.working]
+        gap = a[self.working] * self.v + b[self.working] * self.w - wc
+        violated = a[self.working] * self.rows.v0 + b[self.working] * self.rows.w0 < wc
         tight = self.working[violated & (np.abs(gap) <= 1e-7 * (1.0 + np.abs(wc)))]
         tight = tight[:_MAX_REPORTED]
         rows, n = self.rows, self.rows.n
         point = tight % n
         state = tight < n
         return TightRows(
-            rows.x[point], rows.y[point], self.a[tight], self.b[tight], self.c[tight],
+            rows.x[point], rows.y[point], a[tight], b[tight], c[tight],
             rows.sd[point], rows.margins(point, state), state, point >= rows.n_scan,
         )  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True, eq=False)
 class _Rows:
-    """Every point's two half-planes, per point: a = -n_x, b, and c for (S) and (C)."""
+    """Every point's two half-planes a v + b w >= c: every (S) row, then every (C) row."""
 
     x: FloatArray
     y: FloatArray
     n_scan: int  # the first n_scan points are scan points, the rest unseen edges
     sd: FloatArray
-    a: FloatArray
+    a: FloatArray  # (S) a = -n_x of each point, then (C): the same times 1 + alpha K omega
     b: FloatArray
-    gain: FloatArray  # (C)'s rows are (S)'s times this
-    c_state: FloatArray
-    c_cmd: FloatArray
+    c: FloatArray
+    short: FloatArray  # by how much the command falls short of each row (> 0: violated)
     m_state_extra: FloatArray | None  # omega K u^+ at the current speed (None: standing)
     omega_cmd: FloatArray  # omega and u at the commanded speed (its margin, for the report)
     u_ref: FloatArray
     k_cmd: float
     margin_m: float
     worst_for_command: float  # the command's largest shortfall over every row
-    short_state: FloatArray  # by how much the command falls short of each (S) row, (C) row
-    short_cmd: FloatArray
     nearest: float
     v0: float  # the command the rows were checked against
     w0: float
@@ -515,7 +506,7 @@ class _Scene:
                 if pts.count == 0:
                     return None
                 index = pts.prepared_index
-                r2_min = index.r2_sorted[0] if index is not None else float(pts.r2.min())
+                r2_min = index.r2_sorted[0] if index is not None else _min(pts.r2)
                 if r2_min > (q_max + max(quiet_f, quiet_b)) ** 2:
                     return None
         x = y = _EMPTY
@@ -527,8 +518,7 @@ class _Scene:
                 near = pts.r2 <= far * far
             else:
                 near = pts.r2 <= np.where(pts.x > split, rf * rf, rb * rb)
-            if near.any():
-                x, y = pts.x[near], pts.y[near]
+            x, y = pts.x[near], pts.y[near]
         unseen = [  # (direction, how far it saw, the footprint's extent that way)
             (sign, seen, extent)
             for sign, seen, extent, room in (
@@ -559,10 +549,14 @@ class _Scene:
     def rows(
         self, x: FloatArray, y: FloatArray, n_scan: int, unseen: list[tuple[float, float, float]]
     ) -> _Rows:
-        """The half-planes of the points (module docstring)."""
-        p, alpha = self.params, self.params.alpha_per_s
+        """The half-planes of the points (module docstring): (S) rows, then (C) rows.
+
+        On the few dozen points in reach numpy's cost per call, not per element, is the time,
+        so each quantity is computed once and written where the solver reads it (``out=``), and
+        the creep's nine calls are skipped when no row can creep."""
+        p, alpha, profile = self.params, self.params.alpha_per_s, self.profile
         v0, w0, v_now, w_now = self.v0, self.w0, self.v_now, self.w_now
-        sd, nx, ny, qx, qy = _geometry(x, y, self.profile.footprint)
+        sd, nx, ny, qx, qy, nearest = _geometry(x, y, profile.footprint)
         if unseen:
             # A wall across the axis where the laser stopped seeing, met first by the
             # footprint's front (back) extent: n = (+-1, 0), q = (front or back, 0).
@@ -573,17 +567,30 @@ class _Scene:
             sd, nx, ny, qx, qy = (
                 np.concatenate((g, e)) for g, e in zip((sd, nx, ny, qx, qy), extra[2:], strict=True)
             )
-        b = nx * qy - ny * qx
+            nearest = _min(sd)
+        n = sd.size
+        a_all, b_all, c_all, short = np.empty((4, 2 * n))
+        a, b, c_state = a_all[:n], b_all[:n], c_all[:n]
+        np.negative(nx, out=a)
+        np.subtract(nx * qy, ny * qx, out=b)
         # Approach speeds u = nx v - b w under the command and under the current motion, and
         # how squarely each point lies in that motion's path (omega).
         u_ref = nx * v0 - b * w0 if w0 else nx * v0
         omega_cmd, up_ref = _omega(u_ref, v0, w0, qx, qy)
-        reach_u = np.abs(nx) * self.profile.v_max_mps + np.abs(b) * self.profile.w_max_radps
-        flank = np.maximum(1.0 - reach_u / (CREEP_BELOW * self.profile.v_max_mps), 0.0)
-        creep = (CREEP_PER_S * flank) * np.maximum(sd, 0.0)
-        alpha_room = np.maximum(alpha * (sd - p.margin_m), creep)  # -c of (C)
+        room = sd - p.margin_m
+        creep: FloatArray | float
+        if nearest > 0.0 and _min(np.abs(nx)) >= CREEP_BELOW:
+            # No row creeps: |n_x| >= CREEP_BELOW makes reach_u >= CREEP_BELOW v_max below
+            # (rounding is monotonic), so every flank is 0 and, with every sd > 0, every creep
+            # +0.0: the general form's numbers without its nine numpy calls.
+            creep = 0.0
+        else:
+            reach_u = np.abs(nx) * profile.v_max_mps + np.abs(b) * profile.w_max_radps
+            flank = np.maximum(1.0 - reach_u / (CREEP_BELOW * profile.v_max_mps), 0.0)
+            creep = (CREEP_PER_S * flank) * np.maximum(sd, 0.0)
+        alpha_room = np.maximum(alpha * room, creep)  # -c of (C)
+        np.negative(alpha_room, out=c_all[n:])
         m_extra: FloatArray | None = None
-        c_state = c_cmd = -alpha_room
         if v_now or w_now:
             if v_now == v0 and w_now == w0:  # a replay, a steady cycle: the same speeds twice
                 omega_now, up_now = omega_cmd, up_ref
@@ -591,15 +598,18 @@ class _Scene:
                 u_now = nx * v_now - b * w_now
                 omega_now, up_now = _omega(u_now, v_now, w_now, qx, qy)
             m_extra = (omega_now * self.k_now) * up_now
-            c_state = -np.maximum(alpha * (sd - p.margin_m - m_extra), creep)
+            np.negative(np.maximum(alpha * (room - m_extra), creep), out=c_state)
+        else:
+            c_state[:] = c_all[n:]
         gain = 1.0 + (alpha * self.k_cmd) * omega_cmd  # (C): u gain <= max(alpha room, creep)
+        np.multiply(gain, a, out=a_all[n:])
+        np.multiply(gain, b, out=b_all[n:])
         # The command falls short of row i by c + u_ref (S), c + gain u_ref (C), if positive.
-        short_state = c_state + u_ref
-        short_cmd = gain * u_ref - alpha_room
-        worst = max(float(short_state.max()), float(short_cmd.max()))
+        np.add(c_state, u_ref, out=short[:n])
+        np.subtract(gain * u_ref, alpha_room, out=short[n:])
         return _Rows(
-            x, y, n_scan, sd, -nx, b, gain, c_state, c_cmd, m_extra, omega_cmd, u_ref,
-            self.k_cmd, p.margin_m, worst, short_state, short_cmd, float(sd.min()), v0, w0,
+            x, y, n_scan, sd, a_all, b_all, c_all, short, m_extra, omega_cmd, u_ref, self.k_cmd,
+            p.margin_m, _max(short), nearest, v0, w0,
         )  # fmt: skip
 
 
@@ -621,26 +631,58 @@ def _extents(fp: Footprint) -> tuple[float, float, float]:
     return x0, x1, fp.reach_m
 
 
+@functools.lru_cache(maxsize=32)
+def _inside_bound(fp: Footprint) -> float:
+    """A distance from a polygon's edge beyond which no point is inside it: half the shorter
+    side of its bounding box (a point inside is nearer the box's edge than that, and the box
+    holds the polygon), widened far beyond any rounding."""
+    x0, x1, y0, y1 = fp.bounds
+    return 0.5 * min(x1 - x0, y1 - y0) * (1.0 + 1e-9) + 1e-9
+
+
+def _min(a: FloatArray) -> float:
+    """min of a non-empty array (``ndarray.min`` without its Python wrapper)."""
+    return float(np.minimum.reduce(a))
+
+
+def _max(a: FloatArray) -> float:
+    return float(np.maximum.reduce(a))
+
+
 def _geometry(
     x: FloatArray, y: FloatArray, fp: Footprint
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float]:
     """Signed distance sd, unit normal (nx, ny) and the footprint's nearest point (qx, qy) of
-    each point. The normal is the gradient of sd: from q towards the point outside, from the
-    point towards q inside (the outward normal of the nearest edge)."""
+    each point, and min(sd) (inf for no point). The normal is the gradient of sd: from q
+    towards the point outside, from the point towards q inside (the outward normal of the
+    nearest edge)."""
+    if x.size == 0:
+        return _EMPTY, _EMPTY, _EMPTY, _EMPTY, _EMPTY, math.inf
     box = fp.centred_box
     if box is not None:
         return _box_geometry(x, y, *box)
     if fp.is_disc:
         r = np.sqrt(x * x + y * y)
-        centre = r <= 0.0
-        safe = np.where(centre, 1.0, r)
-        nx, ny = np.where(centre, 1.0, x / safe), np.where(centre, 0.0, y / safe)
         radius = fp.radius_m
-        return r - radius, nx, ny, radius * nx, radius * ny
-    qx, qy = closest_boundary_points(fp, x, y)
+        sd = r - radius
+        nearest = _min(sd)
+        if nearest > -radius:  # no point at the centre (r = 0 would give sd = -radius)
+            nx, ny = x / r, y / r
+        else:
+            centre = r <= 0.0
+            safe = np.where(centre, 1.0, r)
+            nx, ny = np.where(centre, 1.0, x / safe), np.where(centre, 0.0, y / safe)
+        return sd, nx, ny, radius * nx, radius * ny, nearest
+    q = closest_boundary_xy(fp, np.column_stack((x, y)))
+    qx, qy = q[:, 0], q[:, 1]
     dx, dy = x - qx, y - qy
     dist = np.sqrt(dx * dx + dy * dy)
-    sd = np.where(signed_distance(fp, x, y) < 0.0, -dist, dist)
+    candidates = dist <= _inside_bound(fp)
+    if not candidates.any():  # every point outside and off the edge: sd = dist, n = d / sd
+        return dist, dx / dist, dy / dist, qx, qy, _min(dist)
+    inside = np.zeros(dist.size, dtype=np.bool_)
+    inside[candidates] = signed_distance(fp, x[candidates], y[candidates]) < 0.0
+    sd = np.where(inside, -dist, dist)
     on_edge = dist <= 0.0
     safe = np.where(on_edge, 1.0, dist)
     sign = np.where(sd < 0.0, -1.0, 1.0)  # inside: towards the edge, i.e. outwards
@@ -648,22 +690,23 @@ def _geometry(
     if on_edge.any():  # on the edge itself: away from the origin, as outwards as any
         r = np.maximum(np.sqrt(x * x + y * y), _SAME)
         nx, ny = np.where(on_edge, x / r, nx), np.where(on_edge, y / r, ny)
-    return sd, nx, ny, qx, qy
+    return sd, nx, ny, qx, qy, _min(sd)
 
 
 def _box_geometry(
     x: FloatArray, y: FloatArray, half_l: float, half_w: float
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float]:
     """``_geometry`` of the rectangle |x| <= half_l, |y| <= half_w in closed form."""
     qx = np.minimum(np.maximum(x, -half_l), half_l)
     qy = np.minimum(np.maximum(y, -half_w), half_w)
     dx = x - qx
     dy = y - qy
     sd = np.sqrt(dx * dx + dy * dy)
-    inside = sd <= 0.0
-    if not inside.any():
+    nearest = _min(sd)
+    if nearest > 0.0:  # no point inside
         inv = 1.0 / sd
-        return sd, dx * inv, dy * inv, qx, qy
+        return sd, dx * inv, dy * inv, qx, qy, nearest
+    inside = sd <= 0.0
     xi, yi = x[inside], y[inside]
     to_front, to_back = half_l - xi, xi + half_l
     to_left, to_right = half_w - yi, yi + half_w
@@ -675,7 +718,7 @@ def _box_geometry(
     qy[inside] = np.where(ey != 0.0, ey * half_w, yi)
     sd[inside] = -depth
     norm = np.where(inside, 1.0, sd)
-    return sd, dx / norm, dy / norm, qx, qy
+    return sd, dx / norm, dy / norm, qx, qy, _min(sd)
 
 
 def _omega(
@@ -688,15 +731,19 @@ def _omega(
     if w == 0.0:
         if v == 0.0:
             return np.zeros(u.size), up
-        cos = up / abs(v)  # u = nx v <= |v|: no overflow, even for a subnormal v
-        c2 = cos * cos
+        c2 = up / abs(v)  # cos: u = nx v <= |v|, no overflow, even for a subnormal v
+        c2 *= c2
     else:
         gx = v - w * qy
+        gx *= gx
         gy = w * qx
-        c2 = up * up / np.maximum(gx * gx + gy * gy, _SAME)
-    c2 = np.minimum(c2, 1.0)
-    out: FloatArray = c2 * c2
-    return out, up
+        gy *= gy
+        gx += gy
+        c2 = up * up
+        c2 /= np.maximum(gx, _SAME, out=gx)
+    np.minimum(c2, 1.0, out=c2)
+    c2 *= c2
+    return c2, up
 
 
 def _solve(
@@ -716,13 +763,19 @@ def _solve(
     answer, the rounds, the case and the working set. ``short``: by how much the command falls
     short of each row (m/s, > 0: violated): the order in which rows join, not the answer."""
     working = _most_violated(short, k)
+    # The rows scaled to the Euclidean problem, as Python floats (each round picks a few).
+    gx, gy, e = (a * (1.0 / sv)).tolist(), (b * (1.0 / sw)).tolist(), c.tolist()
     for rounds in range(1, _MAX_ROUNDS + 1):
-        found = _project(a[working], b[working], c[working], v0, w0, sv, sw, profile)
+        rows = working.tolist()
+        found = _project_scaled(
+            [gx[i] for i in rows], [gy[i] for i in rows], [e[i] for i in rows],
+            v0, w0, sv, sw, profile,
+        )  # fmt: skip
         if found is None:
             break
         v, w = found
         short = c - (a * v + b * w)
-        if float(short.max()) <= _TOL:
+        if _max(short) <= _TOL:
             return v, w, rounds, CbfCase.SOLVED, working
         add = _most_violated(short, k)
         working = np.concatenate((working, add))
@@ -732,7 +785,7 @@ def _solve(
 
 def _most_violated(short: FloatArray, k: int) -> IntArray:
     """Indices of the (at most) ``k`` rows with the largest ``short`` above the tolerance."""
-    bad = np.flatnonzero(short > _TOL)
+    bad: IntArray = (short > _TOL).nonzero()[0]
     if bad.size > k:
         bad = bad[np.argpartition(-short[bad], k)[:k]]
     return bad
@@ -749,12 +802,24 @@ def _project(
     profile: RobotProfile,
 ) -> tuple[float, float] | None:
     """The closest point to (v0, w0) (weighted) in the polygon of the rows and the box, or None
-    when none of the candidates is feasible (empty polygon, through rounding). The box's rows
-    join only when the answer without them leaves it."""
+    when none of the candidates is feasible (empty polygon, through rounding)."""
+    gx, gy = (a * (1.0 / sv)).tolist(), (b * (1.0 / sw)).tolist()
+    return _project_scaled(gx, gy, c.tolist(), v0, w0, sv, sw, profile)
+
+
+def _project_scaled(
+    gx: list[float],
+    gy: list[float],
+    e: list[float],
+    v0: float,
+    w0: float,
+    sv: float,
+    sw: float,
+    profile: RobotProfile,
+) -> tuple[float, float] | None:
+    """``_project`` of rows already scaled (gx = a / sv, gy = b / sw, e = c; the lists are
+    extended). The box's rows join only when the answer without them leaves it."""
     vm, wm = profile.v_max_mps, profile.w_max_radps
-    gx = (a * (1.0 / sv)).tolist()
-    gy = (b * (1.0 / sw)).tolist()
-    e = c.tolist()
     z0x, z0y = sv * v0, sw * w0
     found = _nearest_in(gx, gy, e, z0x, z0y)
     if found is not None and abs(found[0]) <= sv * vm and abs(found[1]) <= sw * wm:
