@@ -73,7 +73,10 @@ are sufficient, so the projection onto a single violated line, when feasible, is
 otherwise the answer is a vertex of two lines, one of which the command violates (else KKT puts
 the optimum at the command), the feasible one nearest the command. The rows are built for all
 points at once (numpy); the few the solver works on are projected in plain Python, cheaper than
-numpy's per-call cost at that size.
+numpy's per-call cost at that size. That cost, not the arithmetic, is the filter's time on the
+few dozen points in reach (``bench/bench_filter.py``), so each quantity is one numpy call written
+where the solver reads it, the creep's calls are skipped when no row can creep, and a polygon's
+inside test runs only for points near its edge: the numbers are the formulas' own, bit for bit.
 
 Which points enter: a point whose barrier no command of a "cover" (a range of v and |w|) can
 violate is left out, by its distance from the footprint alone. The first cover runs from a
@@ -107,6 +110,7 @@ import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -327,8 +331,12 @@ def cbf_filter(
     """Filter one command; see the module docstring."""
     tau = params.tau_s if tau_s is None else tau_s
     v0, w0, v_now, w_now = v_ref_mps, w_ref_radps, v_now_mps, w_now_radps
-    if not all(abs(x) <= MAX_ABS_COORD_M for x in (v0, w0, v_now, w_now)) or not (
-        0.0 <= tau <= MAX_ABS_COORD_M
+    if not (
+        abs(v0) <= MAX_ABS_COORD_M
+        and abs(w0) <= MAX_ABS_COORD_M
+        and abs(v_now) <= MAX_ABS_COORD_M
+        and abs(w_now) <= MAX_ABS_COORD_M
+        and 0.0 <= tau <= MAX_ABS_COORD_M
     ):
         return _stop(CbfCase.INVALID_INPUT, v0, w0, params, 0.0, 0.0)
 
@@ -345,7 +353,7 @@ def cbf_filter(
 
     sv = math.sqrt(params.weight_v) / profile.v_max_mps  # z = (sv v, sw w): Euclidean QP
     sw = math.sqrt(params.weight_w) / profile.w_max_radps
-    scene = _Scene(profile, params, v0, w0, v_now, w_now, k_now, k_cmd)
+    scene = _Scene(profile, params, v0, w0, v_now, w_now, k_now, k_cmd, *_shape(profile.footprint))
     # Rows are built for the points some command within a "cover" could approach too fast:
     # first the command's own (from a standstill to it: slowing down needs no more points; a
     # little reversing and turning added), then, if the answer leaves the cover, one holding
@@ -403,8 +411,7 @@ def cbf_filter(
     )  # fmt: skip
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class _Working:
+class _Working(NamedTuple):
     """The solver's rows and answer, kept for ``CbfResult.tight``."""
 
     rows: _Rows
@@ -428,8 +435,7 @@ class _Working:
         )  # fmt: skip
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class _Rows:
+class _Rows(NamedTuple):
     """Every point's two half-planes a v + b w >= c: every (S) row, then every (C) row."""
 
     x: FloatArray
@@ -465,9 +471,10 @@ class _Rows:
         return out
 
 
-@dataclass(frozen=True, slots=True)
-class _Scene:
-    """One cycle's settings, shared by the command's check and the solve."""
+class _Scene(NamedTuple):
+    """One cycle's settings, shared by the command's check and the solve. (Like ``_Rows`` and
+    ``_Working``, a named tuple: built on every call, it costs a fraction of a frozen
+    dataclass.)"""
 
     profile: RobotProfile
     params: CbfParams
@@ -477,6 +484,10 @@ class _Scene:
     w_now: float
     k_now: float
     k_cmd: float
+    x_back: float  # the footprint's extents along x (m), its reach from {R}'s origin (m)
+    x_front: float
+    q_max: float
+    ahead_from: float | None  # ``_ahead_from``
 
     def points_in_reach(
         self,
@@ -495,7 +506,7 @@ class _Scene:
         with u the largest approach. Points ahead (``_ahead_from``) are approached by forward
         motion and turning only, the others by reversing and turning only.
         """
-        x_back, x_front, q_max = _extents(self.profile.footprint)
+        x_back, x_front, q_max = self.x_back, self.x_front, self.q_max
         reach_f, reach_b = self._reach_sd(v_range, w_bound)
         if quiet is not None:
             quiet_f, quiet_b = self._reach_sd((quiet[0], quiet[0]), quiet[1])
@@ -512,7 +523,7 @@ class _Scene:
         x = y = _EMPTY
         if pts.count:
             rf, rb = q_max + reach_f, q_max + reach_b
-            split = _ahead_from(self.profile.footprint)
+            split = self.ahead_from
             if rf == rb or split is None:
                 far = max(rf, rb)
                 near = pts.r2 <= far * far
@@ -534,7 +545,7 @@ class _Scene:
     def _reach_sd(self, v_range: tuple[float, float], w_bound: float) -> tuple[float, float]:
         """How far from the footprint (m) a point ahead and a point behind can have its barrier
         violated by a command with v in ``v_range`` and |w| <= ``w_bound``."""
-        p, alpha, q_max = self.params, self.params.alpha_per_s, _extents(self.profile.footprint)[2]
+        p, alpha, q_max = self.params, self.params.alpha_per_s, self.q_max
         turn = q_max * w_bound
         turn_now = q_max * abs(self.w_now)
         u_f = max(v_range[1], 0.0) + turn
@@ -569,15 +580,18 @@ class _Scene:
             )
             nearest = _min(sd)
         n = sd.size
-        a_all, b_all, c_all, short = np.empty((4, 2 * n))
-        a, b, c_state = a_all[:n], b_all[:n], c_all[:n]
+        # Every (S) row, then every (C) row: a = -n_x, b, c, and the command's approach speed
+        # u_ref (S) and gain u_ref (C), written in place (numpy's cost is per call here).
+        a_all, b_all, c_all, u_all = np.empty((4, 2 * n))
+        a, b, u_ref = a_all[:n], b_all[:n], u_all[:n]
         np.negative(nx, out=a)
         np.subtract(nx * qy, ny * qx, out=b)
         # Approach speeds u = nx v - b w under the command and under the current motion, and
         # how squarely each point lies in that motion's path (omega).
-        u_ref = nx * v0 - b * w0 if w0 else nx * v0
+        np.multiply(nx, v0, out=u_ref)
+        if w0:
+            u_ref -= b * w0
         omega_cmd, up_ref = _omega(u_ref, v0, w0, qx, qy)
-        room = sd - p.margin_m
         creep: FloatArray | float
         if nearest > 0.0 and _min(np.abs(nx)) >= CREEP_BELOW:
             # No row creeps: |n_x| >= CREEP_BELOW makes reach_u >= CREEP_BELOW v_max below
@@ -588,8 +602,10 @@ class _Scene:
             reach_u = np.abs(nx) * profile.v_max_mps + np.abs(b) * profile.w_max_radps
             flank = np.maximum(1.0 - reach_u / (CREEP_BELOW * profile.v_max_mps), 0.0)
             creep = (CREEP_PER_S * flank) * np.maximum(sd, 0.0)
-        alpha_room = np.maximum(alpha * room, creep)  # -c of (C)
-        np.negative(alpha_room, out=c_all[n:])
+        # c = -max(alpha (sd - margin - m_extra), creep): m_extra = omega K u^+ at the current
+        # speed for (S) (first row), none for (C) (second row).
+        c2 = c_all.reshape(2, n)
+        room = np.subtract(sd, p.margin_m, out=c2[1])
         m_extra: FloatArray | None = None
         if v_now or w_now:
             if v_now == v0 and w_now == w0:  # a replay, a steady cycle: the same speeds twice
@@ -598,15 +614,18 @@ class _Scene:
                 u_now = nx * v_now - b * w_now
                 omega_now, up_now = _omega(u_now, v_now, w_now, qx, qy)
             m_extra = (omega_now * self.k_now) * up_now
-            np.negative(np.maximum(alpha * (room - m_extra), creep), out=c_state)
+            np.subtract(room, m_extra, out=c2[0])
         else:
-            c_state[:] = c_all[n:]
+            c2[0] = room
+        c2 *= alpha
+        np.maximum(c2, creep, out=c2)
+        np.negative(c2, out=c2)
         gain = 1.0 + (alpha * self.k_cmd) * omega_cmd  # (C): u gain <= max(alpha room, creep)
         np.multiply(gain, a, out=a_all[n:])
         np.multiply(gain, b, out=b_all[n:])
-        # The command falls short of row i by c + u_ref (S), c + gain u_ref (C), if positive.
-        np.add(c_state, u_ref, out=short[:n])
-        np.subtract(gain * u_ref, alpha_room, out=short[n:])
+        np.multiply(gain, u_ref, out=u_all[n:])
+        # The command falls short of each row by c + u (if positive).
+        short = c_all + u_all
         return _Rows(
             x, y, n_scan, sd, a_all, b_all, c_all, short, m_extra, omega_cmd, u_ref, self.k_cmd,
             p.margin_m, _max(short), nearest, v0, w0,
@@ -625,10 +644,11 @@ def _ahead_from(fp: Footprint) -> float | None:
 
 
 @functools.lru_cache(maxsize=32)
-def _extents(fp: Footprint) -> tuple[float, float, float]:
-    """(x_back, x_front, reach) of a footprint (numpy reductions: once per shape, not per call)."""
+def _shape(fp: Footprint) -> tuple[float, float, float, float | None]:
+    """(x_back, x_front, reach, ``_ahead_from``) of a footprint (numpy reductions: once per
+    shape, not per call)."""
     x0, x1, _, _ = fp.bounds
-    return x0, x1, fp.reach_m
+    return x0, x1, fp.reach_m, _ahead_from(fp)
 
 
 @functools.lru_cache(maxsize=32)
@@ -787,7 +807,9 @@ def _most_violated(short: FloatArray, k: int) -> IntArray:
     """Indices of the (at most) ``k`` rows with the largest ``short`` above the tolerance."""
     bad: IntArray = (short > _TOL).nonzero()[0]
     if bad.size > k:
-        bad = bad[np.argpartition(-short[bad], k)[:k]]
+        if bad.size == short.size:  # every row: the same partition without the indexing
+            return (-short).argpartition(k)[:k]
+        bad = bad[(-short[bad]).argpartition(k)[:k]]
     return bad
 
 
@@ -838,10 +860,11 @@ def _nearest_in(
     candidate is feasible. A few rows (the working set): plain Python beats numpy's per-call
     cost here."""
     rows = [i for i in range(len(gx)) if gx[i] * gx[i] + gy[i] * gy[i] > _SAME]
-    tol = [_TOL * (1.0 + abs(v)) for v in e]
+    # (gx, gy, e, tolerance) of each row, for the feasibility tests.
+    checks = [(gx[i], gy[i], e[i], -_TOL * (1.0 + abs(e[i]))) for i in rows]
 
     def feasible(zx: float, zy: float) -> bool:
-        return all(gx[i] * zx + gy[i] * zy - e[i] >= -tol[i] for i in rows)
+        return all(ax * zx + ay * zy - ae >= low for ax, ay, ae, low in checks)
 
     bad = [i for i in rows if gx[i] * z0x + gy[i] * z0y - e[i] < 0.0]
     if not bad:
