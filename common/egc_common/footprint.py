@@ -62,9 +62,13 @@ class Footprint:
 
     vertices_m: tuple[Vertex, ...] = ()
     radius_m: float = 0.0
-    # Derived once (not compared): edges as arrays, and the centred-rectangle half sizes.
+    # Derived once (not compared): the vertices as an array, the centred-rectangle half sizes,
+    # and the edges (``_edges``: starts (N, 2), vectors (N, 2), squared lengths (N,)).
     _xy: FloatArray = field(init=False, repr=False, compare=False, hash=False)
     _box: tuple[float, float] | None = field(init=False, repr=False, compare=False, hash=False)
+    _edges: tuple[FloatArray, FloatArray, FloatArray] | None = field(
+        init=False, repr=False, compare=False, hash=False
+    )
 
     def __post_init__(self) -> None:
         if self.vertices_m and self.radius_m:
@@ -80,6 +84,7 @@ class Footprint:
             object.__setattr__(self, "radius_m", float(r))
             object.__setattr__(self, "_xy", np.empty((0, 2)))
             object.__setattr__(self, "_box", None)
+            object.__setattr__(self, "_edges", None)
             return
         xy = _checked_vertices(self.vertices_m)
         if _signed_area(xy) < 0.0:
@@ -88,6 +93,7 @@ class Footprint:
         object.__setattr__(self, "vertices_m", tuple((float(x), float(y)) for x, y in xy))
         object.__setattr__(self, "_xy", xy)
         object.__setattr__(self, "_box", _centred_box(xy))
+        object.__setattr__(self, "_edges", _edge_arrays(xy))
 
     # -- constructors -------------------------------------------------------------------------
 
@@ -246,15 +252,29 @@ def closest_boundary_points(
         bx: FloatArray = fp.radius_m * ux
         by: FloatArray = fp.radius_m * uy
         return bx, by
-    v = fp.vertices
-    x0, y0 = v[:, 0], v[:, 1]
-    ex, ey = np.roll(x0, -1) - x0, np.roll(y0, -1) - y0
-    dx, dy = x[:, None] - x0, y[:, None] - y0
-    t = np.clip((dx * ex + dy * ey) / (ex * ex + ey * ey), 0.0, 1.0)
-    cx, cy = x0 + t * ex, y0 + t * ey
-    k = np.argmin((x[:, None] - cx) ** 2 + (y[:, None] - cy) ** 2, axis=1)
-    rows = np.arange(x.size)
-    return cx[rows, k], cy[rows, k]
+    q = closest_boundary_xy(fp, np.column_stack((x, y)))
+    return q[:, 0], q[:, 1]
+
+
+def closest_boundary_xy(fp: Footprint, xy: FloatArray) -> FloatArray:
+    """``closest_boundary_points`` of a polygon's (N, 2) points as (N, 2): the nearest point of
+    each edge (the projection clamped to the edge), the nearest of those. x and y ride along
+    one axis, so each step is one numpy call (a filter calls this on a few dozen points per
+    command, where numpy's per-call cost is most of the time)."""
+    edges = fp._edges
+    if edges is None:
+        raise ValueError("closest_boundary_xy takes a polygon footprint")
+    start, edge, length2 = edges
+    d = xy[:, None, :] - start  # (M, N, 2): point minus edge start
+    de = d * edge
+    # The projection's parameter along each edge, clamped to it (np.clip's min(max()), cheaper).
+    t = np.minimum(np.maximum((de[..., 0] + de[..., 1]) / length2, 0.0), 1.0)
+    c = start + t[..., None] * edge  # nearest point of each edge
+    r = xy[:, None, :] - c
+    r *= r
+    k = np.argmin(r[..., 0] + r[..., 1], axis=1)
+    out: FloatArray = c[np.arange(xy.shape[0]), k]
+    return out
 
 
 def ray_exit_m(fp: Footprint, x0_m: float, y0_m: float, angles_rad: npt.ArrayLike) -> FloatArray:
@@ -508,6 +528,18 @@ def _centred_box(xy: FloatArray) -> tuple[float, float] | None:
     hl, hw = float(np.abs(xy[:, 0]).max()), float(np.abs(xy[:, 1]).max())
     corners = {(hl, hw), (-hl, hw), (-hl, -hw), (hl, -hw)}
     return (hl, hw) if {(float(x), float(y)) for x, y in xy} == corners else None
+
+
+def _edge_arrays(xy: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Edge i from vertex i to i + 1: starts (N, 2), vectors (N, 2), squared lengths (N,);
+    read-only, shared by every call on the footprint."""
+    x0, y0 = xy[:, 0], xy[:, 1]
+    edge = np.column_stack((np.roll(x0, -1) - x0, np.roll(y0, -1) - y0))
+    length2 = edge[:, 0] * edge[:, 0] + edge[:, 1] * edge[:, 1]
+    start = xy.copy()
+    for a in (start, edge, length2):
+        a.setflags(write=False)
+    return start, edge, length2
 
 
 def _outward_normals(xy: FloatArray) -> FloatArray:

@@ -13,6 +13,7 @@ from egc_common.footprint import (
     Footprint,
     FootprintError,
     arc_samples,
+    closest_boundary_points,
     contains,
     disc_cover,
     mitre_factor,
@@ -153,6 +154,23 @@ def test_signed_distance_matches_brute_force(fp, seed):
     inside = (winding != 0) if not fp.is_disc else (np.hypot(pts[:, 0], pts[:, 1]) < fp.radius_m)
     clear = brute > 1e-3  # away from the edge, where the sign is unambiguous
     assert np.array_equal((got < 0)[clear], inside[clear])
+
+
+@settings(max_examples=60, deadline=None)
+@given(shapes, st.integers(0, 2**31 - 1))
+def test_closest_boundary_points_are_on_the_edge_at_the_distance(fp, seed):
+    """The nearest boundary point lies on the edge, exactly |signed distance| away, and no
+    sampled edge point is nearer (the cbf filter's q_i: its normals and b_i come from it)."""
+    rng = np.random.default_rng(seed)
+    reach = fp.reach_m
+    pts = rng.uniform(-1.5 * reach, 1.5 * reach, (200, 2))
+    qx, qy = closest_boundary_points(fp, pts[:, 0], pts[:, 1])
+    assert np.all(np.abs(signed_distance(fp, qx, qy)) <= 1e-12)
+    gap = np.hypot(pts[:, 0] - qx, pts[:, 1] - qy)
+    assert np.allclose(gap, np.abs(signed_distance(fp, pts[:, 0], pts[:, 1])), atol=1e-12)
+    edge = boundary_samples(fp, 0.001)
+    brute = np.sqrt(((pts[:, None, :] - edge[None, :, :]) ** 2).sum(axis=2)).min(axis=1)
+    assert np.all(gap <= brute + 1e-12)
 
 
 @settings(max_examples=60, deadline=None)

@@ -73,7 +73,10 @@ are sufficient, so the projection onto a single violated line, when feasible, is
 otherwise the answer is a vertex of two lines, one of which the command violates (else KKT puts
 the optimum at the command), the feasible one nearest the command. The rows are built for all
 points at once (numpy); the few the solver works on are projected in plain Python, cheaper than
-numpy's per-call cost at that size.
+numpy's per-call cost at that size. That cost, not the arithmetic, is the filter's time on the
+few dozen points in reach (``bench/bench_filter.py``), so each quantity is one numpy call written
+where the solver reads it, the creep's calls are skipped when no row can creep, and a polygon's
+inside test runs only for points near its edge: the numbers are the formulas' own, bit for bit.
 
 Which points enter: a point whose barrier no command of a "cover" (a range of v and |w|) can
 violate is left out, by its distance from the footprint alone. The first cover runs from a
@@ -107,10 +110,11 @@ import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
-from egc_common.footprint import Footprint, closest_boundary_points, signed_distance
+from egc_common.footprint import Footprint, closest_boundary_xy, signed_distance
 from egc_common.profiles import RobotProfile
 from egc_common.scan import MAX_ABS_COORD_M, ObstaclePoints, obstacle_points
 
@@ -327,8 +331,12 @@ def cbf_filter(
     """Filter one command; see the module docstring."""
     tau = params.tau_s if tau_s is None else tau_s
     v0, w0, v_now, w_now = v_ref_mps, w_ref_radps, v_now_mps, w_now_radps
-    if not all(abs(x) <= MAX_ABS_COORD_M for x in (v0, w0, v_now, w_now)) or not (
-        0.0 <= tau <= MAX_ABS_COORD_M
+    if not (
+        abs(v0) <= MAX_ABS_COORD_M
+        and abs(w0) <= MAX_ABS_COORD_M
+        and abs(v_now) <= MAX_ABS_COORD_M
+        and abs(w_now) <= MAX_ABS_COORD_M
+        and 0.0 <= tau <= MAX_ABS_COORD_M
     ):
         return _stop(CbfCase.INVALID_INPUT, v0, w0, params, 0.0, 0.0)
 
@@ -345,7 +353,7 @@ def cbf_filter(
 
     sv = math.sqrt(params.weight_v) / profile.v_max_mps  # z = (sv v, sw w): Euclidean QP
     sw = math.sqrt(params.weight_w) / profile.w_max_radps
-    scene = _Scene(profile, params, v0, w0, v_now, w_now, k_now, k_cmd)
+    scene = _Scene(profile, params, v0, w0, v_now, w_now, k_now, k_cmd, *_shape(profile.footprint))
     # Rows are built for the points some command within a "cover" could approach too fast:
     # first the command's own (from a standstill to it: slowing down needs no more points; a
     # little reversing and turning added), then, if the answer leaves the cover, one holding
@@ -374,12 +382,8 @@ def cbf_filter(
         )  # fmt: skip
     rounds_total = 0
     for attempt in range(_MAX_COVERS + 1):
-        a_all = np.concatenate((rows.a, rows.gain * rows.a))  # (S) then (C)
-        b_all = np.concatenate((rows.b, rows.gain * rows.b))
-        c_all = np.concatenate((rows.c_state, rows.c_cmd))
-        short = np.concatenate((rows.short_state, rows.short_cmd))
         v_out, w_out, rounds, case, working = _solve(
-            a_all, b_all, c_all, short, v0, w0, sv, sw, profile, params.points_considered
+            rows.a, rows.b, rows.c, rows.short, v0, w0, sv, sw, profile, params.points_considered
         )
         rounds_total += rounds
         if case is not CbfCase.SOLVED or (cover[0] <= v_out <= cover[1] and abs(w_out) <= cover[2]):
@@ -399,7 +403,7 @@ def cbf_filter(
     # A stop computed as the projection onto a line through the origin comes out as 1e-17.
     v_out = 0.0 if abs(v_out) <= _SAME else v_out
     w_out = 0.0 if abs(w_out) <= _SAME else w_out
-    found = _Working(rows, a_all, b_all, c_all, working, v_out, w_out)
+    found = _Working(rows, working, v_out, w_out)
     modified = bool(v_out != v0 or w_out != w0)
     return CbfResult(
         v_out, w_out, modified, case, params.margin_m, tau, k_now, rows.n, rounds_total, found,
@@ -407,54 +411,47 @@ def cbf_filter(
     )  # fmt: skip
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class _Working:
+class _Working(NamedTuple):
     """The solver's rows and answer, kept for ``CbfResult.tight``."""
 
     rows: _Rows
-    a: FloatArray  # every row, (S) then (C)
-    b: FloatArray
-    c: FloatArray
     working: IntArray  # the rows the solver took (each violated by the command or an answer)
     v: float
     w: float
 
     def tight(self) -> TightRows:
-        wc = self.c[self.working]
-        gap = self.a[self.working] * self.v + self.b[self.working] * self.w - wc
-        violated = self.a[self.working] * self.rows.v0 + self.b[self.working] * self.rows.w0 < wc
+        a, b, c = self.rows.a, self.rows.b, self.rows.c
+        wc = c[self.working]
+        gap = a[self.working] * self.v + b[self.working] * self.w - wc
+        violated = a[self.working] * self.rows.v0 + b[self.working] * self.rows.w0 < wc
         tight = self.working[violated & (np.abs(gap) <= 1e-7 * (1.0 + np.abs(wc)))]
         tight = tight[:_MAX_REPORTED]
         rows, n = self.rows, self.rows.n
         point = tight % n
         state = tight < n
         return TightRows(
-            rows.x[point], rows.y[point], self.a[tight], self.b[tight], self.c[tight],
+            rows.x[point], rows.y[point], a[tight], b[tight], c[tight],
             rows.sd[point], rows.margins(point, state), state, point >= rows.n_scan,
         )  # fmt: skip
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class _Rows:
-    """Every point's two half-planes, per point: a = -n_x, b, and c for (S) and (C)."""
+class _Rows(NamedTuple):
+    """Every point's two half-planes a v + b w >= c: every (S) row, then every (C) row."""
 
     x: FloatArray
     y: FloatArray
     n_scan: int  # the first n_scan points are scan points, the rest unseen edges
     sd: FloatArray
-    a: FloatArray
+    a: FloatArray  # (S) a = -n_x of each point, then (C): the same times 1 + alpha K omega
     b: FloatArray
-    gain: FloatArray  # (C)'s rows are (S)'s times this
-    c_state: FloatArray
-    c_cmd: FloatArray
+    c: FloatArray
+    short: FloatArray  # by how much the command falls short of each row (> 0: violated)
     m_state_extra: FloatArray | None  # omega K u^+ at the current speed (None: standing)
     omega_cmd: FloatArray  # omega and u at the commanded speed (its margin, for the report)
     u_ref: FloatArray
     k_cmd: float
     margin_m: float
     worst_for_command: float  # the command's largest shortfall over every row
-    short_state: FloatArray  # by how much the command falls short of each (S) row, (C) row
-    short_cmd: FloatArray
     nearest: float
     v0: float  # the command the rows were checked against
     w0: float
@@ -474,9 +471,10 @@ class _Rows:
         return out
 
 
-@dataclass(frozen=True, slots=True)
-class _Scene:
-    """One cycle's settings, shared by the command's check and the solve."""
+class _Scene(NamedTuple):
+    """One cycle's settings, shared by the command's check and the solve. (Like ``_Rows`` and
+    ``_Working``, a named tuple: built on every call, it costs a fraction of a frozen
+    dataclass.)"""
 
     profile: RobotProfile
     params: CbfParams
@@ -486,6 +484,10 @@ class _Scene:
     w_now: float
     k_now: float
     k_cmd: float
+    x_back: float  # the footprint's extents along x (m), its reach from {R}'s origin (m)
+    x_front: float
+    q_max: float
+    ahead_from: float | None  # ``_ahead_from``
 
     def points_in_reach(
         self,
@@ -504,7 +506,7 @@ class _Scene:
         with u the largest approach. Points ahead (``_ahead_from``) are approached by forward
         motion and turning only, the others by reversing and turning only.
         """
-        x_back, x_front, q_max = _extents(self.profile.footprint)
+        x_back, x_front, q_max = self.x_back, self.x_front, self.q_max
         reach_f, reach_b = self._reach_sd(v_range, w_bound)
         if quiet is not None:
             quiet_f, quiet_b = self._reach_sd((quiet[0], quiet[0]), quiet[1])
@@ -515,20 +517,19 @@ class _Scene:
                 if pts.count == 0:
                     return None
                 index = pts.prepared_index
-                r2_min = index.r2_sorted[0] if index is not None else float(pts.r2.min())
+                r2_min = index.r2_sorted[0] if index is not None else _min(pts.r2)
                 if r2_min > (q_max + max(quiet_f, quiet_b)) ** 2:
                     return None
         x = y = _EMPTY
         if pts.count:
             rf, rb = q_max + reach_f, q_max + reach_b
-            split = _ahead_from(self.profile.footprint)
+            split = self.ahead_from
             if rf == rb or split is None:
                 far = max(rf, rb)
                 near = pts.r2 <= far * far
             else:
                 near = pts.r2 <= np.where(pts.x > split, rf * rf, rb * rb)
-            if near.any():
-                x, y = pts.x[near], pts.y[near]
+            x, y = pts.x[near], pts.y[near]
         unseen = [  # (direction, how far it saw, the footprint's extent that way)
             (sign, seen, extent)
             for sign, seen, extent, room in (
@@ -544,7 +545,7 @@ class _Scene:
     def _reach_sd(self, v_range: tuple[float, float], w_bound: float) -> tuple[float, float]:
         """How far from the footprint (m) a point ahead and a point behind can have its barrier
         violated by a command with v in ``v_range`` and |w| <= ``w_bound``."""
-        p, alpha, q_max = self.params, self.params.alpha_per_s, _extents(self.profile.footprint)[2]
+        p, alpha, q_max = self.params, self.params.alpha_per_s, self.q_max
         turn = q_max * w_bound
         turn_now = q_max * abs(self.w_now)
         u_f = max(v_range[1], 0.0) + turn
@@ -559,10 +560,14 @@ class _Scene:
     def rows(
         self, x: FloatArray, y: FloatArray, n_scan: int, unseen: list[tuple[float, float, float]]
     ) -> _Rows:
-        """The half-planes of the points (module docstring)."""
-        p, alpha = self.params, self.params.alpha_per_s
+        """The half-planes of the points (module docstring): (S) rows, then (C) rows.
+
+        On the few dozen points in reach numpy's cost per call, not per element, is the time,
+        so each quantity is computed once and written where the solver reads it (``out=``), and
+        the creep's nine calls are skipped when no row can creep."""
+        p, alpha, profile = self.params, self.params.alpha_per_s, self.profile
         v0, w0, v_now, w_now = self.v0, self.w0, self.v_now, self.w_now
-        sd, nx, ny, qx, qy = _geometry(x, y, self.profile.footprint)
+        sd, nx, ny, qx, qy, nearest = _geometry(x, y, profile.footprint)
         if unseen:
             # A wall across the axis where the laser stopped seeing, met first by the
             # footprint's front (back) extent: n = (+-1, 0), q = (front or back, 0).
@@ -573,17 +578,35 @@ class _Scene:
             sd, nx, ny, qx, qy = (
                 np.concatenate((g, e)) for g, e in zip((sd, nx, ny, qx, qy), extra[2:], strict=True)
             )
-        b = nx * qy - ny * qx
+            nearest = _min(sd)
+        n = sd.size
+        # Every (S) row, then every (C) row: a = -n_x, b, c, and the command's approach speed
+        # u_ref (S) and gain u_ref (C), written in place (numpy's cost is per call here).
+        a_all, b_all, c_all, u_all = np.empty((4, 2 * n))
+        a, b, u_ref = a_all[:n], b_all[:n], u_all[:n]
+        np.negative(nx, out=a)
+        np.subtract(nx * qy, ny * qx, out=b)
         # Approach speeds u = nx v - b w under the command and under the current motion, and
         # how squarely each point lies in that motion's path (omega).
-        u_ref = nx * v0 - b * w0 if w0 else nx * v0
+        np.multiply(nx, v0, out=u_ref)
+        if w0:
+            u_ref -= b * w0
         omega_cmd, up_ref = _omega(u_ref, v0, w0, qx, qy)
-        reach_u = np.abs(nx) * self.profile.v_max_mps + np.abs(b) * self.profile.w_max_radps
-        flank = np.maximum(1.0 - reach_u / (CREEP_BELOW * self.profile.v_max_mps), 0.0)
-        creep = (CREEP_PER_S * flank) * np.maximum(sd, 0.0)
-        alpha_room = np.maximum(alpha * (sd - p.margin_m), creep)  # -c of (C)
+        creep: FloatArray | float
+        if nearest > 0.0 and _min(np.abs(nx)) >= CREEP_BELOW:
+            # No row creeps: |n_x| >= CREEP_BELOW makes reach_u >= CREEP_BELOW v_max below
+            # (rounding is monotonic), so every flank is 0 and, with every sd > 0, every creep
+            # +0.0: the general form's numbers without its nine numpy calls.
+            creep = 0.0
+        else:
+            reach_u = np.abs(nx) * profile.v_max_mps + np.abs(b) * profile.w_max_radps
+            flank = np.maximum(1.0 - reach_u / (CREEP_BELOW * profile.v_max_mps), 0.0)
+            creep = (CREEP_PER_S * flank) * np.maximum(sd, 0.0)
+        # c = -max(alpha (sd - margin - m_extra), creep): m_extra = omega K u^+ at the current
+        # speed for (S) (first row), none for (C) (second row).
+        c2 = c_all.reshape(2, n)
+        room = np.subtract(sd, p.margin_m, out=c2[1])
         m_extra: FloatArray | None = None
-        c_state = c_cmd = -alpha_room
         if v_now or w_now:
             if v_now == v0 and w_now == w0:  # a replay, a steady cycle: the same speeds twice
                 omega_now, up_now = omega_cmd, up_ref
@@ -591,15 +614,21 @@ class _Scene:
                 u_now = nx * v_now - b * w_now
                 omega_now, up_now = _omega(u_now, v_now, w_now, qx, qy)
             m_extra = (omega_now * self.k_now) * up_now
-            c_state = -np.maximum(alpha * (sd - p.margin_m - m_extra), creep)
+            np.subtract(room, m_extra, out=c2[0])
+        else:
+            c2[0] = room
+        c2 *= alpha
+        np.maximum(c2, creep, out=c2)
+        np.negative(c2, out=c2)
         gain = 1.0 + (alpha * self.k_cmd) * omega_cmd  # (C): u gain <= max(alpha room, creep)
-        # The command falls short of row i by c + u_ref (S), c + gain u_ref (C), if positive.
-        short_state = c_state + u_ref
-        short_cmd = gain * u_ref - alpha_room
-        worst = max(float(short_state.max()), float(short_cmd.max()))
+        np.multiply(gain, a, out=a_all[n:])
+        np.multiply(gain, b, out=b_all[n:])
+        np.multiply(gain, u_ref, out=u_all[n:])
+        # The command falls short of each row by c + u (if positive).
+        short = c_all + u_all
         return _Rows(
-            x, y, n_scan, sd, -nx, b, gain, c_state, c_cmd, m_extra, omega_cmd, u_ref,
-            self.k_cmd, p.margin_m, worst, short_state, short_cmd, float(sd.min()), v0, w0,
+            x, y, n_scan, sd, a_all, b_all, c_all, short, m_extra, omega_cmd, u_ref, self.k_cmd,
+            p.margin_m, _max(short), nearest, v0, w0,
         )  # fmt: skip
 
 
@@ -615,32 +644,65 @@ def _ahead_from(fp: Footprint) -> float | None:
 
 
 @functools.lru_cache(maxsize=32)
-def _extents(fp: Footprint) -> tuple[float, float, float]:
-    """(x_back, x_front, reach) of a footprint (numpy reductions: once per shape, not per call)."""
+def _shape(fp: Footprint) -> tuple[float, float, float, float | None]:
+    """(x_back, x_front, reach, ``_ahead_from``) of a footprint (numpy reductions: once per
+    shape, not per call)."""
     x0, x1, _, _ = fp.bounds
-    return x0, x1, fp.reach_m
+    return x0, x1, fp.reach_m, _ahead_from(fp)
+
+
+@functools.lru_cache(maxsize=32)
+def _inside_bound(fp: Footprint) -> float:
+    """A distance from a polygon's edge beyond which no point is inside it: half the shorter
+    side of its bounding box (a point inside is nearer the box's edge than that, and the box
+    holds the polygon), widened far beyond any rounding."""
+    x0, x1, y0, y1 = fp.bounds
+    return 0.5 * min(x1 - x0, y1 - y0) * (1.0 + 1e-9) + 1e-9
+
+
+def _min(a: FloatArray) -> float:
+    """min of a non-empty array (``ndarray.min`` without its Python wrapper)."""
+    return float(np.minimum.reduce(a))
+
+
+def _max(a: FloatArray) -> float:
+    return float(np.maximum.reduce(a))
 
 
 def _geometry(
     x: FloatArray, y: FloatArray, fp: Footprint
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float]:
     """Signed distance sd, unit normal (nx, ny) and the footprint's nearest point (qx, qy) of
-    each point. The normal is the gradient of sd: from q towards the point outside, from the
-    point towards q inside (the outward normal of the nearest edge)."""
+    each point, and min(sd) (inf for no point). The normal is the gradient of sd: from q
+    towards the point outside, from the point towards q inside (the outward normal of the
+    nearest edge)."""
+    if x.size == 0:
+        return _EMPTY, _EMPTY, _EMPTY, _EMPTY, _EMPTY, math.inf
     box = fp.centred_box
     if box is not None:
         return _box_geometry(x, y, *box)
     if fp.is_disc:
         r = np.sqrt(x * x + y * y)
-        centre = r <= 0.0
-        safe = np.where(centre, 1.0, r)
-        nx, ny = np.where(centre, 1.0, x / safe), np.where(centre, 0.0, y / safe)
         radius = fp.radius_m
-        return r - radius, nx, ny, radius * nx, radius * ny
-    qx, qy = closest_boundary_points(fp, x, y)
+        sd = r - radius
+        nearest = _min(sd)
+        if nearest > -radius:  # no point at the centre (r = 0 would give sd = -radius)
+            nx, ny = x / r, y / r
+        else:
+            centre = r <= 0.0
+            safe = np.where(centre, 1.0, r)
+            nx, ny = np.where(centre, 1.0, x / safe), np.where(centre, 0.0, y / safe)
+        return sd, nx, ny, radius * nx, radius * ny, nearest
+    q = closest_boundary_xy(fp, np.column_stack((x, y)))
+    qx, qy = q[:, 0], q[:, 1]
     dx, dy = x - qx, y - qy
     dist = np.sqrt(dx * dx + dy * dy)
-    sd = np.where(signed_distance(fp, x, y) < 0.0, -dist, dist)
+    candidates = dist <= _inside_bound(fp)
+    if not candidates.any():  # every point outside and off the edge: sd = dist, n = d / sd
+        return dist, dx / dist, dy / dist, qx, qy, _min(dist)
+    inside = np.zeros(dist.size, dtype=np.bool_)
+    inside[candidates] = signed_distance(fp, x[candidates], y[candidates]) < 0.0
+    sd = np.where(inside, -dist, dist)
     on_edge = dist <= 0.0
     safe = np.where(on_edge, 1.0, dist)
     sign = np.where(sd < 0.0, -1.0, 1.0)  # inside: towards the edge, i.e. outwards
@@ -648,22 +710,23 @@ def _geometry(
     if on_edge.any():  # on the edge itself: away from the origin, as outwards as any
         r = np.maximum(np.sqrt(x * x + y * y), _SAME)
         nx, ny = np.where(on_edge, x / r, nx), np.where(on_edge, y / r, ny)
-    return sd, nx, ny, qx, qy
+    return sd, nx, ny, qx, qy, _min(sd)
 
 
 def _box_geometry(
     x: FloatArray, y: FloatArray, half_l: float, half_w: float
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float]:
     """``_geometry`` of the rectangle |x| <= half_l, |y| <= half_w in closed form."""
     qx = np.minimum(np.maximum(x, -half_l), half_l)
     qy = np.minimum(np.maximum(y, -half_w), half_w)
     dx = x - qx
     dy = y - qy
     sd = np.sqrt(dx * dx + dy * dy)
-    inside = sd <= 0.0
-    if not inside.any():
+    nearest = _min(sd)
+    if nearest > 0.0:  # no point inside
         inv = 1.0 / sd
-        return sd, dx * inv, dy * inv, qx, qy
+        return sd, dx * inv, dy * inv, qx, qy, nearest
+    inside = sd <= 0.0
     xi, yi = x[inside], y[inside]
     to_front, to_back = half_l - xi, xi + half_l
     to_left, to_right = half_w - yi, yi + half_w
@@ -675,7 +738,7 @@ def _box_geometry(
     qy[inside] = np.where(ey != 0.0, ey * half_w, yi)
     sd[inside] = -depth
     norm = np.where(inside, 1.0, sd)
-    return sd, dx / norm, dy / norm, qx, qy
+    return sd, dx / norm, dy / norm, qx, qy, _min(sd)
 
 
 def _omega(
@@ -688,15 +751,19 @@ def _omega(
     if w == 0.0:
         if v == 0.0:
             return np.zeros(u.size), up
-        cos = up / abs(v)  # u = nx v <= |v|: no overflow, even for a subnormal v
-        c2 = cos * cos
+        c2 = up / abs(v)  # cos: u = nx v <= |v|, no overflow, even for a subnormal v
+        c2 *= c2
     else:
         gx = v - w * qy
+        gx *= gx
         gy = w * qx
-        c2 = up * up / np.maximum(gx * gx + gy * gy, _SAME)
-    c2 = np.minimum(c2, 1.0)
-    out: FloatArray = c2 * c2
-    return out, up
+        gy *= gy
+        gx += gy
+        c2 = up * up
+        c2 /= np.maximum(gx, _SAME, out=gx)
+    np.minimum(c2, 1.0, out=c2)
+    c2 *= c2
+    return c2, up
 
 
 def _solve(
@@ -716,13 +783,19 @@ def _solve(
     answer, the rounds, the case and the working set. ``short``: by how much the command falls
     short of each row (m/s, > 0: violated): the order in which rows join, not the answer."""
     working = _most_violated(short, k)
+    # The rows scaled to the Euclidean problem, as Python floats (each round picks a few).
+    gx, gy, e = (a * (1.0 / sv)).tolist(), (b * (1.0 / sw)).tolist(), c.tolist()
     for rounds in range(1, _MAX_ROUNDS + 1):
-        found = _project(a[working], b[working], c[working], v0, w0, sv, sw, profile)
+        rows = working.tolist()
+        found = _project_scaled(
+            [gx[i] for i in rows], [gy[i] for i in rows], [e[i] for i in rows],
+            v0, w0, sv, sw, profile,
+        )  # fmt: skip
         if found is None:
             break
         v, w = found
         short = c - (a * v + b * w)
-        if float(short.max()) <= _TOL:
+        if _max(short) <= _TOL:
             return v, w, rounds, CbfCase.SOLVED, working
         add = _most_violated(short, k)
         working = np.concatenate((working, add))
@@ -732,9 +805,11 @@ def _solve(
 
 def _most_violated(short: FloatArray, k: int) -> IntArray:
     """Indices of the (at most) ``k`` rows with the largest ``short`` above the tolerance."""
-    bad = np.flatnonzero(short > _TOL)
+    bad: IntArray = (short > _TOL).nonzero()[0]
     if bad.size > k:
-        bad = bad[np.argpartition(-short[bad], k)[:k]]
+        if bad.size == short.size:  # every row: the same partition without the indexing
+            return (-short).argpartition(k)[:k]
+        bad = bad[(-short[bad]).argpartition(k)[:k]]
     return bad
 
 
@@ -749,12 +824,24 @@ def _project(
     profile: RobotProfile,
 ) -> tuple[float, float] | None:
     """The closest point to (v0, w0) (weighted) in the polygon of the rows and the box, or None
-    when none of the candidates is feasible (empty polygon, through rounding). The box's rows
-    join only when the answer without them leaves it."""
+    when none of the candidates is feasible (empty polygon, through rounding)."""
+    gx, gy = (a * (1.0 / sv)).tolist(), (b * (1.0 / sw)).tolist()
+    return _project_scaled(gx, gy, c.tolist(), v0, w0, sv, sw, profile)
+
+
+def _project_scaled(
+    gx: list[float],
+    gy: list[float],
+    e: list[float],
+    v0: float,
+    w0: float,
+    sv: float,
+    sw: float,
+    profile: RobotProfile,
+) -> tuple[float, float] | None:
+    """``_project`` of rows already scaled (gx = a / sv, gy = b / sw, e = c; the lists are
+    extended). The box's rows join only when the answer without them leaves it."""
     vm, wm = profile.v_max_mps, profile.w_max_radps
-    gx = (a * (1.0 / sv)).tolist()
-    gy = (b * (1.0 / sw)).tolist()
-    e = c.tolist()
     z0x, z0y = sv * v0, sw * w0
     found = _nearest_in(gx, gy, e, z0x, z0y)
     if found is not None and abs(found[0]) <= sv * vm and abs(found[1]) <= sw * wm:
@@ -773,10 +860,11 @@ def _nearest_in(
     candidate is feasible. A few rows (the working set): plain Python beats numpy's per-call
     cost here."""
     rows = [i for i in range(len(gx)) if gx[i] * gx[i] + gy[i] * gy[i] > _SAME]
-    tol = [_TOL * (1.0 + abs(v)) for v in e]
+    # (gx, gy, e, tolerance) of each row, for the feasibility tests.
+    checks = [(gx[i], gy[i], e[i], -_TOL * (1.0 + abs(e[i]))) for i in rows]
 
     def feasible(zx: float, zy: float) -> bool:
-        return all(gx[i] * zx + gy[i] * zy - e[i] >= -tol[i] for i in rows)
+        return all(ax * zx + ay * zy - ae >= low for ax, ay, ae, low in checks)
 
     bad = [i for i in rows if gx[i] * z0x + gy[i] * z0y - e[i] < 0.0]
     if not bad:
