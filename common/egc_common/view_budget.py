@@ -79,7 +79,8 @@ behind, camera frames waiting in the robot's lowest-priority queue.
   0.1 s and the mean rise since the last report with no queue (``_CALM``). Measured with
   ``bench bandwidth --scenario`` (2 Mbit/s -> 128 kbit/s, 80 ms): the first cut went to
   140-210 kbit/s in three runs of four and the view age was back under 280 ms 2.4-3.3 s after
-  the change; drained at the floor, the queue is one third shorter;
+  the change; drained at the floor, after 1.8-2.0 s in four runs (load 4-8 on 2 cores), with
+  the camera and the 192 and 128 kbit/s figures as before;
 - *back to cruise* once the queue has drained (``queue_ms < margin_ms / 2``): a cut deep
   enough to drain a long queue quickly is too deep to stay at, so the budget returns at once
   to ``cruise`` (0.85) times the rate the link delivered at the last cut (BBR's drain, then
