@@ -66,10 +66,29 @@ behind, camera frames waiting in the robot's lowest-priority queue.
   trip on a 500 ms link) before another unless the queue doubled: the reports lag the cut by a
   round trip, the queue they show grows meanwhile, and cutting on each stale report would
   spiral down (the usual AIMD oscillation);
+- *a drain* when the link narrowed: the first cut in a while that finds the queue growing
+  fast (faster than ``_FAST_GROWTH``, 0.3 ms a ms: a probe's overshoot grows at 0.1) sends
+  the budget to ``floor_kbps`` at once (the camera pauses, telemetry at its least) until the
+  queue has drained. Every byte sent above the link's rate until the cut takes effect waits in
+  its buffer: 400 kbit/s into 128 adds 2.1 ms of queue a ms, so each 100 ms of sending at the
+  old rate costs 0.3 s of drain, and a cut still above the link (0.8 of a second of
+  ``rx_kbps``, most of it the wide link's) keeps adding to it; its depth must not hang on how
+  well a few reports' slope tells C. That slope also misjudges a queue that grows in steps
+  (a large camera frame's time on the link, then the messages behind it at once: the
+  short-window minimum is flat for a while), so the growth is the larger of the slope over
+  0.1 s and the mean rise since the last report with no queue (``_CALM``). Measured with
+  ``bench bandwidth --scenario`` (2 Mbit/s -> 128 kbit/s, 80 ms): the first cut went to
+  140-210 kbit/s in three runs of four and the view age was back under 280 ms 2.4-3.3 s after
+  the change; drained at the floor, after 1.8-2.0 s in four runs (load 4-8 on 2 cores), with
+  the camera and the 192 and 128 kbit/s figures as before;
 - *back to cruise* once the queue has drained (``queue_ms < margin_ms / 2``): a cut deep
   enough to drain a long queue quickly is too deep to stay at, so the budget returns at once
   to ``cruise`` (0.85) times the rate the link delivered at the last cut (BBR's drain, then
-  cruise);
+  cruise); after a drain, the smaller of the estimate at the cut (what the growth says the
+  link delivers) and the operator's last second (the link was busy for most of it), never
+  raised by a second of ``rx_kbps`` during the drain (a frame that arrived whole within it
+  makes it look larger than the link, and cruising above the link refills the queue); the
+  drain ends at once, within the hold;
 - *additive increase*, while the ages stay flat and ``hold_s`` after the last cut, and only
   while the view plane actually fills the budget (a probe the data never used proves nothing):
   ``ai_kbps`` per second up to 1.1 times the rate at the last cut (where the last queue stood:
@@ -265,6 +284,9 @@ class BudgetState:
     fed_kbps: float | None = None  # what the view plane sent before the first cut of a series
     queue_since_ns: int | None = None  # since when a queue (above margin_ms / 2) stands
     deficit_since_ns: int | None = None  # since when, with no ages, rx_kbps is short of sent
+    calm_ns: int | None = None  # the last report with the telemetry's queue near none ...
+    calm_queue_ms: float = 0.0  # ... and that queue
+    draining: bool = False  # the link narrowed: the view plane at its floor until the queue drains
     cuts: int = 0
     undone: int = 0
 
@@ -337,6 +359,8 @@ def on_report(
     view_queue = view.queue_ms(now_ns, short_ns, cover=_COVER)
     queues = [q for q in (view_queue, camera_queue) if q is not None]
     queue = max(queues) if queues else None
+    if view_queue is not None and view_queue <= cfg.margin_ms * _CALM:
+        state = replace(state, calm_ns=now_ns, calm_queue_ms=view_queue)
     state = replace(
         state,
         view=view,
@@ -353,6 +377,8 @@ def on_report(
     rx = report.rx_kbps
     link = state.link_kbps
     no_queue = queue is not None and queue < cfg.margin_ms / 2
+    if state.draining and no_queue:
+        state = _drained(state, cfg, rx)
     if link is not None and rx is not None and rx > link and no_queue:
         state = replace(state, link_kbps=rx)  # the link carries more than we thought
     if queue is not None and not no_queue:
@@ -364,7 +390,12 @@ def on_report(
         if rx is not None and rx > 0 and now_ns - since >= whole_ns:
             # a queue has stood for all of rx_kbps's second: the link was busy, rx is its rate
             state, _, _ = _on_slower_link(state, cfg, in_force, link, rx)
-            state = replace(state, link_kbps=rx, cut_rx_kbps=rx)
+            at_cut = state.cut_rx_kbps
+            if state.draining and at_cut is not None:
+                at_cut = min(at_cut, rx)  # a drain never raises where cruise returns to
+            else:
+                at_cut = rx
+            state = replace(state, link_kbps=rx, cut_rx_kbps=at_cut)
     elif queue is not None:
         state = replace(state, queue_since_ns=None)
     if not cfg.fixed:
@@ -379,12 +410,15 @@ def on_report(
         return state  # the last cut has not reached the reports yet
     measured = rx if rx is not None and rx > 0 else None  # what the link delivered, measured
     rate = measured  # and what it delivers now, as well as can be told
-    growth = view.growth()
+    growth = _growth(state, view, view_queue, now_ns)
     ahead_ms = queue  # the queue in the link now: the reports show it a round trip late
     # The first cut in a while: the view plane sent at the rate S that built this queue; the
     # cuts right after it still see the queue that rate built.
     settled = since_cut is None or since_cut > 2 * cfg.hold_s * NS_PER_S
     fed = sent_kbps if settled else state.fed_kbps
+    # The link narrowed (a queue that grows fast, not a probe's overshoot) under the rate that
+    # built the queue: drain (module docstring, "Control").
+    drain = settled and bool(fed) and growth is not None and growth > _FAST_GROWTH
     if fed and fed > 0 and growth is not None and growth > _FAST_GROWTH:
         # A queue growing by r ms a ms (in the reports' time) is fed at S and drained at
         # S (1 - r): what the link delivers now, before rx_kbps (a second's worth) shows it.
@@ -412,11 +446,13 @@ def on_report(
             view_raise,
             camera_raise,
         )
+    at_cut = state.cut_rx_kbps if measured is None else measured
     return replace(
         state,
-        budget_kbps=max(cfg.floor_kbps, beta * delivered),
+        budget_kbps=cfg.floor_kbps if drain else max(cfg.floor_kbps, beta * delivered),
+        draining=state.draining or drain,
         link_kbps=link if measured is None else measured,
-        cut_rx_kbps=state.cut_rx_kbps if measured is None else measured,
+        cut_rx_kbps=rate if drain else at_cut,
         last_cut_ns=now_ns,
         queue_at_cut_ms=queue,
         beyond_ns=None,
@@ -424,6 +460,19 @@ def on_report(
         fed_kbps=fed,
         cuts=state.cuts + 1,
     )
+
+
+def _drained(state: BudgetState, cfg: BudgetConfig, rx: float | None) -> BudgetState:
+    """The queue a narrowing left has drained: cruise at what the link delivers, the smaller
+    of the estimate at the cut and the operator's last second (the link was busy for most of
+    it, so rx_kbps is about its rate; a frame that came whole within the second may add some)."""
+    at_cut = state.cut_rx_kbps
+    if rx is not None and rx > 0:
+        at_cut = rx if at_cut is None else min(at_cut, rx)
+    if at_cut is None:
+        return replace(state, draining=False)
+    budget = min(cfg.max_kbps, max(state.budget_kbps, cfg.cruise * at_cut))
+    return replace(state, draining=False, budget_kbps=budget, cut_rx_kbps=at_cut)
 
 
 _DEFICIT = 0.75  # with no ages: rx_kbps below this share of what was sent ...
@@ -483,6 +532,7 @@ def _maybe_undo(
         camera=state.camera.raised(-undo.camera_raise_ms),
         undo=None,
         undone=state.undone + 1,
+        draining=False,
     )
 
 
@@ -519,6 +569,26 @@ def on_cycle(
 _FAST_GROWTH = 0.3
 _RX_WINDOW_NS = NS_PER_S  # rx_kbps: the operator's last second (DESIGN 12)
 _TREND_NS = 200_000_000  # the queue's growth: over the last 0.1 s, from entries this old
+_CALM = 0.25  # a telemetry queue below this share of margin_ms is none (the rise's start)
+_RISE_NS = NS_PER_S  # the rise from the last calm report counts when it is this recent
+
+
+def _growth(
+    state: BudgetState, view: _AgeFilter, view_queue: float | None, now_ns: int
+) -> float | None:
+    """How fast the telemetry's queue grows (ms a ms, in the reports' time): the larger of its
+    slope over the last 0.1 s and its mean rise since the last calm report (within a second).
+    The slope alone misses a link that narrowed under a stream of large frames: the queue then
+    grows in steps (a frame's time on the link, then the messages behind it at once), and 0.1 s
+    of the short-window minimum may hold a step's flat part."""
+    slope = view.growth()
+    calm = state.calm_ns
+    if view_queue is None or calm is None or not 0 < now_ns - calm <= _RISE_NS:
+        return slope
+    rise = (view_queue - state.calm_queue_ms) / ((now_ns - calm) / 1e6)
+    return rise if slope is None else max(slope, rise)
+
+
 _CAMERA_SIGNAL_FPS = 2.0  # the camera's latencies count as a queue signal from this rate up
 _COVER = 0.6  # the reports in the view's short window must span this much of it
 

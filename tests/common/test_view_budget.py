@@ -4,7 +4,9 @@ the AIMD steps, and a closed loop against a fluid model of a link with a deep bu
 from __future__ import annotations
 
 import itertools
+import random
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import pytest
@@ -208,6 +210,135 @@ def test_a_fast_growing_queue_says_what_the_link_delivers_before_rx_does() -> No
             age += 5.0
             state = on_report(state, cfg, Report(age, rx, stamp_ns=t), t, sent_kbps=60.0)
     assert state.link_kbps == 128.0 and state.cut_rx_kbps == 128.0
+
+
+def telemetry_ages(
+    duration_ms: int, delay_ms: Callable[[int], float], period_ms: int = 50
+) -> list[tuple[int, float]]:
+    """What the operator reports every 20 ms (time, view age; ms on the robot's clock) of
+    telemetry sent every ``period_ms`` that arrives ``delay_ms(sent)`` after it was sent (any
+    order): the age of the newest message arrived."""
+    arrivals = sorted((s + delay_ms(s), s) for s in range(0, duration_ms, period_ms))
+    ages, newest, i = [], None, 0
+    for t in range(20, duration_ms, 20):
+        while i < len(arrivals) and arrivals[i][0] <= t:
+            newest = arrivals[i][1] if newest is None else max(newest, arrivals[i][1])
+            i += 1
+        if newest is not None:
+            ages.append((t, float(t - newest)))
+    return ages
+
+
+def feed(
+    state: BudgetState,
+    cfg: BudgetConfig,
+    ages: list[tuple[int, float]],
+    rx_kbps: Callable[[int], float],
+    sent_kbps: float,
+    up_ms: float = 80.0,
+) -> list[tuple[int, BudgetState]]:
+    """The reports through an uplink of ``up_ms``: the state after each, by the report's time."""
+    out = []
+    for t, age in ages:
+        now = int((t + up_ms) * MS)
+        report = Report(age, rx_kbps(t), stamp_ns=t * MS)
+        state = on_report(state, cfg, report, now, sent_kbps=sent_kbps)
+        out.append((t, state))
+    return out
+
+
+NARROW_AT_MS = 5000  # the link goes from 2 Mbit/s to 128 kbit/s under 400 kbit/s of view
+
+
+def serialized_delays(
+    narrow_at_ms: int, end_ms: int, wide_kbps: float = 2000.0, thin_kbps: float = 128.0
+) -> dict[int, float]:
+    """The one-way delay (ms) of each telemetry message (1.1 kB every 50 ms; key: its send
+    time) through a link with a deep buffer that narrows from ``wide_kbps`` to ``thin_kbps`` at
+    ``narrow_at_ms``, shared with 4 kB camera frames every 100 ms (400 kbit/s in all): each
+    message waits for the link to carry everything sent before it, so the delays rise in
+    steps (a frame's time on the link, then less for the messages right behind it)."""
+    sent = [(s, 1100, True) for s in range(0, end_ms, 50)]
+    sent += [(s, 4000, False) for s in range(25, end_ms, 100)]
+    free_ms, delays = 0.0, {}
+    for s, nbytes, telemetry in sorted(sent):
+        start = max(float(s), free_ms)
+        free_ms = start + nbytes * 8.0 / (wide_kbps if start < narrow_at_ms else thin_kbps)
+        if telemetry:
+            delays[s] = 80.0 + free_ms - s
+    return delays
+
+
+@pytest.mark.parametrize("phase_ms", [0, 13, 26, 39])
+def test_a_link_that_narrows_is_drained_at_the_floor_at_once(phase_ms: int) -> None:
+    """2 Mbit/s -> 128 kbit/s under 400 kbit/s of view data (``serialized_delays``; the step
+    at four phases of the streams). The ages rise in steps, and the slope over 0.1 s used to
+    misjudge them: the first cut went to 0.8 x a second of rx_kbps (142 kbit/s, still above
+    the link) in three phases of four, and the queue grew for 0.3 s more. Within 300 ms of the
+    first report older than the sawtooth allows (base + a telemetry period + 20 ms), the
+    budget is at its floor (the camera off), where cruise will return to is well below what
+    was sent, and the budget stays at the floor while the queue is still growing."""
+    cfg = BudgetConfig(camera=True)
+    narrow_at = NARROW_AT_MS + phase_ms
+    delays = serialized_delays(narrow_at, narrow_at + 1500)
+    ages = telemetry_ages(narrow_at + 1500, lambda s: delays[s])
+
+    def rx(t: int) -> float:  # a second's worth: the wide link's for a while
+        return 400.0 if t < narrow_at + 200 else 330.0
+
+    states = feed(BudgetState(budget_kbps=600.0), cfg, ages, rx, sent_kbps=400.0)
+    base = min(a for t, a in ages if t < narrow_at)
+    evidence = next(t for t, a in ages if t > narrow_at and a > base + 50.0 + 20.0)
+    cut_at, cut = next((t, s) for t, s in states if s.cuts)
+    assert cut_at - evidence <= 300, (evidence, cut_at)
+    assert cut.cuts == 1 and cut.draining
+    assert cut.budget_kbps == cfg.floor_kbps
+    assert plan(cut, cfg, OVERHEAD).camera_fps == 0.0  # the camera pauses
+    assert cut.cut_rx_kbps is not None and cut.cut_rx_kbps <= 200.0
+    growing = [s for t, s in states if cut_at < t <= cut_at + 600]
+    assert all(s.budget_kbps == cfg.floor_kbps for s in growing)
+
+
+def test_steady_jitter_of_30_ms_never_cuts() -> None:
+    """A link whose delay jitters by +-30 ms (uniform, messages may overtake each other) and
+    carries all that is sent: 30 s of reports, no cut, no drain."""
+    cfg = BudgetConfig(camera=True)
+    rng = random.Random(27)
+    jitter = {s: rng.uniform(-30.0, 30.0) for s in range(0, 30_000, 50)}
+    ages = telemetry_ages(30_000, lambda s: 80.0 + jitter[s])
+    states = feed(BudgetState(budget_kbps=300.0), cfg, ages, lambda t: 300.0, sent_kbps=300.0)
+    assert all(s.cuts == 0 and not s.draining for _, s in states)
+    assert max(s.queue_ms or 0.0 for _, s in states) < cfg.margin_ms
+
+
+def test_a_drain_returns_to_cruise_at_what_the_link_delivered() -> None:
+    """Once the queue a narrowing left has drained, the budget returns at once (no hold) to
+    cruise times the smaller of the estimate at the cut and the operator's last second; an
+    rx_kbps that a frame arriving whole made look larger during the drain raises neither."""
+    cfg = BudgetConfig(camera=True)
+
+    def delay(sent: int) -> float:
+        if sent <= NARROW_AT_MS:
+            return 80.0
+        if sent <= NARROW_AT_MS + 400:  # the queue builds until the cut takes effect ...
+            return 80.0 + (sent - NARROW_AT_MS) * 2.1
+        return max(80.0, 80.0 + 840.0 - (sent - NARROW_AT_MS - 400))  # ... then drains
+
+    ages = telemetry_ages(NARROW_AT_MS + 2500, delay)
+
+    def rx(t: int) -> float:
+        return 400.0 if t < NARROW_AT_MS + 300 else 170.0 if t < NARROW_AT_MS + 1400 else 120.0
+
+    states = feed(BudgetState(budget_kbps=600.0), cfg, ages, rx, sent_kbps=400.0)
+    cut_at, cut = next((t, s) for t, s in states if s.cuts)
+    assert cut.draining and cut.budget_kbps == cfg.floor_kbps
+    estimate = cut.cut_rx_kbps
+    assert estimate is not None
+    back_at, back = next((t, s) for t, s in states if t > cut_at and not s.draining)
+    assert back_at - cut_at < 1000 * cfg.hold_s + 800  # the queue drained: ~1.2 s of it
+    assert back.cuts == 1
+    assert back.budget_kbps == pytest.approx(cfg.cruise * min(estimate, rx(back_at)))
+    assert back.budget_kbps <= cfg.cruise * 170.0
 
 
 def test_with_no_ages_a_link_that_delivers_less_than_is_sent_cuts() -> None:
