@@ -392,6 +392,17 @@ class RobotController:
         return self._controller_op
 
     @property
+    def driving_for_operator(self) -> bool:
+        """Whether losing the operator in control now loses a drive (DESIGN 8): DRIVING, or
+        held by the link alone (a command timeout or stale commands) while its newest command
+        still holds the deadman. An operator that released the deadman and then went quiet (a
+        script that ended, a console that closed) left; it was not lost."""
+        if self._transition.state is State.DRIVING:
+            return True
+        cmd = self._command
+        return self._transition.reason in LINK_REASONS and cmd is not None and cmd.deadman
+
+    @property
     def link_totals(self) -> tuple[int, int]:
         """(commands that arrived from the operator in control, seq numbers missing between
         them) over the whole run: the link's loss as the robot measured it."""

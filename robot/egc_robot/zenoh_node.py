@@ -73,7 +73,6 @@ from egc_common.view_budget import (
 from egc_robot.controller import CommandVerdict, CycleOutput, InputVerdict, RobotController
 from egc_robot.drivers import Driver
 from egc_robot.run_stats import RunStats
-from egc_robot.state_machine import LINK_REASONS, State
 
 log = logging.getLogger("egc.robot")
 
@@ -273,11 +272,7 @@ class RobotNode:
         alive = sample.kind == zenoh.SampleKind.PUT
         with self._lock:
             in_control = self._controller.operator
-            # Lost while it drove (or held on the link alone): not an operator that released
-            # the deadman and closed, as a finished script does.
-            driving = self._controller.state is State.DRIVING or self._controller.reason in (
-                LINK_REASONS
-            )
+            driving = self._controller.driving_for_operator
             self._controller.on_operator_alive(operator_id, alive)
             if not alive and operator_id == in_control and driving and self._stats is not None:
                 self._stats.on_operator_lost()

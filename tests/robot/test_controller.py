@@ -379,3 +379,25 @@ def test_a_skipped_telemetry_is_never_built_and_the_facts_match_a_built_one(monk
     assert built == [kept.base.stamp_ns]
     assert (facts.stamp_ns, facts.state, facts.limiter) == (t.stamp_ns, t.state, t.limiter)
     assert facts.loop_delay_ms == t.loop_delay_ms and facts.view_age_ms == t.view_age_ms == 120
+
+
+def test_an_operator_that_released_the_deadman_then_went_quiet_was_not_lost_while_driving():
+    """The robot counts an operator lost while driving (the summary's ``operator_lost``) only
+    when the drive was on: DRIVING, or held by the link alone with the deadman still held. A
+    script that releases the deadman and closes goes quiet for longer than the command timeout
+    on a slow link before its session ends: not lost (the demo at 192 kbit/s counted it)."""
+    rig = driving_rig()
+    assert rig.c.driving_for_operator
+    rig.send(deadman=False)
+    rig.cycle()
+    assert rig.c.state is State.HOLD and rig.c.reason == "deadman released"
+    assert not rig.c.driving_for_operator
+    for _ in range(20):  # 400 ms without a command: the command timeout
+        rig.cycle()
+    assert rig.c.reason == "command timeout" and not rig.c.driving_for_operator
+
+    held = driving_rig()
+    for _ in range(20):  # the link went quiet with the deadman held
+        held.cycle()
+    assert held.c.state is State.HOLD and held.c.reason == "command timeout"
+    assert held.c.driving_for_operator
