@@ -383,7 +383,7 @@ def cbf_filter(
     rounds_total = 0
     for attempt in range(_MAX_COVERS + 1):
         v_out, w_out, rounds, case, working = _solve(
-            rows.a, rows.b, rows.c, rows.short, v0, w0, sv, sw, profile, params.points_considered
+            rows.abc, rows.short, v0, w0, sv, sw, profile, params.points_considered
         )
         rounds_total += rounds
         if case is not CbfCase.SOLVED or (cover[0] <= v_out <= cover[1] and abs(w_out) <= cover[2]):
@@ -442,9 +442,9 @@ class _Rows(NamedTuple):
     y: FloatArray
     n_scan: int  # the first n_scan points are scan points, the rest unseen edges
     sd: FloatArray
-    a: FloatArray  # (S) a = -n_x of each point, then (C): the same times 1 + alpha K omega
-    b: FloatArray
-    c: FloatArray
+    # (3, 2n): a, b, c of every row. (S) a = -n_x of each point, then (C): the same times
+    # 1 + alpha K omega.
+    abc: FloatArray
     short: FloatArray  # by how much the command falls short of each row (> 0: violated)
     m_state_extra: FloatArray | None  # omega K u^+ at the current speed (None: standing)
     omega_cmd: FloatArray  # omega and u at the commanded speed (its margin, for the report)
@@ -459,6 +459,21 @@ class _Rows(NamedTuple):
     @property
     def n(self) -> int:
         return self.x.size
+
+    @property
+    def a(self) -> FloatArray:
+        row: FloatArray = self.abc[0]
+        return row
+
+    @property
+    def b(self) -> FloatArray:
+        row: FloatArray = self.abc[1]
+        return row
+
+    @property
+    def c(self) -> FloatArray:
+        row: FloatArray = self.abc[2]
+        return row
 
     def margins(self, point: IntArray, state: npt.NDArray[np.bool_]) -> FloatArray:
         """The margins m_i of (S) rows (``state``) and (C) rows of the given points (m)."""
@@ -582,7 +597,8 @@ class _Scene(NamedTuple):
         n = sd.size
         # Every (S) row, then every (C) row: a = -n_x, b, c, and the command's approach speed
         # u_ref (S) and gain u_ref (C), written in place (numpy's cost is per call here).
-        a_all, b_all, c_all, u_all = np.empty((4, 2 * n))
+        block = np.empty((4, 2 * n))
+        a_all, b_all, c_all, u_all = block
         a, b, u_ref = a_all[:n], b_all[:n], u_all[:n]
         np.negative(nx, out=a)
         np.subtract(nx * qy, ny * qx, out=b)
@@ -627,7 +643,7 @@ class _Scene(NamedTuple):
         # The command falls short of each row by c + u (if positive).
         short = c_all + u_all
         return _Rows(
-            x, y, n_scan, sd, a_all, b_all, c_all, short, m_extra, omega_cmd, u_ref, self.k_cmd,
+            x, y, n_scan, sd, block[:3], short, m_extra, omega_cmd, u_ref, self.k_cmd,
             p.margin_m, _max(short), nearest, v0, w0,
         )  # fmt: skip
 
@@ -767,9 +783,7 @@ def _omega(
 
 
 def _solve(
-    a: FloatArray,
-    b: FloatArray,
-    c: FloatArray,
+    abc: FloatArray,
     short: FloatArray,
     v0: float,
     w0: float,
@@ -778,28 +792,28 @@ def _solve(
     profile: RobotProfile,
     k: int,
 ) -> tuple[float, float, int, CbfCase, IntArray]:
-    """Cutting planes over the rows a v + b w >= c (module docstring): the ``k`` most violated
-    rows first, then each round the ``k`` most violated by the last answer. Returns the
-    answer, the rounds, the case and the working set. ``short``: by how much the command falls
-    short of each row (m/s, > 0: violated): the order in which rows join, not the answer."""
+    """Cutting planes over the rows a v + b w >= c (module docstring; ``abc``: the (3, N) rows
+    a, b, c): the ``k`` most violated rows first, then each round the ``k`` most violated by
+    the last answer. Returns the answer, the rounds, the case and the working set. ``short``:
+    by how much the command falls short of each row (m/s, > 0: violated): the order in which
+    rows join, not the answer."""
     working = _most_violated(short, k)
-    # The rows scaled to the Euclidean problem, as Python floats (each round picks a few).
-    gx, gy, e = (a * (1.0 / sv)).tolist(), (b * (1.0 / sw)).tolist(), c.tolist()
+    isv, isw = 1.0 / sv, 1.0 / sw
     for rounds in range(1, _MAX_ROUNDS + 1):
-        rows = working.tolist()
+        # Only the working rows become Python floats, scaled to the Euclidean problem.
+        ga, gb, e = abc.take(working, axis=1).tolist()
         found = _project_scaled(
-            [gx[i] for i in rows], [gy[i] for i in rows], [e[i] for i in rows],
-            v0, w0, sv, sw, profile,
-        )  # fmt: skip
+            [g * isv for g in ga], [g * isw for g in gb], e, v0, w0, sv, sw, profile
+        )
         if found is None:
             break
         v, w = found
-        short = c - (a * v + b * w)
+        short = np.dot((-v, -w, 1.0), abc)  # c - (a v + b w): every row's shortfall
         if _max(short) <= _TOL:
             return v, w, rounds, CbfCase.SOLVED, working
         add = _most_violated(short, k)
         working = np.concatenate((working, add))
-    v, w = _stop_and_turn(b, c, w0, profile)
+    v, w = _stop_and_turn(abc[1], abc[2], w0, profile)
     return v, w, _MAX_ROUNDS, CbfCase.STOP_TURN, working
 
 
