@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import statistics
 import sys
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -480,45 +481,63 @@ def _camera(r: Result) -> list[str]:
 
 
 def _bandwidth(r: Result) -> list[str]:
-    lb = r["loopback"]
-    out = _table(
-        ["stream (robot -> operator)", "msgs/s", "bytes/msg", "kbit/s"],
-        [
-            [k, _num(s["msgs_per_s"], 1), _num(s["bytes_per_msg"], 0), _num(s["kbps"], 1)]
-            for k, s in lb["streams"].items()
-        ],
-    )
-    out += [
-        "",
-        f"View plane {_num(lb['view_kbps'], 1)} kbit/s; the robot process "
-        f"{_num(lb['robot_cpu_pct'], 1)}% of a core, peak RSS {_num(lb['robot_rss_mb'], 0)} MB.",
-    ]
-    demos = {k: v for k, v in r.items() if k.startswith("demo_rate_")}
-    if demos:
-        out += [""]
+    """``bench bandwidth``: the loopback streams with and without the camera, the demo through
+    each link (the median of its repeats) and the rate-change scenario."""
+    out: list[str] = []
+    for camera in ("sim", "none"):
+        lb = r.get(f"loopback_camera_{camera}")
+        if not lb:
+            continue
+        out += [f"Loopback, defaults, `--camera {camera}`:", ""]
         out += _table(
+            ["stream (robot -> operator)", "msgs/s", "bytes/msg", "kbit/s"],
             [
-                "downlink",
-                "distance share",
-                "HOLD",
-                "collisions",
-                "view age p50 ms",
-                "command age p99 ms",
-                "view plane kbit/s",
-            ],
-            [
-                [
-                    f"rate={k.removeprefix('demo_rate_')} kbit/s",
-                    _num(v.get("distance_share")),
-                    _num(v.get("hold_share")),
-                    _num(v.get("collisions")),
-                    _num(v.get("view_age_p50_ms"), 0),
-                    _num(v.get("cmd_age_p99_ms"), 0),
-                    str(v.get("downlink_kbps")),
-                ]
-                for k, v in demos.items()
+                [k, _num(s["msgs_per_s"], 1), _num(s["bytes_per_msg"], 0), _num(s["kbps"], 1)]
+                for k, s in lb["streams"].items()
             ],
         )
+        out += [
+            "",
+            f"View plane {_num(lb['view_kbps'], 1)} kbit/s; the robot process "
+            f"{_num(lb['robot_cpu_pct'], 1)}% of a core, peak RSS "
+            f"{_num(lb['robot_rss_mb'], 0)} MB.",
+            "",
+        ]
+    demos = r.get("demo") or {}
+    if demos:
+        out += ["The demo through each link (the median of its runs):", ""]
+        columns = (
+            ("distance_share", 3), ("hold_share", 3), ("collisions", 0), ("operator_lost", 0),
+            ("view_age_p50_ms", 0), ("cmd_age_p99_ms", 0), ("camera_fps_driving", 1),
+            ("camera_age_p50_ms", 0),
+        )  # fmt: skip
+        rows = []
+        for link, runs in demos.items():
+            ok = [x for x in runs if "error" not in x]
+            row = [link, str(len(ok))]
+            for key, digits in columns:
+                values = [x[key] for x in ok if x.get(key) is not None]
+                row.append(_num(statistics.median(values), digits) if values else "-")
+            rows.append(row)
+        out += _table(["link", "runs", *(k for k, _ in columns)], rows)
+        out += [""]
+    scen = r.get("scenario")
+    if scen and "back_under_s" in scen:
+        rates = scen["rates_kbps"]
+        changes = ", ".join(
+            f"at {c:g} s to {rates[i + 1]:g} kbit/s: back under the limit after "
+            + ("never" if b is None else f"{b:g} s")
+            for i, (c, b) in enumerate(zip(scen["changes_s"], scen["back_under_s"], strict=True))
+        )
+        out += [
+            f"Scenario `{scen['file']}` ({' -> '.join(f'{x:g}' for x in rates)} kbit/s): the "
+            f"view age's median per second {changes}; the camera in the last phase "
+            f"{_num(scen['camera_fps_last_phase'], 1)} frames/s.",
+            "",
+        ]
+    missed = r.get("missed")
+    if missed is not None:
+        out += ["Targets missed: " + ("; ".join(missed) if missed else "none") + "."]
     return out
 
 

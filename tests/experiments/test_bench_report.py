@@ -101,3 +101,18 @@ def test_bench_report_writes_the_page_from_the_results(tmp_path: Path) -> None:
         timeout=120,
     )
     assert proc.returncode == 2 and "not a file in an existing folder" in proc.stderr
+
+
+def test_every_committed_result_renders_with_its_own_section() -> None:
+    """A benchmark whose result file changed shape must get its renderer changed with it: the
+    committed results all render without the generic fallback (the bandwidth section showed
+    only its top-level numbers for a day)."""
+    results = load_results()
+    assert "bandwidth" in results
+    for name, result in results.items():
+        renderer = bench_report.RENDERERS.get(name)
+        if renderer is None:
+            continue
+        assert "does not have the shape" not in "\n".join(
+            bench_report._rendered(renderer, result)
+        ), name
