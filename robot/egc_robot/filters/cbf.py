@@ -51,20 +51,23 @@ beyond which nothing is known to be free):
   at most exponentially (never to contact); every other row keeps kappa_i = 0, so a wall
   ahead or beside is still kept at the margin.
 
-The margin's speed is taken twice, which makes two half-planes per point:
+The margin's speed is taken twice, which makes two conditions per point:
 
 - (S) at the robot's current velocity (the spec's "braking distance at the current speed"):
   u_i(v, w) <= max(alpha (sd_i - margin - omega_i K u_i(v_now, w_now)^+), kappa_i sd_i^+). A
   robot that is fast now needs room to stop from this speed, whatever it is asked next.
 - (C) at the commanded velocity:
-  u_i (1 + alpha omega_i K) <= max(alpha (sd_i - margin), kappa_i sd_i^+), linear because u_i is. Without it the filter chases its own output: a slower command shrinks
+  u_i (1 + alpha omega_i K) <= max(alpha (sd_i - margin), kappa_i sd_i^+), linear because u_i
+  is. Without it the filter chases its own output: a slower command shrinks
   next cycle's margin, which allows a faster one (loop gain alpha K > 1 for every useful alpha:
   the command chatters). With both, the command settles on their common fixed point.
   K here uses the larger of the current and the commanded speeds (an upper bound of the braking
   time, so the linear margin is never shorter than the quadratic braking distance).
 
-In a replay (the current speed is the recorded command) (S) and (C) agree on the recorded
-command. Box limits |v| <= v_max, |w| <= w_max from the profile close the feasible set.
+Both bound the same u_i(v, w), so they are one half-plane, the tighter:
+u_i(v, w) <= min(c_S, c_C / (1 + alpha omega_i K)) with c_S, c_C their right-hand sides (the
+result's ``tight`` still says which binds). In a replay (the current speed is the recorded
+command) (S) and (C) agree on the recorded command. Box limits |v| <= v_max, |w| <= w_max from the profile close the feasible set.
 
 **Solving** min wv (v - v0)^2 + ww (w - w0)^2 over the half-planes and the box, exactly, in
 closed form (no iterative solver): in coordinates scaled by the weights this is the Euclidean
@@ -179,8 +182,7 @@ class CbfParams:
     - ``points_considered``: how many constraints the solver takes at a time, the most violated
       ones (first by the command, then each round by the last answer). It checks every row
       built after each round, so this sets the cost of a round, not the answer: 8 holds a wall
-      ahead and one beside, each with its (S) and (C) rows and neighbours, settled in one or
-      two rounds.
+      ahead and one beside, each with its neighbours, settled in one or two rounds.
     """
 
     alpha_per_s: float = 8.0
@@ -298,7 +300,8 @@ class CbfResult:
     @property
     def tight(self) -> TightRows | None:
         """The constraints the command violated and the answer meets with equality (at most
-        ``_MAX_REPORTED``), as arrays; None when nothing changed. Computed when asked: the
+        ``_MAX_REPORTED``), as arrays, each the (S) or (C) that binds in its point's row (both:
+        (C)); None when nothing changed. Computed when asked: the
         control loop does not."""
         return None if self.working is None else self.working.tight()
 
@@ -420,32 +423,37 @@ class _Working(NamedTuple):
     w: float
 
     def tight(self) -> TightRows:
-        a, b, c = self.rows.a, self.rows.b, self.rows.c
+        rows = self.rows
+        a, b, c = rows.a, rows.b, rows.c
         wc = c[self.working]
         gap = a[self.working] * self.v + b[self.working] * self.w - wc
-        violated = a[self.working] * self.rows.v0 + b[self.working] * self.rows.w0 < wc
-        tight = self.working[violated & (np.abs(gap) <= 1e-7 * (1.0 + np.abs(wc)))]
-        tight = tight[:_MAX_REPORTED]
-        rows, n = self.rows, self.rows.n
-        point = tight % n
-        state = tight < n
+        violated = a[self.working] * rows.v0 + b[self.working] * rows.w0 < wc
+        point = self.working[violated & (np.abs(gap) <= 1e-7 * (1.0 + np.abs(wc)))]
+        point = point[:_MAX_REPORTED]
+        # Which of the point's half-planes binds: (C) where its c is the row's (also when
+        # both are), reported as (C) is written, -gain u >= c (the same half-plane); else (S).
+        gain = rows.gain[point]
+        state = rows.bounds[1][point] / gain != c[point]
+        scale = np.where(state, 1.0, gain)
         return TightRows(
-            rows.x[point], rows.y[point], a[tight], b[tight], c[tight],
-            rows.sd[point], rows.margins(point, state), state, point >= rows.n_scan,
+            rows.x[point], rows.y[point], a[point] * scale, b[point] * scale,
+            np.where(state, c[point], rows.bounds[1][point]), rows.sd[point],
+            rows.margins(point, state), state, point >= rows.n_scan,
         )  # fmt: skip
 
 
 class _Rows(NamedTuple):
-    """Every point's two half-planes a v + b w >= c: every (S) row, then every (C) row."""
+    """Every point's half-plane a v + b w >= c, the tighter of its (S) and (C)."""
 
     x: FloatArray
     y: FloatArray
     n_scan: int  # the first n_scan points are scan points, the rest unseen edges
     sd: FloatArray
-    # (3, 2n): a, b, c of every row. (S) a = -n_x of each point, then (C): the same times
-    # 1 + alpha K omega.
-    abc: FloatArray
+    abc: FloatArray  # (3, n): a = -n_x, b, c of each point's row
     short: FloatArray  # by how much the command falls short of each row (> 0: violated)
+    # (2, n): (S)'s c and (C)'s c before the division by its gain (for the report).
+    bounds: FloatArray
+    gain: FloatArray  # 1 + alpha K omega: (C) is -gain u >= bounds[1]
     m_state_extra: FloatArray | None  # omega K u^+ at the current speed (None: standing)
     omega_cmd: FloatArray  # omega and u at the commanded speed (its margin, for the report)
     u_ref: FloatArray
@@ -575,7 +583,7 @@ class _Scene(NamedTuple):
     def rows(
         self, x: FloatArray, y: FloatArray, n_scan: int, unseen: list[tuple[float, float, float]]
     ) -> _Rows:
-        """The half-planes of the points (module docstring): (S) rows, then (C) rows.
+        """The half-plane of each point (module docstring): the tighter of its (S) and (C).
 
         On the few dozen points in reach numpy's cost per call, not per element, is the time,
         so each quantity is computed once and written where the solver reads it (``out=``), and
@@ -595,16 +603,14 @@ class _Scene(NamedTuple):
             )
             nearest = _min(sd)
         n = sd.size
-        # Every (S) row, then every (C) row: a = -n_x, b, c, and the command's approach speed
-        # u_ref (S) and gain u_ref (C), written in place (numpy's cost is per call here).
-        block = np.empty((4, 2 * n))
-        a_all, b_all, c_all, u_all = block
-        a, b, u_ref = a_all[:n], b_all[:n], u_all[:n]
+        # One row per point: a = -n_x, b, c (written in place: numpy's cost is per call here).
+        abc = np.empty((3, n))
+        a, b, c = abc
         np.negative(nx, out=a)
         np.subtract(nx * qy, ny * qx, out=b)
         # Approach speeds u = nx v - b w under the command and under the current motion, and
         # how squarely each point lies in that motion's path (omega).
-        np.multiply(nx, v0, out=u_ref)
+        u_ref = nx * v0
         if w0:
             u_ref -= b * w0
         omega_cmd, up_ref = _omega(u_ref, v0, w0, qx, qy)
@@ -618,10 +624,11 @@ class _Scene(NamedTuple):
             reach_u = np.abs(nx) * profile.v_max_mps + np.abs(b) * profile.w_max_radps
             flank = np.maximum(1.0 - reach_u / (CREEP_BELOW * profile.v_max_mps), 0.0)
             creep = (CREEP_PER_S * flank) * np.maximum(sd, 0.0)
-        # c = -max(alpha (sd - margin - m_extra), creep): m_extra = omega K u^+ at the current
-        # speed for (S) (first row), none for (C) (second row).
-        c2 = c_all.reshape(2, n)
-        room = np.subtract(sd, p.margin_m, out=c2[1])
+        # bounds[0] = -max(alpha (sd - margin - m_extra), creep), (S)'s c with m_extra =
+        # omega K u^+ at the current speed; bounds[1] = -max(alpha (sd - margin), creep), (C)'s
+        # c before its division by the gain.
+        bounds = np.empty((2, n))
+        room = np.subtract(sd, p.margin_m, out=bounds[1])
         m_extra: FloatArray | None = None
         if v_now or w_now:
             if v_now == v0 and w_now == w0:  # a replay, a steady cycle: the same speeds twice
@@ -630,20 +637,21 @@ class _Scene(NamedTuple):
                 u_now = nx * v_now - b * w_now
                 omega_now, up_now = _omega(u_now, v_now, w_now, qx, qy)
             m_extra = (omega_now * self.k_now) * up_now
-            np.subtract(room, m_extra, out=c2[0])
+            np.subtract(room, m_extra, out=bounds[0])
         else:
-            c2[0] = room
-        c2 *= alpha
-        np.maximum(c2, creep, out=c2)
-        np.negative(c2, out=c2)
-        gain = 1.0 + (alpha * self.k_cmd) * omega_cmd  # (C): u gain <= max(alpha room, creep)
-        np.multiply(gain, a, out=a_all[n:])
-        np.multiply(gain, b, out=b_all[n:])
-        np.multiply(gain, u_ref, out=u_all[n:])
+            bounds[0] = room
+        bounds *= alpha
+        np.maximum(bounds, creep, out=bounds)
+        np.negative(bounds, out=bounds)
+        # (C): -gain u >= bounds[1], i.e. -u >= bounds[1] / gain; the point's row is the
+        # tighter of (S) and (C): the same normal, the larger c.
+        gain = 1.0 + (alpha * self.k_cmd) * omega_cmd
+        np.divide(bounds[1], gain, out=c)
+        np.maximum(bounds[0], c, out=c)
         # The command falls short of each row by c + u (if positive).
-        short = c_all + u_all
+        short = c + u_ref
         return _Rows(
-            x, y, n_scan, sd, block[:3], short, m_extra, omega_cmd, u_ref, self.k_cmd,
+            x, y, n_scan, sd, abc, short, bounds, gain, m_extra, omega_cmd, u_ref, self.k_cmd,
             p.margin_m, _max(short), nearest, v0, w0,
         )  # fmt: skip
 
