@@ -143,6 +143,7 @@ _COVER_W = 0.25
 _TOL = 1e-9  # a constraint is met when short of it by no more than this (m/s)
 _SAME = 1e-12
 _EMPTY = np.empty(0)
+_NO_POINTS = np.empty((0, 2))
 _MAX_REPORTED = 64  # active constraints kept in a result (the view and the tool show them)
 
 
@@ -518,8 +519,8 @@ class _Scene(NamedTuple):
         v_range: tuple[float, float],
         w_bound: float,
         quiet: tuple[float, float] | None = None,
-    ) -> tuple[FloatArray, FloatArray, int, list[tuple[float, float, float]]] | None:
-        """The points (x, y), how many are scan points, and the unseen edges, that a command
+    ) -> tuple[FloatArray, int, list[tuple[float, float, float]]] | None:
+        """The points (an (m, 2) array of x, y), how many are scan points, and the unseen edges, that a command
         with v in ``v_range`` and |w| <= ``w_bound`` could approach faster than their barriers
         allow; None when there is none, or when ``quiet`` = (v, |w|) of the command itself could
         approach none of them too fast (then nothing changes it).
@@ -543,7 +544,7 @@ class _Scene(NamedTuple):
                 r2_min = index.r2_sorted[0] if index is not None else _min(pts.r2)
                 if r2_min > (q_max + max(quiet_f, quiet_b)) ** 2:
                     return None
-        x = y = _EMPTY
+        xy = _NO_POINTS
         if pts.count:
             rf, rb = q_max + reach_f, q_max + reach_b
             split = self.ahead_from
@@ -552,7 +553,7 @@ class _Scene(NamedTuple):
                 near = pts.r2 <= far * far
             else:
                 near = pts.r2 <= np.where(pts.x > split, rf * rf, rb * rb)
-            x, y = pts.x[near], pts.y[near]
+            xy = pts.xy[near]
         unseen = [  # (direction, how far it saw, the footprint's extent that way)
             (sign, seen, extent)
             for sign, seen, extent, room in (
@@ -561,9 +562,10 @@ class _Scene(NamedTuple):
             )
             if seen - extent < room
         ]
-        if x.size == 0 and not unseen:
+        n_scan = len(xy)
+        if n_scan == 0 and not unseen:
             return None
-        return x, y, x.size, unseen
+        return xy, n_scan, unseen
 
     def _reach_sd(self, v_range: tuple[float, float], w_bound: float) -> tuple[float, float]:
         """How far from the footprint (m) a point ahead and a point behind can have its barrier
@@ -580,9 +582,7 @@ class _Scene(NamedTuple):
             p.margin_m + u_b / alpha + max(u_b * self.k_cmd, self.k_now * s_b),
         )
 
-    def rows(
-        self, x: FloatArray, y: FloatArray, n_scan: int, unseen: list[tuple[float, float, float]]
-    ) -> _Rows:
+    def rows(self, xy: FloatArray, n_scan: int, unseen: list[tuple[float, float, float]]) -> _Rows:
         """The half-plane of each point (module docstring): the tighter of its (S) and (C).
 
         On the few dozen points in reach numpy's cost per call, not per element, is the time,
@@ -590,7 +590,8 @@ class _Scene(NamedTuple):
         the creep's nine calls are skipped when no row can creep."""
         p, alpha, profile = self.params, self.params.alpha_per_s, self.profile
         v0, w0, v_now, w_now = self.v0, self.w0, self.v_now, self.w_now
-        sd, nx, ny, qx, qy, nearest = _geometry(x, y, profile.footprint)
+        x, y = xy.T
+        sd, nx, ny, qx, qy, nearest = _geometry(xy, profile.footprint)
         if unseen:
             # A wall across the axis where the laser stopped seeing, met first by the
             # footprint's front (back) extent: n = (+-1, 0), q = (front or back, 0).
@@ -694,17 +695,18 @@ def _max(a: FloatArray) -> float:
 
 
 def _geometry(
-    x: FloatArray, y: FloatArray, fp: Footprint
+    xy: FloatArray, fp: Footprint
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float]:
     """Signed distance sd, unit normal (nx, ny) and the footprint's nearest point (qx, qy) of
-    each point, and min(sd) (inf for no point). The normal is the gradient of sd: from q
-    towards the point outside, from the point towards q inside (the outward normal of the
-    nearest edge)."""
-    if x.size == 0:
+    each point of the (m, 2) ``xy``, and min(sd) (inf for no point). The normal is the
+    gradient of sd: from q towards the point outside, from the point towards q inside (the
+    outward normal of the nearest edge)."""
+    if len(xy) == 0:
         return _EMPTY, _EMPTY, _EMPTY, _EMPTY, _EMPTY, math.inf
     box = fp.centred_box
     if box is not None:
-        return _box_geometry(x, y, *box)
+        return _box_geometry(xy.T, *_box_corners(*box))
+    x, y = xy.T
     if fp.is_disc:
         r = np.sqrt(x * x + y * y)
         radius = fp.radius_m
@@ -717,7 +719,7 @@ def _geometry(
             safe = np.where(centre, 1.0, r)
             nx, ny = np.where(centre, 1.0, x / safe), np.where(centre, 0.0, y / safe)
         return sd, nx, ny, radius * nx, radius * ny, nearest
-    q = closest_boundary_xy(fp, np.column_stack((x, y)))
+    q = closest_boundary_xy(fp, xy)
     qx, qy = q[:, 0], q[:, 1]
     dx, dy = x - qx, y - qy
     dist = np.sqrt(dx * dx + dy * dy)
@@ -737,19 +739,29 @@ def _geometry(
     return sd, nx, ny, qx, qy, _min(sd)
 
 
+@functools.lru_cache(maxsize=32)
+def _box_corners(half_l: float, half_w: float) -> tuple[FloatArray, FloatArray]:
+    """The corners (-half_l, -half_w) and (half_l, half_w) as (2, 1) columns."""
+    high = np.array([[half_l], [half_w]])
+    return -high, high
+
+
 def _box_geometry(
-    x: FloatArray, y: FloatArray, half_l: float, half_w: float
+    p: FloatArray, low: FloatArray, high: FloatArray
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float]:
-    """``_geometry`` of the rectangle |x| <= half_l, |y| <= half_w in closed form."""
-    qx = np.minimum(np.maximum(x, -half_l), half_l)
-    qy = np.minimum(np.maximum(y, -half_w), half_w)
-    dx = x - qx
-    dy = y - qy
-    sd = np.sqrt(dx * dx + dy * dy)
+    """``_geometry`` of the rectangle ``low`` <= (x, y) <= ``high`` = (half_l, half_w), in
+    closed form, on the (2, m) points ``p`` (x and y ride along one axis: one numpy call per
+    step)."""
+    q = np.minimum(np.maximum(p, low), high)
+    d = p - q
+    d2 = d * d
+    sd = np.sqrt(d2[0] + d2[1])
     nearest = _min(sd)
     if nearest > 0.0:  # no point inside
-        inv = 1.0 / sd
-        return sd, dx * inv, dy * inv, qx, qy, nearest
+        n = d * (1.0 / sd)
+        return sd, n[0], n[1], q[0], q[1], nearest
+    half_l, half_w = float(high[0, 0]), float(high[1, 0])
+    (x, y), (dx, dy), (qx, qy) = p, d, q
     inside = sd <= 0.0
     xi, yi = x[inside], y[inside]
     to_front, to_back = half_l - xi, xi + half_l
