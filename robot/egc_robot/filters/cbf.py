@@ -117,7 +117,7 @@ from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
-from egc_common.footprint import Footprint, closest_boundary_xy, signed_distance
+from egc_common.footprint import Footprint, signed_distance
 from egc_common.profiles import RobotProfile
 from egc_common.scan import MAX_ABS_COORD_M, ObstaclePoints, obstacle_points
 
@@ -125,6 +125,7 @@ from egc_robot.safety import SweepParams
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
+ComplexArray = npt.NDArray[np.complex128]
 
 # omega_i = cos^PATH_POWER: how much of the stopping distance a point off the path is owed
 # (module docstring: with 4 a Jackal at 0.8 m/s passes a wall 0.2 m away).
@@ -511,7 +512,6 @@ class _Scene(NamedTuple):
     x_back: float  # the footprint's extents along x (m), its reach from {R}'s origin (m)
     x_front: float
     q_max: float
-    ahead_from: float | None  # ``_ahead_from``
 
     def points_in_reach(
         self,
@@ -527,8 +527,7 @@ class _Scene(NamedTuple):
 
         A point farther from the footprint than reach_sd has slack in (S) and (C):
         (S) alpha (sd - margin - K u_now) >= u and (C) alpha (sd - margin) >= u (1 + alpha K)
-        with u the largest approach. Points ahead (``_ahead_from``) are approached by forward
-        motion and turning only, the others by reversing and turning only.
+        with u the largest approach.
         """
         x_back, x_front, q_max = self.x_back, self.x_front, self.q_max
         reach_f, reach_b = self._reach_sd(v_range, w_bound)
@@ -546,14 +545,10 @@ class _Scene(NamedTuple):
                     return None
         xy = _NO_POINTS
         if pts.count:
-            rf, rb = q_max + reach_f, q_max + reach_b
-            split = self.ahead_from
-            if rf == rb or split is None:
-                far = max(rf, rb)
-                near = pts.r2 <= far * far
-            else:
-                near = pts.r2 <= np.where(pts.x > split, rf * rf, rb * rb)
-            xy = pts.xy[near]
+            # One threshold for points ahead and behind: the few more rows a split by side
+            # would leave out cost less than its two numpy calls over the whole scan.
+            far = q_max + max(reach_f, reach_b)
+            xy = pts.xy[pts.r2 <= far * far]
         unseen = [  # (direction, how far it saw, the footprint's extent that way)
             (sign, seen, extent)
             for sign, seen, extent, room in (
@@ -657,23 +652,12 @@ class _Scene(NamedTuple):
         )  # fmt: skip
 
 
-def _ahead_from(fp: Footprint) -> float | None:
-    """The x beyond which every point outside the footprint has n_x > 0 and short of which
-    n_x <= 0 (forward motion approaches only the points beyond it), or None when no such x
-    exists: the front edge of a centred rectangle (beside it n = (0, +-1)), 0 for a disc
-    (n = p / |p|); a general polygon's nearest boundary point may lie behind a point anywhere."""
-    box = fp.centred_box
-    if box is not None:
-        return box[0]
-    return 0.0 if fp.is_disc else None
-
-
 @functools.lru_cache(maxsize=32)
-def _shape(fp: Footprint) -> tuple[float, float, float, float | None]:
-    """(x_back, x_front, reach, ``_ahead_from``) of a footprint (numpy reductions: once per
-    shape, not per call)."""
+def _shape(fp: Footprint) -> tuple[float, float, float]:
+    """(x_back, x_front, reach) of a footprint (numpy reductions: once per shape, not per
+    call)."""
     x0, x1, _, _ = fp.bounds
-    return x0, x1, fp.reach_m, _ahead_from(fp)
+    return x0, x1, fp.reach_m
 
 
 @functools.lru_cache(maxsize=32)
@@ -719,10 +703,7 @@ def _geometry(
             safe = np.where(centre, 1.0, r)
             nx, ny = np.where(centre, 1.0, x / safe), np.where(centre, 0.0, y / safe)
         return sd, nx, ny, radius * nx, radius * ny, nearest
-    q = closest_boundary_xy(fp, xy)
-    qx, qy = q[:, 0], q[:, 1]
-    dx, dy = x - qx, y - qy
-    dist = np.sqrt(dx * dx + dy * dy)
+    qx, qy, dx, dy, dist = _polygon_nearest(xy, *_polygon_edges(fp))
     candidates = dist <= _inside_bound(fp)
     if not candidates.any():  # every point outside and off the edge: sd = dist, n = d / sd
         return dist, dx / dist, dy / dist, qx, qy, _min(dist)
@@ -737,6 +718,42 @@ def _geometry(
         r = np.maximum(np.sqrt(x * x + y * y), _SAME)
         nx, ny = np.where(on_edge, x / r, nx), np.where(on_edge, y / r, ny)
     return sd, nx, ny, qx, qy, _min(sd)
+
+
+@functools.lru_cache(maxsize=32)
+def _polygon_edges(fp: Footprint) -> tuple[FloatArray, FloatArray, FloatArray, ComplexArray]:
+    """A polygon's edges: starts (N, 2), vectors (N, 2), squared lengths (N,) (as
+    ``closest_boundary_xy`` takes them), and the starts and vectors as x + i y (2, N)."""
+    edges = fp._edges
+    if edges is None:
+        raise ValueError("a polygon footprint has edges")
+    start, edge, length2 = edges
+    both = np.ascontiguousarray(np.stack((start, edge))).view(np.complex128)[..., 0]
+    return start, edge, length2, both
+
+
+def _polygon_nearest(
+    xy: FloatArray, start: FloatArray, edge: FloatArray, length2: FloatArray, both: ComplexArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The polygon's nearest boundary point q of each point p of the (m, 2) ``xy``, p - q and
+    |p - q|: ``closest_boundary_xy``'s arithmetic to the bit (the projection onto each edge,
+    clamped to it, the nearest of those; a point on an edge keeps its exact zero distance),
+    with x + i y in one complex number where that is exact (sums, products by a real)."""
+    d = xy[:, None, :] - start  # (m, N, 2)
+    d *= edge
+    t = d[..., 0] + d[..., 1]
+    t /= length2
+    np.minimum(np.maximum(t, 0.0, out=t), 1.0, out=t)
+    c = t * both[1]
+    c += both[0]  # the nearest point of each edge
+    r = np.ascontiguousarray(xy).view(np.complex128) - c  # p minus it
+    rx, ry = r.real, r.imag
+    r2 = rx * rx
+    r2 += ry * ry
+    k = r2.argmin(axis=1)
+    row = np.arange(k.size)
+    q, pq = c[row, k], r[row, k]
+    return q.real, q.imag, pq.real, pq.imag, np.sqrt(r2[row, k])
 
 
 @functools.lru_cache(maxsize=32)
