@@ -358,7 +358,11 @@ def cbf_filter(
 
     sv = math.sqrt(params.weight_v) / profile.v_max_mps  # z = (sv v, sw w): Euclidean QP
     sw = math.sqrt(params.weight_w) / profile.w_max_radps
-    scene = _Scene(profile, params, v0, w0, v_now, w_now, k_now, k_cmd, *_shape(profile.footprint))
+    shape = _shape(profile.footprint)
+    scene = _Scene(
+        profile, params, v0, w0, v_now, w_now, k_now, k_cmd, shape.x_back, shape.x_front,
+        shape.reach, shape,
+    )  # fmt: skip
     # Rows are built for the points some command within a "cover" could approach too fast:
     # first the command's own (from a standstill to it: slowing down needs no more points; a
     # little reversing and turning added), then, if the answer leaves the cover, one holding
@@ -512,6 +516,7 @@ class _Scene(NamedTuple):
     x_back: float  # the footprint's extents along x (m), its reach from {R}'s origin (m)
     x_front: float
     q_max: float
+    shape: _Shape
 
     def points_in_reach(
         self,
@@ -567,14 +572,18 @@ class _Scene(NamedTuple):
         violated by a command with v in ``v_range`` and |w| <= ``w_bound``."""
         p, alpha, q_max = self.params, self.params.alpha_per_s, self.q_max
         turn = q_max * w_bound
-        turn_now = q_max * abs(self.w_now)
-        u_f = max(v_range[1], 0.0) + turn
-        u_b = max(-v_range[0], 0.0) + turn
-        s_f = max(self.v_now, 0.0) + turn_now
-        s_b = max(-self.v_now, 0.0) + turn_now
+        w_now, v_now, v_lo, v_hi = self.w_now, self.v_now, -v_range[0], v_range[1]
+        turn_now = q_max * (w_now if w_now >= 0.0 else -w_now)
+        # max(a, b) written as b if b > a else a (the builtin's result, without its call).
+        u_f = (0.0 if v_hi < 0.0 else v_hi) + turn
+        u_b = (0.0 if v_lo < 0.0 else v_lo) + turn
+        s_f = (0.0 if v_now < 0.0 else v_now) + turn_now
+        s_b = (0.0 if -v_now < 0.0 else -v_now) + turn_now
+        f_cmd, f_now = u_f * self.k_cmd, self.k_now * s_f
+        b_cmd, b_now = u_b * self.k_cmd, self.k_now * s_b
         return (
-            p.margin_m + u_f / alpha + max(u_f * self.k_cmd, self.k_now * s_f),
-            p.margin_m + u_b / alpha + max(u_b * self.k_cmd, self.k_now * s_b),
+            p.margin_m + u_f / alpha + (f_now if f_now > f_cmd else f_cmd),
+            p.margin_m + u_b / alpha + (b_now if b_now > b_cmd else b_cmd),
         )
 
     def rows(self, xy: FloatArray, n_scan: int, unseen: list[tuple[float, float, float]]) -> _Rows:
@@ -586,7 +595,7 @@ class _Scene(NamedTuple):
         p, alpha, profile = self.params, self.params.alpha_per_s, self.profile
         v0, w0, v_now, w_now = self.v0, self.w0, self.v_now, self.w_now
         x, y = xy.T
-        sd, nx, ny, qx, qy, nearest = _geometry(xy, profile.footprint)
+        sd, nx, ny, qx, qy, nearest = _geometry(xy, self.shape)
         if unseen:
             # A wall across the axis where the laser stopped seeing, met first by the
             # footprint's front (back) extent: n = (+-1, 0), q = (front or back, 0).
@@ -652,21 +661,33 @@ class _Scene(NamedTuple):
         )  # fmt: skip
 
 
-@functools.lru_cache(maxsize=32)
-def _shape(fp: Footprint) -> tuple[float, float, float]:
-    """(x_back, x_front, reach) of a footprint (numpy reductions: once per shape, not per
-    call)."""
-    x0, x1, _, _ = fp.bounds
-    return x0, x1, fp.reach_m
+class _Shape(NamedTuple):
+    """What the filter reads of a footprint, derived once per shape (``_shape``)."""
+
+    x_back: float  # the footprint's extents along x (m), its reach from {R}'s origin (m)
+    x_front: float
+    reach: float
+    footprint: Footprint
+    box: tuple[FloatArray, FloatArray] | None  # a centred rectangle's corners, as (2, 1)
+    edges: tuple[FloatArray, FloatArray, FloatArray, ComplexArray] | None  # a polygon's
+    # A distance from a polygon's edge beyond which no point is inside it: half the shorter
+    # side of its bounding box (a point inside is nearer the box's edge than that, and the
+    # box holds the polygon), widened far beyond any rounding.
+    inside_bound: float
 
 
 @functools.lru_cache(maxsize=32)
-def _inside_bound(fp: Footprint) -> float:
-    """A distance from a polygon's edge beyond which no point is inside it: half the shorter
-    side of its bounding box (a point inside is nearer the box's edge than that, and the box
-    holds the polygon), widened far beyond any rounding."""
+def _shape(fp: Footprint) -> _Shape:
+    """``_Shape`` of a footprint (numpy reductions and a hash: once per call, not per step)."""
     x0, x1, y0, y1 = fp.bounds
-    return 0.5 * min(x1 - x0, y1 - y0) * (1.0 + 1e-9) + 1e-9
+    box = fp.centred_box
+    corners = None
+    if box is not None:
+        high = np.array([[box[0]], [box[1]]])
+        corners = (-high, high)
+    edges = None if fp.is_disc or box is not None else _polygon_edges(fp)
+    inside = 0.5 * min(x1 - x0, y1 - y0) * (1.0 + 1e-9) + 1e-9
+    return _Shape(x0, x1, fp.reach_m, fp, corners, edges, inside)
 
 
 def _min(a: FloatArray) -> float:
@@ -679,7 +700,7 @@ def _max(a: FloatArray) -> float:
 
 
 def _geometry(
-    xy: FloatArray, fp: Footprint
+    xy: FloatArray, shape: _Shape
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float]:
     """Signed distance sd, unit normal (nx, ny) and the footprint's nearest point (qx, qy) of
     each point of the (m, 2) ``xy``, and min(sd) (inf for no point). The normal is the
@@ -687,11 +708,11 @@ def _geometry(
     outward normal of the nearest edge)."""
     if len(xy) == 0:
         return _EMPTY, _EMPTY, _EMPTY, _EMPTY, _EMPTY, math.inf
-    box = fp.centred_box
-    if box is not None:
-        return _box_geometry(xy.T, *_box_corners(*box))
+    if shape.box is not None:
+        return _box_geometry(xy.T, *shape.box)
     x, y = xy.T
-    if fp.is_disc:
+    fp = shape.footprint
+    if shape.edges is None:  # a disc
         r = np.sqrt(x * x + y * y)
         radius = fp.radius_m
         sd = r - radius
@@ -703,8 +724,8 @@ def _geometry(
             safe = np.where(centre, 1.0, r)
             nx, ny = np.where(centre, 1.0, x / safe), np.where(centre, 0.0, y / safe)
         return sd, nx, ny, radius * nx, radius * ny, nearest
-    qx, qy, dx, dy, dist = _polygon_nearest(xy, *_polygon_edges(fp))
-    candidates = dist <= _inside_bound(fp)
+    qx, qy, dx, dy, dist = _polygon_nearest(xy, *shape.edges)
+    candidates = dist <= shape.inside_bound
     if not candidates.any():  # every point outside and off the edge: sd = dist, n = d / sd
         return dist, dx / dist, dy / dist, qx, qy, _min(dist)
     inside = np.zeros(dist.size, dtype=np.bool_)
@@ -720,7 +741,6 @@ def _geometry(
     return sd, nx, ny, qx, qy, _min(sd)
 
 
-@functools.lru_cache(maxsize=32)
 def _polygon_edges(fp: Footprint) -> tuple[FloatArray, FloatArray, FloatArray, ComplexArray]:
     """A polygon's edges: starts (N, 2), vectors (N, 2), squared lengths (N,) (as
     ``closest_boundary_xy`` takes them), and the starts and vectors as x + i y (2, N)."""
@@ -754,13 +774,6 @@ def _polygon_nearest(
     row = np.arange(k.size)
     q, pq = c[row, k], r[row, k]
     return q.real, q.imag, pq.real, pq.imag, np.sqrt(r2[row, k])
-
-
-@functools.lru_cache(maxsize=32)
-def _box_corners(half_l: float, half_w: float) -> tuple[FloatArray, FloatArray]:
-    """The corners (-half_l, -half_w) and (half_l, half_w) as (2, 1) columns."""
-    high = np.array([[half_l], [half_w]])
-    return -high, high
 
 
 def _box_geometry(
@@ -914,8 +927,11 @@ def _nearest_in(
     # (gx, gy, e, tolerance) of each row, for the feasibility tests.
     checks = [(gx[i], gy[i], e[i], -_TOL * (1.0 + abs(e[i]))) for i in rows]
 
-    def feasible(zx: float, zy: float) -> bool:
-        return all(ax * zx + ay * zy - ae >= low for ax, ay, ae, low in checks)
+    def feasible(zx: float, zy: float) -> bool:  # a loop: all() over a generator costs more
+        for ax, ay, ae, low in checks:  # noqa: SIM110
+            if not ax * zx + ay * zy - ae >= low:
+                return False
+        return True
 
     bad = [i for i in rows if gx[i] * z0x + gy[i] * z0y - e[i] < 0.0]
     if not bad:
