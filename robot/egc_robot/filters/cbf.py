@@ -58,16 +58,17 @@ The margin's speed is taken twice, which makes two conditions per point:
   robot that is fast now needs room to stop from this speed, whatever it is asked next.
 - (C) at the commanded velocity:
   u_i (1 + alpha omega_i K) <= max(alpha (sd_i - margin), kappa_i sd_i^+), linear because u_i
-  is. Without it the filter chases its own output: a slower command shrinks
-  next cycle's margin, which allows a faster one (loop gain alpha K > 1 for every useful alpha:
-  the command chatters). With both, the command settles on their common fixed point.
+  is. Without it the filter chases its own output: a slower command shrinks next cycle's
+  margin, which allows a faster one (loop gain alpha K > 1 for every useful alpha: the command
+  chatters). With both, the command settles on their common fixed point.
   K here uses the larger of the current and the commanded speeds (an upper bound of the braking
   time, so the linear margin is never shorter than the quadratic braking distance).
 
-Both bound the same u_i(v, w), so they are one half-plane, the tighter:
+Both bound the same u_i(v, w), so they make one half-plane per point, the tighter:
 u_i(v, w) <= min(c_S, c_C / (1 + alpha omega_i K)) with c_S, c_C their right-hand sides (the
 result's ``tight`` still says which binds). In a replay (the current speed is the recorded
-command) (S) and (C) agree on the recorded command. Box limits |v| <= v_max, |w| <= w_max from the profile close the feasible set.
+command) (S) and (C) agree on the recorded command. Box limits |v| <= v_max, |w| <= w_max
+from the profile close the feasible set.
 
 **Solving** min wv (v - v0)^2 + ww (w - w0)^2 over the half-planes and the box, exactly, in
 closed form (no iterative solver): in coordinates scaled by the weights this is the Euclidean
@@ -525,10 +526,10 @@ class _Scene(NamedTuple):
         w_bound: float,
         quiet: tuple[float, float] | None = None,
     ) -> tuple[FloatArray, int, list[tuple[float, float, float]]] | None:
-        """The points (an (m, 2) array of x, y), how many are scan points, and the unseen edges, that a command
-        with v in ``v_range`` and |w| <= ``w_bound`` could approach faster than their barriers
-        allow; None when there is none, or when ``quiet`` = (v, |w|) of the command itself could
-        approach none of them too fast (then nothing changes it).
+        """The points (an (m, 2) array of x, y), how many are scan points, and the unseen
+        edges, that a command with v in ``v_range`` and |w| <= ``w_bound`` could approach faster
+        than their barriers allow; None when there is none, or when ``quiet`` = (v, |w|) of the
+        command itself could approach none of them too fast (then nothing changes it).
 
         A point farther from the footprint than reach_sd has slack in (S) and (C):
         (S) alpha (sd - margin - K u_now) >= u and (C) alpha (sd - margin) >= u (1 + alpha K)
