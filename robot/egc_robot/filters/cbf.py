@@ -51,20 +51,24 @@ beyond which nothing is known to be free):
   at most exponentially (never to contact); every other row keeps kappa_i = 0, so a wall
   ahead or beside is still kept at the margin.
 
-The margin's speed is taken twice, which makes two half-planes per point:
+The margin's speed is taken twice, which makes two conditions per point:
 
 - (S) at the robot's current velocity (the spec's "braking distance at the current speed"):
   u_i(v, w) <= max(alpha (sd_i - margin - omega_i K u_i(v_now, w_now)^+), kappa_i sd_i^+). A
   robot that is fast now needs room to stop from this speed, whatever it is asked next.
 - (C) at the commanded velocity:
-  u_i (1 + alpha omega_i K) <= max(alpha (sd_i - margin), kappa_i sd_i^+), linear because u_i is. Without it the filter chases its own output: a slower command shrinks
-  next cycle's margin, which allows a faster one (loop gain alpha K > 1 for every useful alpha:
-  the command chatters). With both, the command settles on their common fixed point.
+  u_i (1 + alpha omega_i K) <= max(alpha (sd_i - margin), kappa_i sd_i^+), linear because u_i
+  is. Without it the filter chases its own output: a slower command shrinks next cycle's
+  margin, which allows a faster one (loop gain alpha K > 1 for every useful alpha: the command
+  chatters). With both, the command settles on their common fixed point.
   K here uses the larger of the current and the commanded speeds (an upper bound of the braking
   time, so the linear margin is never shorter than the quadratic braking distance).
 
-In a replay (the current speed is the recorded command) (S) and (C) agree on the recorded
-command. Box limits |v| <= v_max, |w| <= w_max from the profile close the feasible set.
+Both bound the same u_i(v, w), so they make one half-plane per point, the tighter:
+u_i(v, w) <= min(c_S, c_C / (1 + alpha omega_i K)) with c_S, c_C their right-hand sides (the
+result's ``tight`` still says which binds). In a replay (the current speed is the recorded
+command) (S) and (C) agree on the recorded command. Box limits |v| <= v_max, |w| <= w_max
+from the profile close the feasible set.
 
 **Solving** min wv (v - v0)^2 + ww (w - w0)^2 over the half-planes and the box, exactly, in
 closed form (no iterative solver): in coordinates scaled by the weights this is the Euclidean
@@ -114,7 +118,7 @@ from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
-from egc_common.footprint import Footprint, closest_boundary_xy, signed_distance
+from egc_common.footprint import Footprint, signed_distance
 from egc_common.profiles import RobotProfile
 from egc_common.scan import MAX_ABS_COORD_M, ObstaclePoints, obstacle_points
 
@@ -122,6 +126,7 @@ from egc_robot.safety import SweepParams
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
+ComplexArray = npt.NDArray[np.complex128]
 
 # omega_i = cos^PATH_POWER: how much of the stopping distance a point off the path is owed
 # (module docstring: with 4 a Jackal at 0.8 m/s passes a wall 0.2 m away).
@@ -140,6 +145,7 @@ _COVER_W = 0.25
 _TOL = 1e-9  # a constraint is met when short of it by no more than this (m/s)
 _SAME = 1e-12
 _EMPTY = np.empty(0)
+_NO_POINTS = np.empty((0, 2))
 _MAX_REPORTED = 64  # active constraints kept in a result (the view and the tool show them)
 
 
@@ -179,8 +185,7 @@ class CbfParams:
     - ``points_considered``: how many constraints the solver takes at a time, the most violated
       ones (first by the command, then each round by the last answer). It checks every row
       built after each round, so this sets the cost of a round, not the answer: 8 holds a wall
-      ahead and one beside, each with its (S) and (C) rows and neighbours, settled in one or
-      two rounds.
+      ahead and one beside, each with its neighbours, settled in one or two rounds.
     """
 
     alpha_per_s: float = 8.0
@@ -298,7 +303,8 @@ class CbfResult:
     @property
     def tight(self) -> TightRows | None:
         """The constraints the command violated and the answer meets with equality (at most
-        ``_MAX_REPORTED``), as arrays; None when nothing changed. Computed when asked: the
+        ``_MAX_REPORTED``), as arrays, each the (S) or (C) that binds in its point's row (both:
+        (C)); None when nothing changed. Computed when asked: the
         control loop does not."""
         return None if self.working is None else self.working.tight()
 
@@ -353,7 +359,11 @@ def cbf_filter(
 
     sv = math.sqrt(params.weight_v) / profile.v_max_mps  # z = (sv v, sw w): Euclidean QP
     sw = math.sqrt(params.weight_w) / profile.w_max_radps
-    scene = _Scene(profile, params, v0, w0, v_now, w_now, k_now, k_cmd, *_shape(profile.footprint))
+    shape = _shape(profile.footprint)
+    scene = _Scene(
+        profile, params, v0, w0, v_now, w_now, k_now, k_cmd, shape.x_back, shape.x_front,
+        shape.reach, shape,
+    )  # fmt: skip
     # Rows are built for the points some command within a "cover" could approach too fast:
     # first the command's own (from a standstill to it: slowing down needs no more points; a
     # little reversing and turning added), then, if the answer leaves the cover, one holding
@@ -420,32 +430,37 @@ class _Working(NamedTuple):
     w: float
 
     def tight(self) -> TightRows:
-        a, b, c = self.rows.a, self.rows.b, self.rows.c
+        rows = self.rows
+        a, b, c = rows.a, rows.b, rows.c
         wc = c[self.working]
         gap = a[self.working] * self.v + b[self.working] * self.w - wc
-        violated = a[self.working] * self.rows.v0 + b[self.working] * self.rows.w0 < wc
-        tight = self.working[violated & (np.abs(gap) <= 1e-7 * (1.0 + np.abs(wc)))]
-        tight = tight[:_MAX_REPORTED]
-        rows, n = self.rows, self.rows.n
-        point = tight % n
-        state = tight < n
+        violated = a[self.working] * rows.v0 + b[self.working] * rows.w0 < wc
+        point = self.working[violated & (np.abs(gap) <= 1e-7 * (1.0 + np.abs(wc)))]
+        point = point[:_MAX_REPORTED]
+        # Which of the point's half-planes binds: (C) where its c is the row's (also when
+        # both are), reported as (C) is written, -gain u >= c (the same half-plane); else (S).
+        gain = rows.gain[point]
+        state = rows.bounds[1][point] / gain != c[point]
+        scale = np.where(state, 1.0, gain)
         return TightRows(
-            rows.x[point], rows.y[point], a[tight], b[tight], c[tight],
-            rows.sd[point], rows.margins(point, state), state, point >= rows.n_scan,
+            rows.x[point], rows.y[point], a[point] * scale, b[point] * scale,
+            np.where(state, c[point], rows.bounds[1][point]), rows.sd[point],
+            rows.margins(point, state), state, point >= rows.n_scan,
         )  # fmt: skip
 
 
 class _Rows(NamedTuple):
-    """Every point's two half-planes a v + b w >= c: every (S) row, then every (C) row."""
+    """Every point's half-plane a v + b w >= c, the tighter of its (S) and (C)."""
 
     x: FloatArray
     y: FloatArray
     n_scan: int  # the first n_scan points are scan points, the rest unseen edges
     sd: FloatArray
-    # (3, 2n): a, b, c of every row. (S) a = -n_x of each point, then (C): the same times
-    # 1 + alpha K omega.
-    abc: FloatArray
+    abc: FloatArray  # (3, n): a = -n_x, b, c of each point's row
     short: FloatArray  # by how much the command falls short of each row (> 0: violated)
+    # (2, n): (S)'s c and (C)'s c before the division by its gain (for the report).
+    bounds: FloatArray
+    gain: FloatArray  # 1 + alpha K omega: (C) is -gain u >= bounds[1]
     m_state_extra: FloatArray | None  # omega K u^+ at the current speed (None: standing)
     omega_cmd: FloatArray  # omega and u at the commanded speed (its margin, for the report)
     u_ref: FloatArray
@@ -502,7 +517,7 @@ class _Scene(NamedTuple):
     x_back: float  # the footprint's extents along x (m), its reach from {R}'s origin (m)
     x_front: float
     q_max: float
-    ahead_from: float | None  # ``_ahead_from``
+    shape: _Shape
 
     def points_in_reach(
         self,
@@ -510,16 +525,15 @@ class _Scene(NamedTuple):
         v_range: tuple[float, float],
         w_bound: float,
         quiet: tuple[float, float] | None = None,
-    ) -> tuple[FloatArray, FloatArray, int, list[tuple[float, float, float]]] | None:
-        """The points (x, y), how many are scan points, and the unseen edges, that a command
-        with v in ``v_range`` and |w| <= ``w_bound`` could approach faster than their barriers
-        allow; None when there is none, or when ``quiet`` = (v, |w|) of the command itself could
-        approach none of them too fast (then nothing changes it).
+    ) -> tuple[FloatArray, int, list[tuple[float, float, float]]] | None:
+        """The points (an (m, 2) array of x, y), how many are scan points, and the unseen
+        edges, that a command with v in ``v_range`` and |w| <= ``w_bound`` could approach faster
+        than their barriers allow; None when there is none, or when ``quiet`` = (v, |w|) of the
+        command itself could approach none of them too fast (then nothing changes it).
 
         A point farther from the footprint than reach_sd has slack in (S) and (C):
         (S) alpha (sd - margin - K u_now) >= u and (C) alpha (sd - margin) >= u (1 + alpha K)
-        with u the largest approach. Points ahead (``_ahead_from``) are approached by forward
-        motion and turning only, the others by reversing and turning only.
+        with u the largest approach.
         """
         x_back, x_front, q_max = self.x_back, self.x_front, self.q_max
         reach_f, reach_b = self._reach_sd(v_range, w_bound)
@@ -535,16 +549,12 @@ class _Scene(NamedTuple):
                 r2_min = index.r2_sorted[0] if index is not None else _min(pts.r2)
                 if r2_min > (q_max + max(quiet_f, quiet_b)) ** 2:
                     return None
-        x = y = _EMPTY
+        xy = _NO_POINTS
         if pts.count:
-            rf, rb = q_max + reach_f, q_max + reach_b
-            split = self.ahead_from
-            if rf == rb or split is None:
-                far = max(rf, rb)
-                near = pts.r2 <= far * far
-            else:
-                near = pts.r2 <= np.where(pts.x > split, rf * rf, rb * rb)
-            x, y = pts.x[near], pts.y[near]
+            # One threshold for points ahead and behind: the few more rows a split by side
+            # would leave out cost less than its two numpy calls over the whole scan.
+            far = q_max + max(reach_f, reach_b)
+            xy = pts.xy[pts.r2 <= far * far]
         unseen = [  # (direction, how far it saw, the footprint's extent that way)
             (sign, seen, extent)
             for sign, seen, extent, room in (
@@ -553,36 +563,40 @@ class _Scene(NamedTuple):
             )
             if seen - extent < room
         ]
-        if x.size == 0 and not unseen:
+        n_scan = len(xy)
+        if n_scan == 0 and not unseen:
             return None
-        return x, y, x.size, unseen
+        return xy, n_scan, unseen
 
     def _reach_sd(self, v_range: tuple[float, float], w_bound: float) -> tuple[float, float]:
         """How far from the footprint (m) a point ahead and a point behind can have its barrier
         violated by a command with v in ``v_range`` and |w| <= ``w_bound``."""
         p, alpha, q_max = self.params, self.params.alpha_per_s, self.q_max
         turn = q_max * w_bound
-        turn_now = q_max * abs(self.w_now)
-        u_f = max(v_range[1], 0.0) + turn
-        u_b = max(-v_range[0], 0.0) + turn
-        s_f = max(self.v_now, 0.0) + turn_now
-        s_b = max(-self.v_now, 0.0) + turn_now
+        w_now, v_now, v_lo, v_hi = self.w_now, self.v_now, -v_range[0], v_range[1]
+        turn_now = q_max * (w_now if w_now >= 0.0 else -w_now)
+        # max(a, b) written as b if b > a else a (the builtin's result, without its call).
+        u_f = (0.0 if v_hi < 0.0 else v_hi) + turn
+        u_b = (0.0 if v_lo < 0.0 else v_lo) + turn
+        s_f = (0.0 if v_now < 0.0 else v_now) + turn_now
+        s_b = (0.0 if -v_now < 0.0 else -v_now) + turn_now
+        f_cmd, f_now = u_f * self.k_cmd, self.k_now * s_f
+        b_cmd, b_now = u_b * self.k_cmd, self.k_now * s_b
         return (
-            p.margin_m + u_f / alpha + max(u_f * self.k_cmd, self.k_now * s_f),
-            p.margin_m + u_b / alpha + max(u_b * self.k_cmd, self.k_now * s_b),
+            p.margin_m + u_f / alpha + (f_now if f_now > f_cmd else f_cmd),
+            p.margin_m + u_b / alpha + (b_now if b_now > b_cmd else b_cmd),
         )
 
-    def rows(
-        self, x: FloatArray, y: FloatArray, n_scan: int, unseen: list[tuple[float, float, float]]
-    ) -> _Rows:
-        """The half-planes of the points (module docstring): (S) rows, then (C) rows.
+    def rows(self, xy: FloatArray, n_scan: int, unseen: list[tuple[float, float, float]]) -> _Rows:
+        """The half-plane of each point (module docstring): the tighter of its (S) and (C).
 
         On the few dozen points in reach numpy's cost per call, not per element, is the time,
         so each quantity is computed once and written where the solver reads it (``out=``), and
         the creep's nine calls are skipped when no row can creep."""
         p, alpha, profile = self.params, self.params.alpha_per_s, self.profile
         v0, w0, v_now, w_now = self.v0, self.w0, self.v_now, self.w_now
-        sd, nx, ny, qx, qy, nearest = _geometry(x, y, profile.footprint)
+        x, y = xy.T
+        sd, nx, ny, qx, qy, nearest = _geometry(xy, self.shape)
         if unseen:
             # A wall across the axis where the laser stopped seeing, met first by the
             # footprint's front (back) extent: n = (+-1, 0), q = (front or back, 0).
@@ -595,16 +609,14 @@ class _Scene(NamedTuple):
             )
             nearest = _min(sd)
         n = sd.size
-        # Every (S) row, then every (C) row: a = -n_x, b, c, and the command's approach speed
-        # u_ref (S) and gain u_ref (C), written in place (numpy's cost is per call here).
-        block = np.empty((4, 2 * n))
-        a_all, b_all, c_all, u_all = block
-        a, b, u_ref = a_all[:n], b_all[:n], u_all[:n]
+        # One row per point: a = -n_x, b, c (written in place: numpy's cost is per call here).
+        abc = np.empty((3, n))
+        a, b, c = abc
         np.negative(nx, out=a)
         np.subtract(nx * qy, ny * qx, out=b)
         # Approach speeds u = nx v - b w under the command and under the current motion, and
         # how squarely each point lies in that motion's path (omega).
-        np.multiply(nx, v0, out=u_ref)
+        u_ref = nx * v0
         if w0:
             u_ref -= b * w0
         omega_cmd, up_ref = _omega(u_ref, v0, w0, qx, qy)
@@ -618,10 +630,11 @@ class _Scene(NamedTuple):
             reach_u = np.abs(nx) * profile.v_max_mps + np.abs(b) * profile.w_max_radps
             flank = np.maximum(1.0 - reach_u / (CREEP_BELOW * profile.v_max_mps), 0.0)
             creep = (CREEP_PER_S * flank) * np.maximum(sd, 0.0)
-        # c = -max(alpha (sd - margin - m_extra), creep): m_extra = omega K u^+ at the current
-        # speed for (S) (first row), none for (C) (second row).
-        c2 = c_all.reshape(2, n)
-        room = np.subtract(sd, p.margin_m, out=c2[1])
+        # bounds[0] = -max(alpha (sd - margin - m_extra), creep), (S)'s c with m_extra =
+        # omega K u^+ at the current speed; bounds[1] = -max(alpha (sd - margin), creep), (C)'s
+        # c before its division by the gain.
+        bounds = np.empty((2, n))
+        room = np.subtract(sd, p.margin_m, out=bounds[1])
         m_extra: FloatArray | None = None
         if v_now or w_now:
             if v_now == v0 and w_now == w0:  # a replay, a steady cycle: the same speeds twice
@@ -630,50 +643,52 @@ class _Scene(NamedTuple):
                 u_now = nx * v_now - b * w_now
                 omega_now, up_now = _omega(u_now, v_now, w_now, qx, qy)
             m_extra = (omega_now * self.k_now) * up_now
-            np.subtract(room, m_extra, out=c2[0])
+            np.subtract(room, m_extra, out=bounds[0])
         else:
-            c2[0] = room
-        c2 *= alpha
-        np.maximum(c2, creep, out=c2)
-        np.negative(c2, out=c2)
-        gain = 1.0 + (alpha * self.k_cmd) * omega_cmd  # (C): u gain <= max(alpha room, creep)
-        np.multiply(gain, a, out=a_all[n:])
-        np.multiply(gain, b, out=b_all[n:])
-        np.multiply(gain, u_ref, out=u_all[n:])
+            bounds[0] = room
+        bounds *= alpha
+        np.maximum(bounds, creep, out=bounds)
+        np.negative(bounds, out=bounds)
+        # (C): -gain u >= bounds[1], i.e. -u >= bounds[1] / gain; the point's row is the
+        # tighter of (S) and (C): the same normal, the larger c.
+        gain = 1.0 + (alpha * self.k_cmd) * omega_cmd
+        np.divide(bounds[1], gain, out=c)
+        np.maximum(bounds[0], c, out=c)
         # The command falls short of each row by c + u (if positive).
-        short = c_all + u_all
+        short = c + u_ref
         return _Rows(
-            x, y, n_scan, sd, block[:3], short, m_extra, omega_cmd, u_ref, self.k_cmd,
+            x, y, n_scan, sd, abc, short, bounds, gain, m_extra, omega_cmd, u_ref, self.k_cmd,
             p.margin_m, _max(short), nearest, v0, w0,
         )  # fmt: skip
 
 
-def _ahead_from(fp: Footprint) -> float | None:
-    """The x beyond which every point outside the footprint has n_x > 0 and short of which
-    n_x <= 0 (forward motion approaches only the points beyond it), or None when no such x
-    exists: the front edge of a centred rectangle (beside it n = (0, +-1)), 0 for a disc
-    (n = p / |p|); a general polygon's nearest boundary point may lie behind a point anywhere."""
-    box = fp.centred_box
-    if box is not None:
-        return box[0]
-    return 0.0 if fp.is_disc else None
+class _Shape(NamedTuple):
+    """What the filter reads of a footprint, derived once per shape (``_shape``)."""
+
+    x_back: float  # the footprint's extents along x (m), its reach from {R}'s origin (m)
+    x_front: float
+    reach: float
+    footprint: Footprint
+    box: tuple[FloatArray, FloatArray] | None  # a centred rectangle's corners, as (2, 1)
+    edges: tuple[FloatArray, FloatArray, FloatArray, ComplexArray] | None  # a polygon's
+    # A distance from a polygon's edge beyond which no point is inside it: half the shorter
+    # side of its bounding box (a point inside is nearer the box's edge than that, and the
+    # box holds the polygon), widened far beyond any rounding.
+    inside_bound: float
 
 
 @functools.lru_cache(maxsize=32)
-def _shape(fp: Footprint) -> tuple[float, float, float, float | None]:
-    """(x_back, x_front, reach, ``_ahead_from``) of a footprint (numpy reductions: once per
-    shape, not per call)."""
-    x0, x1, _, _ = fp.bounds
-    return x0, x1, fp.reach_m, _ahead_from(fp)
-
-
-@functools.lru_cache(maxsize=32)
-def _inside_bound(fp: Footprint) -> float:
-    """A distance from a polygon's edge beyond which no point is inside it: half the shorter
-    side of its bounding box (a point inside is nearer the box's edge than that, and the box
-    holds the polygon), widened far beyond any rounding."""
+def _shape(fp: Footprint) -> _Shape:
+    """``_Shape`` of a footprint (numpy reductions and a hash: once per call, not per step)."""
     x0, x1, y0, y1 = fp.bounds
-    return 0.5 * min(x1 - x0, y1 - y0) * (1.0 + 1e-9) + 1e-9
+    box = fp.centred_box
+    corners = None
+    if box is not None:
+        high = np.array([[box[0]], [box[1]]])
+        corners = (-high, high)
+    edges = None if fp.is_disc or box is not None else _polygon_edges(fp)
+    inside = 0.5 * min(x1 - x0, y1 - y0) * (1.0 + 1e-9) + 1e-9
+    return _Shape(x0, x1, fp.reach_m, fp, corners, edges, inside)
 
 
 def _min(a: FloatArray) -> float:
@@ -686,18 +701,19 @@ def _max(a: FloatArray) -> float:
 
 
 def _geometry(
-    x: FloatArray, y: FloatArray, fp: Footprint
+    xy: FloatArray, shape: _Shape
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float]:
     """Signed distance sd, unit normal (nx, ny) and the footprint's nearest point (qx, qy) of
-    each point, and min(sd) (inf for no point). The normal is the gradient of sd: from q
-    towards the point outside, from the point towards q inside (the outward normal of the
-    nearest edge)."""
-    if x.size == 0:
+    each point of the (m, 2) ``xy``, and min(sd) (inf for no point). The normal is the
+    gradient of sd: from q towards the point outside, from the point towards q inside (the
+    outward normal of the nearest edge)."""
+    if len(xy) == 0:
         return _EMPTY, _EMPTY, _EMPTY, _EMPTY, _EMPTY, math.inf
-    box = fp.centred_box
-    if box is not None:
-        return _box_geometry(x, y, *box)
-    if fp.is_disc:
+    if shape.box is not None:
+        return _box_geometry(xy.T, *shape.box)
+    x, y = xy.T
+    fp = shape.footprint
+    if shape.edges is None:  # a disc
         r = np.sqrt(x * x + y * y)
         radius = fp.radius_m
         sd = r - radius
@@ -709,11 +725,8 @@ def _geometry(
             safe = np.where(centre, 1.0, r)
             nx, ny = np.where(centre, 1.0, x / safe), np.where(centre, 0.0, y / safe)
         return sd, nx, ny, radius * nx, radius * ny, nearest
-    q = closest_boundary_xy(fp, np.column_stack((x, y)))
-    qx, qy = q[:, 0], q[:, 1]
-    dx, dy = x - qx, y - qy
-    dist = np.sqrt(dx * dx + dy * dy)
-    candidates = dist <= _inside_bound(fp)
+    qx, qy, dx, dy, dist = _polygon_nearest(xy, *shape.edges)
+    candidates = dist <= shape.inside_bound
     if not candidates.any():  # every point outside and off the edge: sd = dist, n = d / sd
         return dist, dx / dist, dy / dist, qx, qy, _min(dist)
     inside = np.zeros(dist.size, dtype=np.bool_)
@@ -729,19 +742,57 @@ def _geometry(
     return sd, nx, ny, qx, qy, _min(sd)
 
 
+def _polygon_edges(fp: Footprint) -> tuple[FloatArray, FloatArray, FloatArray, ComplexArray]:
+    """A polygon's edges: starts (N, 2), vectors (N, 2), squared lengths (N,) (as
+    ``closest_boundary_xy`` takes them), and the starts and vectors as x + i y (2, N)."""
+    edges = fp._edges
+    if edges is None:
+        raise ValueError("a polygon footprint has edges")
+    start, edge, length2 = edges
+    both = np.ascontiguousarray(np.stack((start, edge))).view(np.complex128)[..., 0]
+    return start, edge, length2, both
+
+
+def _polygon_nearest(
+    xy: FloatArray, start: FloatArray, edge: FloatArray, length2: FloatArray, both: ComplexArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The polygon's nearest boundary point q of each point p of the (m, 2) ``xy``, p - q and
+    |p - q|: ``closest_boundary_xy``'s arithmetic to the bit (the projection onto each edge,
+    clamped to it, the nearest of those; a point on an edge keeps its exact zero distance),
+    with x + i y in one complex number where that is exact (sums, products by a real)."""
+    d = xy[:, None, :] - start  # (m, N, 2)
+    d *= edge
+    t = d[..., 0] + d[..., 1]
+    t /= length2
+    np.minimum(np.maximum(t, 0.0, out=t), 1.0, out=t)
+    c = t * both[1]
+    c += both[0]  # the nearest point of each edge
+    r = np.ascontiguousarray(xy).view(np.complex128) - c  # p minus it
+    rx, ry = r.real, r.imag
+    r2 = rx * rx
+    r2 += ry * ry
+    k = r2.argmin(axis=1)
+    row = np.arange(k.size)
+    q, pq = c[row, k], r[row, k]
+    return q.real, q.imag, pq.real, pq.imag, np.sqrt(r2[row, k])
+
+
 def _box_geometry(
-    x: FloatArray, y: FloatArray, half_l: float, half_w: float
+    p: FloatArray, low: FloatArray, high: FloatArray
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float]:
-    """``_geometry`` of the rectangle |x| <= half_l, |y| <= half_w in closed form."""
-    qx = np.minimum(np.maximum(x, -half_l), half_l)
-    qy = np.minimum(np.maximum(y, -half_w), half_w)
-    dx = x - qx
-    dy = y - qy
-    sd = np.sqrt(dx * dx + dy * dy)
+    """``_geometry`` of the rectangle ``low`` <= (x, y) <= ``high`` = (half_l, half_w), in
+    closed form, on the (2, m) points ``p`` (x and y ride along one axis: one numpy call per
+    step)."""
+    q = np.minimum(np.maximum(p, low), high)
+    d = p - q
+    d2 = d * d
+    sd = np.sqrt(d2[0] + d2[1])
     nearest = _min(sd)
     if nearest > 0.0:  # no point inside
-        inv = 1.0 / sd
-        return sd, dx * inv, dy * inv, qx, qy, nearest
+        n = d * (1.0 / sd)
+        return sd, n[0], n[1], q[0], q[1], nearest
+    half_l, half_w = float(high[0, 0]), float(high[1, 0])
+    (x, y), (dx, dy), (qx, qy) = p, d, q
     inside = sd <= 0.0
     xi, yi = x[inside], y[inside]
     to_front, to_back = half_l - xi, xi + half_l
@@ -877,8 +928,11 @@ def _nearest_in(
     # (gx, gy, e, tolerance) of each row, for the feasibility tests.
     checks = [(gx[i], gy[i], e[i], -_TOL * (1.0 + abs(e[i]))) for i in rows]
 
-    def feasible(zx: float, zy: float) -> bool:
-        return all(ax * zx + ay * zy - ae >= low for ax, ay, ae, low in checks)
+    def feasible(zx: float, zy: float) -> bool:  # a loop: all() over a generator costs more
+        for ax, ay, ae, low in checks:  # noqa: SIM110
+            if not ax * zx + ay * zy - ae >= low:
+                return False
+        return True
 
     bad = [i for i in rows if gx[i] * z0x + gy[i] * z0y - e[i] < 0.0]
     if not bad:
