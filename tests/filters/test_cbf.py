@@ -32,6 +32,11 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 TOL = 1e-7  # m/s: a constraint counts as met when short of it by no more than this
+# Output change (share of v_max, w_max) below which no jump is judged: the solver's answer is
+# exact to its rounding, which a row beside the flank (|b| of a few mm) amplifies to a few
+# 1e-7 of w_max (a Pioneer found 4.4e-7). A jump this test exists for is of the output's own
+# size (the creep's flip: none to full turn).
+SOLVER_SLACK = 1e-6
 
 
 def barrier_rows(
@@ -256,7 +261,8 @@ def test_the_output_is_continuous_as_an_obstacle_approaches(profile, data, beari
                 hi, f_hi = mid, f_mid
             else:
                 lo, f_lo = mid, f_mid
-        assert np.abs(f_hi - f_lo).max() <= change / 1000.0, (radii[i], change, f_lo, f_hi)
+        jump = np.abs(f_hi - f_lo).max()
+        assert jump <= max(change / 1000.0, SOLVER_SLACK), (radii[i], change, f_lo, f_hi)
 
 
 @pytest.mark.parametrize("profile", PROFILES, ids=lambda p: p.name)
