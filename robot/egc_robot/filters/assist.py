@@ -180,6 +180,8 @@ import numpy.typing as npt
 from egc_common.profiles import RobotProfile
 from egc_common.scan import ObstaclePoints, obstacle_points
 
+from egc_robot.filters.local_plan import LocalPlan, PlanSettings, moved_path, plan_target
+
 FloatArray = npt.NDArray[np.float64]
 
 # Sectors and bands of the 3x3 histogram: grid[sector][band].
@@ -202,12 +204,15 @@ RULES = (
     "avoid-left",
     "avoid-right",
     "unblock",
+    "plan",
     "goal",
     "blend",
     "free",
 )
 
 _SAME = 1e-9
+_KEEP_EVERY = 2  # the memory keeps every second cell of the path (``plan_keep_cost``)
+_SWEEP_MARGIN_M = 0.03  # the footprint sweep's margin (safety.SweepParams.margin_m)
 _HALF_PI = 0.5 * math.pi
 Grid = tuple[tuple[int, int, int], tuple[int, int, int], tuple[int, int, int]]
 BoolGrid = tuple[tuple[bool, bool, bool], tuple[bool, bool, bool], tuple[bool, bool, bool]]
@@ -291,6 +296,32 @@ class AssistParams:
     squeeze_half_width_m: float = 0.2205
     squeeze_step_rad: float = math.radians(1.0)
     squeeze_centre_max_rad: float = math.radians(10.0)
+    # Local planner (rule ``plan``, module docstring; ``local_plan``): grid cell and half
+    # window (m; 0 cell: no planner), traversable clearance (half the width + 1 cm), the
+    # clearance above which a cell costs nothing extra, the cost weights (1), the clearance
+    # below which the footprint cannot turn in place (a gap), how far ahead gaps are looked
+    # for, the look-ahead on the path and along a gap's axis, where a gap's entry point may
+    # lie before its middle and how near counts as there (m).
+    plan_cell_m: float = 0.05
+    plan_window_m: float = 2.5
+    plan_clearance_min_m: float = 0.2005
+    plan_clearance_pref_m: float = 0.4294
+    plan_clearance_weight: float = 3.0
+    plan_unknown_cost: float = 1.5
+    plan_heuristic_weight: float = 3.0
+    plan_narrow_m: float = 0.3294
+    plan_horizon_m: float = 1.5
+    plan_lookahead_m: float = 0.5
+    plan_axis_lookahead_m: float = 0.3
+    plan_approach_min_m: float = 0.3
+    plan_approach_max_m: float = 0.7
+    plan_entry_tolerance_m: float = 0.06
+    # Following the plan: turn in place above this heading error (rad); speed at most
+    # ``plan_slow_per_s`` x (the path's clearance ahead - half the width), never below
+    # ``plan_speed_min_mps`` (m/s) unless the stick asks for less.
+    plan_turn_rad: float = math.radians(30.0)
+    plan_slow_per_s: float = 2.0
+    plan_speed_min_mps: float = 0.1
     # A via point closer than this (m) gives no direction: joystick plus avoidance.
     goal_min_m: float = 0.05
     # dt larger than this (s) counts as this (a resumed link does not jump the confidence).
@@ -336,6 +367,17 @@ class AssistParams:
         for name in positive:
             if getattr(self, name) <= 0:
                 raise ValueError(f"assist.{name} must be positive")
+        if self.plan_cell_m > 0.0:
+            if not 0.0 < self.plan_clearance_min_m < self.plan_clearance_pref_m:
+                raise ValueError(
+                    "assist needs 0 < plan_clearance_min_m < plan_clearance_pref_m"
+                )
+            if self.plan_window_m < 2.0 * self.plan_cell_m:
+                raise ValueError("assist.plan_window_m must be at least two plan cells")
+            if self.plan_unknown_cost < 1.0:
+                raise ValueError("assist.plan_unknown_cost must be at least 1")
+            if self.plan_approach_min_m > self.plan_approach_max_m:
+                raise ValueError("assist needs plan_approach_min_m <= plan_approach_max_m")
         if self.activation_threshold >= self.hit_max:
             raise ValueError("assist.activation_threshold must be below hit_max")
         if not 0.0 < self.override_confidence <= 1.0:
@@ -355,6 +397,7 @@ class AssistParams:
             "wall_lost_turn_rad",
             "squeeze_step_rad",
             "squeeze_centre_max_rad",
+            "plan_turn_rad",
         ):
             if getattr(self, name) > math.pi:
                 raise ValueError(f"assist.{name} must be in [0, pi]")
@@ -376,9 +419,31 @@ class AssistParams:
             "leave_clear_m": r_max + 2.0 * length,
             "detour_half_width_m": profile.width_m,
             "wall_retreat_m": length,
+            "plan_clearance_min_m": 0.5 * profile.width_m + 0.01,
+            "plan_narrow_m": profile.half_diagonal_m + _SWEEP_MARGIN_M,
+            "plan_clearance_pref_m": profile.half_diagonal_m + _SWEEP_MARGIN_M + 0.1,
         }
         derived.update(overrides)
         return AssistParams(**derived)
+
+    def plan_settings(self) -> PlanSettings:
+        """The local planner's settings (``plan_*``)."""
+        return PlanSettings(
+            cell_m=self.plan_cell_m,
+            window_m=self.plan_window_m,
+            clearance_min_m=self.plan_clearance_min_m,
+            clearance_pref_m=self.plan_clearance_pref_m,
+            clearance_weight=self.plan_clearance_weight,
+            unknown_cost=self.plan_unknown_cost,
+            heuristic_weight=self.plan_heuristic_weight,
+            narrow_m=self.plan_narrow_m,
+            horizon_m=self.plan_horizon_m,
+            lookahead_m=self.plan_lookahead_m,
+            axis_lookahead_m=self.plan_axis_lookahead_m,
+            approach_min_m=self.plan_approach_min_m,
+            approach_max_m=self.plan_approach_max_m,
+            entry_tolerance_m=self.plan_entry_tolerance_m,
+        )
 
     @staticmethod
     def from_mapping(
@@ -450,6 +515,7 @@ class AssistMemory:
     freed_ns: int | None = None
     override_held_s: float = 0.0
     override_spent: bool = False
+    plan_path: tuple[tuple[float, float], ...] = ()
 
     @staticmethod
     def initial() -> AssistMemory:
@@ -830,6 +896,8 @@ def assist_step(
     spent = memory.override_spent and cell is not None and cell == memory.stick_cell
     v_ref, w_ref = profile.v_max_mps * xs, profile.w_max_radps * ys
 
+    kept_path: tuple[tuple[float, float], ...] = ()
+
     def result(
         v: float,
         w: float,
@@ -873,6 +941,7 @@ def assist_step(
             *unblock,
             override_held_s,
             spent,
+            kept_path,
         )
         modified = abs(v - v_ref) > _SAME or abs(w - w_ref) > _SAME
         return AssistResult(
@@ -917,7 +986,32 @@ def assist_step(
     theta: float
     detour_heading: float | None = None
     detour_turn = memory.detour
-    if source == "goal" and bearing is not None:
+    plan: LocalPlan | None = None
+    if bearing is not None and goal_xy_m is not None and params.plan_cell_m > 0.0 and len(obs):
+        previous = memory.plan_path
+        if sent is not None:
+            previous = moved_path(previous, sent[0], sent[1], dt)
+        plan = plan_target(obs, goal_xy_m, params.plan_settings(), previous)
+    if plan is not None:
+        kept_path = tuple(
+            (float(x), float(y)) for x, y in plan.path_xy_m[:: _KEEP_EVERY].tolist()
+        )
+    if plan is not None and source == "blend":
+        # The planner replaces the target's direction; the stick still pulls (sec. V).
+        theta_d = _circular_mean(phi, math.atan2(plan.target_xy_m[1], plan.target_xy_m[0]))
+    if plan is not None and source == "goal":
+        theta, rule = math.atan2(plan.target_xy_m[1], plan.target_xy_m[0]), "plan"
+        cap = max(
+            params.plan_speed_min_mps,
+            params.plan_slow_per_s * (plan.clearance_ahead_m - 0.5 * profile.width_m),
+        )
+        speed_scale = min(1.0, cap / max(drive * profile.v_max_mps, _SAME))
+        if abs(theta) > params.plan_turn_rad:
+            if len(obs) == 0 or float(obs.r2.min()) >= params.plan_narrow_m**2:
+                speed_scale = 0.0  # room to turn: face the target first (an arc is swept wide)
+            else:  # no room to turn in place: a slow arc
+                speed_scale = min(speed_scale, params.plan_speed_min_mps / profile.v_max_mps)
+    elif source == "goal" and bearing is not None:
         side = memory.wall_side
         front = levels[FRONT]
         if side is None:
