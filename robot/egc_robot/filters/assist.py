@@ -103,6 +103,32 @@ How each part maps to the paper
   crossed at angle a is only g cos(a) wide. Measured (``docs/assist.md``, notes): Jackal
   ``clutter:0-29`` 0/30 -> 5/30 (5 of the 9 cylinder fields, none of the 21 baffle worlds),
   ``random:1000-1029`` 26/30 -> 27/30, 0 collisions. ``squeeze_step_rad`` = 0 turns it off.
+- **Local planner** (deviation, issue 28; ``local_plan``): the narrow detour above picks a
+  heading from the current scan, so it entered a 1.2 x W gap at an angle (4 cm a side against
+  the sweep's 3 cm margin) and had no room to turn in place inside a column: 5 of 30
+  ``clutter`` worlds. With a via point (and ``plan_cell_m`` > 0) the assistant now plans on
+  the scan every cycle and the planner only replaces the *target's direction*: a grid in {R}
+  (``plan_window_m`` either side, ``plan_cell_m`` cells), a cell traversable when its
+  clearance is at least ``plan_clearance_min_m`` (W / 2 + 1 cm), cells nearer than
+  ``plan_clearance_pref_m`` dearer (cost ~ 1 / clearance), cells no beam crossed
+  ``plan_unknown_cost`` dearer, Dijkstra from the robot to the via point (or, when it lies
+  outside the window, out through the window's rim towards it). The rules steer at the path's
+  look-ahead point, or, when the path crosses a gap too narrow to turn in (clearance below
+  ``plan_narrow_m``, the footprint's reach + the sweep's margin), first at the gap's entry
+  point on its axis (where there is room to turn) and then along the axis through its middle
+  (``local_plan``'s docstring). With the stick in line with the via point (rule ``plan``)
+  the robot turns in place towards that point when it is more than ``plan_turn_rad`` off and
+  there is room (a slow arc when not), and drives no faster than ``plan_slow_per_s`` x the
+  path's clearance beyond half the width (at least ``plan_speed_min_mps``), never faster than
+  the stick asks; with the stick elsewhere the paper's blend averages the stick with the
+  planned direction (rule ``blend`` and the obstacle rules as before), and the override is
+  untouched. The plan replaces ``goal``, ``detour`` and wall following while it finds a way;
+  when the robot's own cell is not traversable (nothing to plan from) those rules decide as
+  before. The memory keeps the last path (``plan_path``, every second cell), moved into this
+  cycle's {R} by the velocity last sent, and cells along it cost ``keep_cost`` (0.7) times as
+  much: without it the robot rocked between two gaps of about the same cost. The pipeline's
+  footprint sweep still has the last word. Measured (``docs/assist.md``): Jackal, ``goal``
+  operator, via point at the goal, ``clutter:0-29`` 5/30 -> see the commit messages.
 - **Wall following** (sec. V: "an obstacle in front while moving toward a target destination ...
   rotate to align with and then move parallel to the wall"). Entered when heading for the via
   point (rule ``goal``) with FRONT active at CLOSE or INTERMEDIATE, the corridor towards the via
@@ -162,7 +188,7 @@ Rules (names reported in ``AssistResult.rule``), in the order they are tried
 ``invalid`` (NaN / infinite stick or via point: stop), ``unknown`` (no scan point and the sensor
 does not declare no-return as free, DESIGN 5.9 NO_POINTS_UNKNOWN: nothing seen is not free: stop),
 ``idle`` (stick centred: stop), ``reverse`` (x_o < 0: the stick's eq. 4 command; the rules look
-ahead only, the sweep guards the reverse), ``override``, ``wall-follow-left`` /
+ahead only, the sweep guards the reverse), ``override``, ``plan``, ``wall-follow-left`` /
 ``wall-follow-right``, ``detour``, ``avoid-front``, ``gap``, ``avoid-left`` / ``avoid-right``,
 and with nothing active ``goal``, ``blend`` or ``free``; then ``unblock`` in place of any of
 them that the base was refused.
@@ -213,6 +239,7 @@ RULES = (
 _SAME = 1e-9
 _KEEP_EVERY = 2  # the memory keeps every second cell of the path (``plan_keep_cost``)
 _SWEEP_MARGIN_M = 0.03  # the footprint sweep's margin (safety.SweepParams.margin_m)
+_PIONEER_REACH_M = math.hypot(0.2275, 0.1905)  # the Pioneer's half diagonal (DESIGN 3)
 _HALF_PI = 0.5 * math.pi
 Grid = tuple[tuple[int, int, int], tuple[int, int, int], tuple[int, int, int]]
 BoolGrid = tuple[tuple[bool, bool, bool], tuple[bool, bool, bool], tuple[bool, bool, bool]]
@@ -305,11 +332,11 @@ class AssistParams:
     plan_cell_m: float = 0.05
     plan_window_m: float = 2.5
     plan_clearance_min_m: float = 0.2005
-    plan_clearance_pref_m: float = 0.4294
+    plan_clearance_pref_m: float = _PIONEER_REACH_M + _SWEEP_MARGIN_M + 0.1
     plan_clearance_weight: float = 3.0
     plan_unknown_cost: float = 1.5
     plan_heuristic_weight: float = 3.0
-    plan_narrow_m: float = 0.3294
+    plan_narrow_m: float = _PIONEER_REACH_M + _SWEEP_MARGIN_M
     plan_horizon_m: float = 1.5
     plan_lookahead_m: float = 0.5
     plan_axis_lookahead_m: float = 0.3
@@ -369,9 +396,7 @@ class AssistParams:
                 raise ValueError(f"assist.{name} must be positive")
         if self.plan_cell_m > 0.0:
             if not 0.0 < self.plan_clearance_min_m < self.plan_clearance_pref_m:
-                raise ValueError(
-                    "assist needs 0 < plan_clearance_min_m < plan_clearance_pref_m"
-                )
+                raise ValueError("assist needs 0 < plan_clearance_min_m < plan_clearance_pref_m")
             if self.plan_window_m < 2.0 * self.plan_cell_m:
                 raise ValueError("assist.plan_window_m must be at least two plan cells")
             if self.plan_unknown_cost < 1.0:
@@ -993,9 +1018,7 @@ def assist_step(
             previous = moved_path(previous, sent[0], sent[1], dt)
         plan = plan_target(obs, goal_xy_m, params.plan_settings(), previous)
     if plan is not None:
-        kept_path = tuple(
-            (float(x), float(y)) for x, y in plan.path_xy_m[:: _KEEP_EVERY].tolist()
-        )
+        kept_path = tuple((float(x), float(y)) for x, y in plan.path_xy_m[::_KEEP_EVERY].tolist())
     if plan is not None and source == "blend":
         # The planner replaces the target's direction; the stick still pulls (sec. V).
         theta_d = _circular_mean(phi, math.atan2(plan.target_xy_m[1], plan.target_xy_m[0]))

@@ -45,8 +45,8 @@ from functools import lru_cache
 import numpy as np
 import numpy.typing as npt
 from egc_common.scan import ObstaclePoints
-from scipy.sparse import csr_matrix
 from scipy.ndimage import distance_transform_edt
+from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
@@ -97,7 +97,7 @@ class LocalPlan:
 
 @lru_cache(maxsize=8)
 def _layout(cell_m: float, window_m: float, bins: int) -> _Layout:
-    half = int(round(window_m / cell_m))
+    half = round(window_m / cell_m)
     axis = (np.arange(2 * half + 1) - half) * cell_m
     xx, yy = np.meshgrid(axis, axis)  # [row = y, col = x]
     angle = np.arctan2(yy, xx)
@@ -105,7 +105,19 @@ def _layout(cell_m: float, window_m: float, bins: int) -> _Layout:
     rim = np.zeros(xx.shape, dtype=bool)
     rim[[0, -1], :] = True
     rim[:, [0, -1]] = True
-    return _Layout(half, xx, yy, np.hypot(xx, yy), sector, rim)
+    n = 2 * half + 1
+    own = np.arange(n * n).reshape(n, n)
+    neighbours = np.empty((n * n, len(_NEIGHBOURS)), dtype=np.int64)
+    inside = np.empty((n * n, len(_NEIGHBOURS)), dtype=bool)
+    for k, (dr, dc) in enumerate(_NEIGHBOURS):
+        r, c = np.arange(n)[:, None] + dr, np.arange(n)[None, :] + dc
+        ok = (r >= 0) & (r < n) & (c >= 0) & (c < n)
+        neighbours[:, k] = np.where(
+            ok, np.clip(r, 0, n - 1) * n + np.clip(c, 0, n - 1), own
+        ).ravel()
+        inside[:, k] = ok.ravel()
+    indptr = np.arange(0, len(_NEIGHBOURS) * n * n + 1, len(_NEIGHBOURS))
+    return _Layout(half, xx, yy, np.hypot(xx, yy), sector, rim, neighbours, inside, indptr)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -118,6 +130,11 @@ class _Layout:
     radius: FloatArray
     sector: IntArray
     rim: npt.NDArray[np.bool_]  # the window's outermost ring of cells
+    # The 8-neighbour graph's fixed shape: every cell's neighbours (itself past the border),
+    # which of them exist, and the CSR row pointers (8 entries a row).
+    neighbours: IntArray
+    inside: npt.NDArray[np.bool_]
+    indptr: IntArray
 
 
 _BINS = 720  # angular sectors of the "seen" test (a quarter of a degree wider than 1 deg beams)
@@ -151,7 +168,8 @@ def clearances(obstacles: ObstaclePoints, layout: _Layout, s: PlanSettings) -> F
     ok = (ci >= 0) & (ci < n) & (ri >= 0) & (ri < n)
     free = np.ones((n, n), dtype=bool)
     free[ri[ok], ci[ok]] = False
-    clearance = np.minimum(distance_transform_edt(free) * s.cell_m, s.clearance_pref_m)
+    raster: FloatArray = np.asarray(distance_transform_edt(free), dtype=np.float64)
+    clearance = np.minimum(raster * s.cell_m, s.clearance_pref_m)
     edge = np.abs(clearance - s.clearance_min_m) <= s.cell_m
     if edge.any():
         d, _ = cKDTree(obstacles.xy).query(
@@ -163,28 +181,17 @@ def clearances(obstacles: ObstaclePoints, layout: _Layout, s: PlanSettings) -> F
 
 
 def _graph(
-    trav: npt.NDArray[np.bool_], cost: FloatArray, cell_m: float
-) -> tuple[csr_matrix, IntArray]:
-    """The 8-connected graph of the traversable cells (CSR, built row by row without a sort)
-    and each cell's node id (-1: not traversable)."""
-    n = trav.shape[0]
-    ids = np.full((n + 2, n + 2), -1, dtype=np.int64)
-    count = int(trav.sum())
-    ids[1:-1, 1:-1][trav] = np.arange(count)
-    padded = np.zeros((n + 2, n + 2))
-    padded[1:-1, 1:-1] = cost
-    own = cost[trav]
-    nbrs = np.empty((count, 8), dtype=np.int64)
-    weights = np.empty((count, 8))
-    for k, (dr, dc) in enumerate(_NEIGHBOURS):
-        window = (slice(1 + dr, n + 1 + dr), slice(1 + dc, n + 1 + dc))
-        nbrs[:, k] = ids[window][trav]
-        weights[:, k] = padded[window][trav]
-    weights = 0.5 * (weights + own[:, None]) * (_LENGTHS * cell_m)
-    ok = nbrs >= 0
-    indptr = np.concatenate(([0], np.cumsum(ok.sum(axis=1))))
-    graph = csr_matrix((weights[ok], nbrs[ok], indptr), shape=(count, count))
-    return graph, ids[1:-1, 1:-1]
+    trav: npt.NDArray[np.bool_], cost: FloatArray, cell_m: float, layout: _Layout
+) -> csr_matrix:
+    """The 8-connected graph of the cells (node = row-major cell index), edge cost = length x
+    the mean of its two cells' costs; an edge touching a cell that is not traversable costs
+    inf (never taken). Every row has its 8 entries, so the CSR is built without a sort."""
+    flat_cost, flat_trav = cost.ravel(), trav.ravel()
+    nb = layout.neighbours
+    weights = 0.5 * (flat_cost[:, None] + flat_cost[nb]) * (_LENGTHS * cell_m)
+    weights[~(flat_trav[:, None] & flat_trav[nb] & layout.inside)] = np.inf
+    size = len(flat_cost)
+    return csr_matrix((weights.ravel(), nb.ravel(), layout.indptr), shape=(size, size))
 
 
 def moved_path(
@@ -236,27 +243,26 @@ def plan_target(
             for dc in (-1, 0, 1):
                 along_kept[kr[inside] + dr, kc[inside] + dc] = True
         cost = np.where(along_kept, s.keep_cost * cost, cost)
-    graph, ids = _graph(trav, cost, s.cell_m)
-    start = int(ids[half, half])
+    graph = _graph(trav, cost, s.cell_m, layout)
+    start = half * n + half
     dist, pred = dijkstra(graph, directed=True, indices=start, return_predecessors=True)
-    gc, gr = int(round(gx / s.cell_m)) + half, int(round(gy / s.cell_m)) + half
-    goal_id = int(ids[gr, gc]) if 0 <= gc < n and 0 <= gr < n else -1
+    gc, gr = round(float(gx) / s.cell_m) + half, round(float(gy) / s.cell_m) + half
+    goal_id = gr * n + gc if 0 <= gc < n and 0 <= gr < n else -1
     if goal_id >= 0 and math.isfinite(dist[goal_id]):
         end = goal_id
     else:
-        cell_x, cell_y = layout.xx[trav], layout.yy[trav]  # node order = row-major order
-        score = dist + np.hypot(cell_x - gx, cell_y - gy)
-        rim = layout.rim[trav] & np.isfinite(dist)
+        to_goal = np.hypot(layout.xx.ravel() - gx, layout.yy.ravel() - gy)
+        rim = layout.rim.ravel() & np.isfinite(dist)
         if goal_id < 0 and rim.any():  # the way on leaves the window: through its rim
-            end = int(np.flatnonzero(rim)[np.argmin(score[rim])])
+            end = int(np.argmin(np.where(rim, dist + to_goal, np.inf)))
         else:  # the via point is in the window but out of reach: get as near it as possible
-            end = int(np.argmin(dist + s.heuristic_weight * np.hypot(cell_x - gx, cell_y - gy)))
+            end = int(np.argmin(dist + s.heuristic_weight * to_goal))
     nodes = [end]
     while nodes[-1] != start:
         nodes.append(int(pred[nodes[-1]]))
     order = np.asarray(nodes[::-1], dtype=np.int64)
-    path = np.column_stack((layout.xx[trav][order], layout.yy[trav][order]))
-    path_clear = clearance[trav][order]
+    path = np.column_stack((layout.xx.ravel()[order], layout.yy.ravel()[order]))
+    path_clear = clearance.ravel()[order]
     steps = np.hypot(*np.diff(path, axis=0).T) if len(path) > 1 else np.zeros(0)
     along = np.concatenate(([0.0], np.cumsum(steps)))
     within = along <= s.horizon_m
@@ -276,9 +282,15 @@ def plan_target(
         return LocalPlan(target, path, ahead, "path")
     (mx, my), (nx, ny) = gap
     a = -(mx * nx + my * ny)  # the robot's coordinate along the axis (0 at the middle)
+    off = abs(mx * ny - my * nx)  # and its distance from the axis
     entry_s = _entry_distance(obstacles, (mx, my), (nx, ny), s)
     ex, ey = mx - entry_s * nx, my - entry_s * ny
-    if a < -entry_s and math.hypot(ex, ey) > s.entry_tolerance_m:
+    # Off the axis and not yet at the gap's mouth: to the entry point first.
+    if (
+        a < -s.approach_min_m
+        and off > s.entry_tolerance_m
+        and math.hypot(ex, ey) > s.entry_tolerance_m
+    ):
         if _segment_clear(obstacles, (ex, ey), s.clearance_min_m):
             return LocalPlan((ex, ey), path, ahead, "approach", gap)
         k = min(int(np.searchsorted(along, s.lookahead_m)), len(path) - 1)
@@ -293,8 +305,8 @@ def _gap_at(
     """The gap the path crosses at cell ``k``: of the scan points near it, the closest pair
     with one on either side of the path (the throat), its middle and the axis through it
     (perpendicular to the pair, along the path). None when it is not a gap: one side empty,
-    the pair as wide as a turn needs, or lying along the path rather than across it (a wall
-    beside the path)."""
+    the pair as wide as a turn needs, lying along the path rather than across it, or not
+    where the path crosses (a wall beside or behind the path)."""
     lo, hi = max(k - 2, 0), min(k + 2, len(path) - 1)
     if hi == lo:
         return None
@@ -321,15 +333,20 @@ def _gap_at(
     width = math.hypot(gx, gy)
     if not 0.0 < width < 2.0 * s.narrow_m or abs(gx * dx + gy * dy) > _ACROSS * width:
         return None
+    # The path crosses the throat: its cell lies on the segment between the two points.
+    ox = px - float(obstacles.x[right[j]])
+    oy = py - float(obstacles.y[right[j]])
+    if abs(gx * oy - gy * ox) > 2.0 * s.cell_m * width:
+        return None
+    if not 0.0 <= gx * ox + gy * oy <= width * width:
+        return None
     nx, ny = gy / width, -gx / width
     if nx * dx + ny * dy < 0.0:
         nx, ny = -nx, -ny
     return (float(mx[i, j]), float(my[i, j])), (nx, ny)
 
 
-def _segment_clear(
-    obstacles: ObstaclePoints, end: tuple[float, float], clearance_m: float
-) -> bool:
+def _segment_clear(obstacles: ObstaclePoints, end: tuple[float, float], clearance_m: float) -> bool:
     """No scan point within ``clearance_m`` of the segment from the robot to ``end``."""
     ex, ey = end
     length2 = ex * ex + ey * ey
@@ -346,10 +363,12 @@ def _entry_distance(
     axis: tuple[float, float],
     s: PlanSettings,
 ) -> float:
-    """The nearest distance before the gap's middle, in [approach_min, approach_max], at which
-    the footprint has room to turn (clearance >= narrow_m); approach_max if none has."""
+    """Where on the axis, in [approach_min, approach_max] before the gap's middle, the robot
+    turns to face the gap: the nearest distance with room to turn and a little more
+    (clearance >= narrow_m + a cell), else the roomiest one."""
     ds = np.arange(s.approach_min_m, s.approach_max_m + 1e-9, 0.5 * s.cell_m)
     px, py = middle[0] - ds * axis[0], middle[1] - ds * axis[1]
     d2 = (obstacles.x[None, :] - px[:, None]) ** 2 + (obstacles.y[None, :] - py[:, None]) ** 2
-    room = np.flatnonzero(d2.min(axis=1) >= s.narrow_m * s.narrow_m)
-    return float(ds[room[0]]) if len(room) else float(ds[-1])
+    room = np.sqrt(d2.min(axis=1))
+    enough = np.flatnonzero(room >= s.narrow_m + s.cell_m)
+    return float(ds[enough[0]]) if len(enough) else float(ds[int(np.argmax(room))])
