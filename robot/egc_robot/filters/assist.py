@@ -330,7 +330,7 @@ class AssistParams:
     # for, the look-ahead on the path and along a gap's axis, where a gap's entry point may
     # lie before its middle and how near counts as there (m).
     plan_cell_m: float = 0.05
-    plan_window_m: float = 2.5
+    plan_window_m: float = 2.0
     plan_clearance_min_m: float = 0.2005
     plan_clearance_pref_m: float = _PIONEER_REACH_M + _SWEEP_MARGIN_M + 0.1
     plan_clearance_weight: float = 3.0

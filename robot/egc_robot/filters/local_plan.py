@@ -20,7 +20,7 @@ Steps (DESIGN 6, ``assist``; the paper has no planner, see the deviation in ``as
    w = (1 + ``clearance_weight`` (pref - c) / (pref - min)) for c < pref, 1 above, so paths
    keep to the middle of bands and gaps (cost ~ 1 / clearance).
 3. **Shortest path** (Dijkstra, ``scipy.sparse.csgraph``) over the 8-connected traversable
-   cells from the robot's cell, edge cost = length x mean of its cells' costs. The end is the
+   cells from the robot's cell, a step costs its length x the cost of the cell it enters. The end is the
    via point's cell when it is reachable, else the reachable cell minimising path cost +
    ``heuristic_weight`` x straight distance to the via point (a via point outside the window
    or behind what the scan cannot see).
@@ -107,17 +107,15 @@ def _layout(cell_m: float, window_m: float, bins: int) -> _Layout:
     rim[:, [0, -1]] = True
     n = 2 * half + 1
     own = np.arange(n * n).reshape(n, n)
-    neighbours = np.empty((n * n, len(_NEIGHBOURS)), dtype=np.int64)
-    inside = np.empty((n * n, len(_NEIGHBOURS)), dtype=bool)
+    neighbours = np.empty((n * n, len(_NEIGHBOURS)), dtype=np.int32)
     for k, (dr, dc) in enumerate(_NEIGHBOURS):
         r, c = np.arange(n)[:, None] + dr, np.arange(n)[None, :] + dc
         ok = (r >= 0) & (r < n) & (c >= 0) & (c < n)
         neighbours[:, k] = np.where(
             ok, np.clip(r, 0, n - 1) * n + np.clip(c, 0, n - 1), own
         ).ravel()
-        inside[:, k] = ok.ravel()
-    indptr = np.arange(0, len(_NEIGHBOURS) * n * n + 1, len(_NEIGHBOURS))
-    return _Layout(half, xx, yy, np.hypot(xx, yy), sector, rim, neighbours, inside, indptr)
+    indptr = np.arange(0, len(_NEIGHBOURS) * n * n + 1, len(_NEIGHBOURS), dtype=np.int32)
+    return _Layout(half, xx, yy, np.hypot(xx, yy), sector, rim, neighbours, indptr)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -130,11 +128,10 @@ class _Layout:
     radius: FloatArray
     sector: IntArray
     rim: npt.NDArray[np.bool_]  # the window's outermost ring of cells
-    # The 8-neighbour graph's fixed shape: every cell's neighbours (itself past the border),
-    # which of them exist, and the CSR row pointers (8 entries a row).
-    neighbours: IntArray
-    inside: npt.NDArray[np.bool_]
-    indptr: IntArray
+    # The 8-neighbour graph's fixed shape: every cell's neighbours (itself past the border)
+    # and the CSR row pointers (8 entries a row).
+    neighbours: npt.NDArray[np.int32]
+    indptr: npt.NDArray[np.int32]
 
 
 _BINS = 720  # angular sectors of the "seen" test (a quarter of a degree wider than 1 deg beams)
@@ -183,15 +180,16 @@ def clearances(obstacles: ObstaclePoints, layout: _Layout, s: PlanSettings) -> F
 def _graph(
     trav: npt.NDArray[np.bool_], cost: FloatArray, cell_m: float, layout: _Layout
 ) -> csr_matrix:
-    """The 8-connected graph of the cells (node = row-major cell index), edge cost = length x
-    the mean of its two cells' costs; an edge touching a cell that is not traversable costs
-    inf (never taken). Every row has its 8 entries, so the CSR is built without a sort."""
-    flat_cost, flat_trav = cost.ravel(), trav.ravel()
-    nb = layout.neighbours
-    weights = 0.5 * (flat_cost[:, None] + flat_cost[nb]) * (_LENGTHS * cell_m)
-    weights[~(flat_trav[:, None] & flat_trav[nb] & layout.inside)] = np.inf
-    size = len(flat_cost)
-    return csr_matrix((weights.ravel(), nb.ravel(), layout.indptr), shape=(size, size))
+    """The 8-connected graph of the cells (node = row-major cell index): a step costs its
+    length x the cost of the cell it enters, inf into a cell that is not traversable (never
+    taken); past the window's border a cell's neighbour is itself (a loop, never taken).
+    Every row has its 8 entries, so the CSR is built without a sort."""
+    entered = np.where(trav, cost, np.inf).ravel()
+    weights = entered[layout.neighbours] * (_LENGTHS * cell_m)
+    size = len(entered)
+    return csr_matrix(
+        (weights.ravel(), layout.neighbours.ravel(), layout.indptr), shape=(size, size)
+    )
 
 
 def moved_path(
