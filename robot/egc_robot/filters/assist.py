@@ -329,8 +329,8 @@ class AssistParams:
     # below which the footprint cannot turn in place (a gap), how far ahead gaps are looked
     # for, the look-ahead on the path and along a gap's axis, where a gap's entry point may
     # lie before its middle and how near counts as there (m).
-    plan_cell_m: float = 0.05
-    plan_window_m: float = 2.0
+    plan_cell_m: float = 0.06
+    plan_window_m: float = 2.5
     plan_clearance_min_m: float = 0.2005
     plan_clearance_pref_m: float = _PIONEER_REACH_M + _SWEEP_MARGIN_M + 0.1
     plan_clearance_weight: float = 3.0
@@ -347,8 +347,9 @@ class AssistParams:
     # ``plan_slow_per_s`` x (the path's clearance ahead - half the width), never below
     # ``plan_speed_min_mps`` (m/s) unless the stick asks for less.
     plan_turn_rad: float = math.radians(30.0)
-    plan_slow_per_s: float = 2.0
-    plan_speed_min_mps: float = 0.1
+    plan_align_rad: float = math.radians(10.0)  # the same along a gap's axis, with room
+    plan_slow_per_s: float = 3.0
+    plan_speed_min_mps: float = 0.15
     # A via point closer than this (m) gives no direction: joystick plus avoidance.
     goal_min_m: float = 0.05
     # dt larger than this (s) counts as this (a resumed link does not jump the confidence).
@@ -423,6 +424,7 @@ class AssistParams:
             "squeeze_step_rad",
             "squeeze_centre_max_rad",
             "plan_turn_rad",
+            "plan_align_rad",
         ):
             if getattr(self, name) > math.pi:
                 raise ValueError(f"assist.{name} must be in [0, pi]")
@@ -515,7 +517,9 @@ class AssistMemory:
     ``escape``: the unblocking try under way (0 ahead, 1 turn, 2 back; -1 none), ``escape_s``
     how long it has run, ``escape_turn`` the turn the rules wanted when it began; ``freed_by``
     / ``freed_ns``: the try that last freed the robot, and when; ``override_held_s``: how long
-    the sweep has held the override still; ``override_spent``: it yielded, for this stick cell.
+    the sweep has held the override still; ``override_spent``: it yielded, for this stick cell;
+    ``plan_path``: the local planner's last path in {R} then (every second cell; empty: none),
+    ``plan_phase``: its last phase ("" none, "path", "approach", "thread").
     """
 
     counts: Grid = _ZERO_GRID
@@ -541,6 +545,7 @@ class AssistMemory:
     override_held_s: float = 0.0
     override_spent: bool = False
     plan_path: tuple[tuple[float, float], ...] = ()
+    plan_phase: str = ""
 
     @staticmethod
     def initial() -> AssistMemory:
@@ -922,6 +927,7 @@ def assist_step(
     v_ref, w_ref = profile.v_max_mps * xs, profile.w_max_radps * ys
 
     kept_path: tuple[tuple[float, float], ...] = ()
+    plan_phase = ""
 
     def result(
         v: float,
@@ -967,6 +973,7 @@ def assist_step(
             override_held_s,
             spent,
             kept_path,
+            plan_phase,
         )
         modified = abs(v - v_ref) > _SAME or abs(w - w_ref) > _SAME
         return AssistResult(
@@ -1016,8 +1023,11 @@ def assist_step(
         previous = memory.plan_path
         if sent is not None:
             previous = moved_path(previous, sent[0], sent[1], dt)
-        plan = plan_target(obs, goal_xy_m, params.plan_settings(), previous)
+        plan = plan_target(
+            obs, goal_xy_m, params.plan_settings(), previous, memory.plan_phase == "thread"
+        )
     if plan is not None:
+        plan_phase = plan.phase
         kept_path = tuple((float(x), float(y)) for x, y in plan.path_xy_m[::_KEEP_EVERY].tolist())
     if plan is not None and source == "blend":
         # The planner replaces the target's direction; the stick still pulls (sec. V).
@@ -1028,8 +1038,14 @@ def assist_step(
             params.plan_speed_min_mps,
             params.plan_slow_per_s * (plan.clearance_ahead_m - 0.5 * profile.width_m),
         )
+        if plan.phase == "approach":  # slow down onto the entry point: the turn is made there
+            reach_m = math.hypot(plan.target_xy_m[0], plan.target_xy_m[1])
+            cap = min(cap, max(params.plan_speed_min_mps, params.plan_slow_per_s * reach_m))
         speed_scale = min(1.0, cap / max(drive * profile.v_max_mps, _SAME))
-        if abs(theta) > params.plan_turn_rad:
+        # Along a gap's axis the robot lines up closely before it drives (the gap leaves it
+        # centimetres); elsewhere only a large turn is made in place.
+        turn_rad = params.plan_align_rad if plan.phase == "thread" else params.plan_turn_rad
+        if abs(theta) > turn_rad:
             if len(obs) == 0 or float(obs.r2.min()) >= params.plan_narrow_m**2:
                 speed_scale = 0.0  # room to turn: face the target first (an arc is swept wide)
             else:  # no room to turn in place: a slow arc

@@ -1,39 +1,45 @@
 """A local planner on the current scan: where ``assist`` steers when a via point is set (issue 28).
 
-``plan_target(obstacles, goal_xy_m, params)`` is a pure function of one scan (points in {R})
-and the via point in {R}. It answers with a ``LocalPlan``: the point in {R} the assistant's
-rules steer to this cycle (instead of the via point itself), the path it lies on, and the
-clearances that set the speed. Nothing is kept between cycles: every cycle plans again on the
-scan it was given, so no odometry is needed and a stale plan can never be followed.
+``plan_target(obstacles, goal_xy_m, settings, previous)`` is a pure function of one scan
+(points in {R}), the via point in {R} and last cycle's path moved into this cycle's {R}
+(``moved_path``, by the velocity last sent). It answers with a ``LocalPlan``: the point in {R}
+the assistant's rules steer to this cycle (instead of the via point itself), the path it lies
+on, the clearance that sets the speed, and the gap being crossed. The plan is made again
+every cycle on the scan it was given; the last path only makes its own cells cheaper.
 
 Steps (DESIGN 6, ``assist``; the paper has no planner, see the deviation in ``assist``):
 
-1. **Local grid.** A square of ``2 window_m`` around the robot, cells ``cell_m`` wide, the robot
-   on the centre cell. A cell's *clearance* is the exact distance from its centre to the nearest
-   scan point (a k-d tree, capped at ``clearance_pref_m``), not a rasterised distance
-   transform: a gap 1.2 x the robot's width leaves 4 cm either side, less than the error of a
-   5 cm raster. Cells along a beam up to its return are *seen* free (a ray cast from the
-   sensor at the origin of {R} to every point); the rest are *unknown*, traversable at
-   ``unknown_cost`` times the cost (optimistic: behind an obstacle is not known to be blocked).
-2. **Traversable**: clearance >= ``clearance_min_m`` (half the footprint's width + a little):
-   the robot's centre can be there with its sides clear. Each cell costs
-   w = (1 + ``clearance_weight`` (pref - c) / (pref - min)) for c < pref, 1 above, so paths
-   keep to the middle of bands and gaps (cost ~ 1 / clearance).
-3. **Shortest path** (Dijkstra, ``scipy.sparse.csgraph``) over the 8-connected traversable
-   cells from the robot's cell, a step costs its length x the cost of the cell it enters. The end is the
-   via point's cell when it is reachable, else the reachable cell minimising path cost +
-   ``heuristic_weight`` x straight distance to the via point (a via point outside the window
-   or behind what the scan cannot see).
+1. **Local grid.** A square of ``2 window_m`` around the robot, cells ``cell_m`` wide, the
+   robot on the centre cell. A cell's *clearance* is its centre's distance to the nearest scan
+   point, capped at ``clearance_pref_m``: a distance transform of the points on the grid, made
+   exact (a k-d tree) within a cell of ``clearance_min_m``, where it decides what is
+   traversable (a gap 1.2 x the robot's width leaves 4 cm either side, less than the raster's
+   error). Cells nearer the sensor than the return in their direction are *seen* free; the
+   rest are *unknown* and cost ``unknown_cost`` times as much (optimistic: behind an obstacle
+   is not known to be blocked).
+2. **Traversable**: clearance >= ``clearance_min_m`` (half the footprint's width + 1 cm): the
+   robot's centre can be there with its sides clear. Each cell costs
+   w = 1 + ``clearance_weight`` (pref - c) / (pref - min) for c < pref, 1 above, so paths keep
+   to the middle of bands and gaps (cost ~ 1 / clearance); cells of the last path
+   ``keep_cost`` times that.
+3. **Shortest path** (Dijkstra, ``scipy.sparse.csgraph``) over the 8-connected cells from the
+   robot's: a step costs its length x the cost of the cell it enters. The end is the via
+   point's cell when it is reachable; for a via point outside the window, the cell of the
+   window's rim with the least path cost + straight distance to the via point; for one inside
+   but out of reach, the cell with the least path cost + ``heuristic_weight`` x that distance.
 4. **Gaps along their axis.** A *narrow* stretch of the path (clearance below ``narrow_m``:
-   no room to turn the footprint in place) within ``horizon_m`` ahead is a gap. Its throat is
-   the narrowest path cell; the nearest scan point on each side of the path there, p_L and
-   p_R, give the gap's middle M = (p_L + p_R) / 2 and its axis n (perpendicular to p_L - p_R,
-   along the path). The robot first goes to the *entry point* E = M - s n, with s the
-   smallest distance in [``approach_min_m``, ``approach_max_m``] at which E has room to turn
-   (clearance >= ``narrow_m``); from there (within ``entry_tolerance_m``), or once it is in
-   the gap, it steers at the axis point ``axis_lookahead_m`` ahead of its own projection on
-   the axis (pure pursuit of the axis line), so it enters straight and centred. Without a gap
-   ahead the target is the path point ``lookahead_m`` along it.
+   no room to turn the footprint in place) within ``horizon_m`` ahead may be a gap. At its
+   narrowest cell, the closest pair of scan points one either side of the path (p_L, p_R) is
+   its throat when the path crosses the segment between them and the pair lies across the
+   path (not a wall beside it): the gap's middle M = (p_L + p_R) / 2, its axis n
+   perpendicular to p_L - p_R, along the path. Off the axis and not yet at the gap's mouth,
+   the robot first goes to the *entry point* E = M - s n, s the nearest distance in
+   [``approach_min_m``, ``approach_max_m``] with the most room to turn there, when the way
+   to E is clear (else along the path); at E, on the axis (within ``entry_tolerance_m``,
+   facing along it; twice that once threading) or at the mouth, it steers at the axis point
+   ``axis_lookahead_m`` ahead of its own projection on the axis (pure pursuit of the axis
+   line), so it enters straight and centred. Without a gap ahead the target is the path
+   point ``lookahead_m`` along it.
 """
 
 from __future__ import annotations
@@ -56,6 +62,8 @@ IntArray = npt.NDArray[np.int64]
 _SQRT2 = math.sqrt(2.0)
 # A throat's two points lie across the path: |cos| of their angle to it at most this.
 _ACROSS = 0.6
+# On a gap's axis and heading along it within this (rad): threaded without the entry point.
+_LINED_UP_RAD = math.radians(15.0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -84,7 +92,7 @@ class LocalPlan:
     """One cycle's plan, all in {R}.
 
     ``target_xy_m``: where the rules steer; ``path_xy_m``: the planned cells' centres, from the
-    robot; ``clearance_ahead_m``: the smallest clearance on the path within ``horizon_m``;
+    robot; ``clearance_ahead_m``: the smallest clearance on the path within ``lookahead_m``;
     ``phase``: "path" (no gap ahead), "approach" (to a gap's entry point) or "thread" (along a
     gap's axis); ``gap``: (M, n) of that gap, else None."""
 
@@ -215,11 +223,13 @@ def plan_target(
     goal_xy_m: tuple[float, float],
     s: PlanSettings,
     previous: tuple[tuple[float, float], ...] = (),
+    threading: bool = False,
 ) -> LocalPlan | None:
     """The cycle's plan (module docstring); None when the robot's own cell is not traversable
     (then the rules decide alone). ``previous``: last cycle's path in this {R}
     (``moved_path``); cells along it cost ``keep_cost`` times as much, so two ways of about
-    the same cost do not take turns as the robot moves (it rocked between two gaps)."""
+    the same cost do not take turns as the robot moves (it rocked between two gaps).
+    ``threading``: last cycle's phase was "thread"."""
     layout = _layout(s.cell_m, s.window_m, _BINS)
     half = layout.half
     n = 2 * half + 1
@@ -264,7 +274,7 @@ def plan_target(
     steps = np.hypot(*np.diff(path, axis=0).T) if len(path) > 1 else np.zeros(0)
     along = np.concatenate(([0.0], np.cumsum(steps)))
     within = along <= s.horizon_m
-    ahead = float(path_clear[within].min())
+    ahead = float(path_clear[along <= s.lookahead_m].min())
 
     narrow = np.flatnonzero(within & (path_clear < s.narrow_m))
     gap = None
@@ -283,12 +293,14 @@ def plan_target(
     off = abs(mx * ny - my * nx)  # and its distance from the axis
     entry_s = _entry_distance(obstacles, (mx, my), (nx, ny), s)
     ex, ey = mx - entry_s * nx, my - entry_s * ny
-    # Off the axis and not yet at the gap's mouth: to the entry point first.
-    if (
-        a < -s.approach_min_m
-        and off > s.entry_tolerance_m
-        and math.hypot(ex, ey) > s.entry_tolerance_m
-    ):
+    # To the entry point first, unless already there, on the axis facing along it, or at the
+    # gap's mouth (where there is no room to turn any more).
+    at_entry = math.hypot(ex, ey) <= s.entry_tolerance_m
+    lined_up = off <= s.entry_tolerance_m and abs(math.atan2(ny, nx)) <= _LINED_UP_RAD
+    # Threading last cycle and still near the axis: go on (turning on the spot at the entry
+    # point swings the robot's heading, and with it the tests above, back and forth).
+    lined_up = lined_up or (threading and off <= 2.0 * s.entry_tolerance_m)
+    if not (at_entry or lined_up or a >= -s.approach_min_m):
         if _segment_clear(obstacles, (ex, ey), s.clearance_min_m):
             return LocalPlan((ex, ey), path, ahead, "approach", gap)
         k = min(int(np.searchsorted(along, s.lookahead_m)), len(path) - 1)
@@ -362,11 +374,10 @@ def _entry_distance(
     s: PlanSettings,
 ) -> float:
     """Where on the axis, in [approach_min, approach_max] before the gap's middle, the robot
-    turns to face the gap: the nearest distance with room to turn and a little more
-    (clearance >= narrow_m + a cell), else the roomiest one."""
+    turns to face the gap: the roomiest place (clearance capped at clearance_pref_m), the
+    nearest of equals."""
     ds = np.arange(s.approach_min_m, s.approach_max_m + 1e-9, 0.5 * s.cell_m)
     px, py = middle[0] - ds * axis[0], middle[1] - ds * axis[1]
     d2 = (obstacles.x[None, :] - px[:, None]) ** 2 + (obstacles.y[None, :] - py[:, None]) ** 2
-    room = np.sqrt(d2.min(axis=1))
-    enough = np.flatnonzero(room >= s.narrow_m + s.cell_m)
-    return float(ds[enough[0]]) if len(enough) else float(ds[int(np.argmax(room))])
+    room = np.minimum(np.sqrt(d2.min(axis=1)), s.clearance_pref_m)
+    return float(ds[np.flatnonzero(room >= room.max() - 1e-9)[0]])
