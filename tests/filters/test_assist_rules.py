@@ -34,7 +34,11 @@ from egc_sim.simulator import Simulator
 from tests.sim.helpers import boxed_room, grid_world
 
 P = PIONEER3DX
-PARAMS = AssistParams.from_profile(P)
+# The rules of the paper and of the earlier deviations, without the local planner that now
+# picks their target when there is a via point (``plan_cell_m`` = 0; the planner's own tests
+# are ``test_rule_plan`` and the closed loops below, and tests/filters/test_local_plan.py).
+PLANNED = AssistParams.from_profile(P)
+PARAMS = replace(PLANNED, plan_cell_m=0.0)
 MS = 1_000_000  # ns per ms
 DT_MS = 50
 
@@ -665,18 +669,44 @@ def drive(sim: Simulator, goal_world, params: AssistParams, max_time_s: float, t
     return False, rules
 
 
-def test_closed_loop_goal_behind_a_single_obstacle_is_reached():
+def test_rule_plan():
+    """With a via point and the stick in line with it, the planner picks the target: a wall
+    across the way with one opening off to the side is crossed through the opening, on its
+    axis, slowly, turning in place first when the target is far off the robot's heading."""
+    gap = (0.5, 0.5 + 1.3 * P.width_m)
+    wall = np.vstack((line(1.5, -3.0, 1.5, gap[0], 200), line(1.5, gap[1], 1.5, 3.0, 200)))
+    r = run(1.0, 0.0, wall, goal=(4.0, 0.0), params=PLANNED)
+    assert r.rule == "plan"
+    # Towards the opening (left), not at the via point straight through the wall.
+    assert r.heading_rad is not None and r.heading_rad > math.radians(20.0)
+    assert r.memory.plan_path, "the path is kept for the next cycle"
+    if abs(r.heading_rad) > PLANNED.plan_turn_rad:
+        assert r.v_mps == 0.0 and r.w_radps > 0.0  # room to turn: in place first
+    else:
+        assert 0.0 < r.v_mps <= max(PLANNED.plan_speed_min_mps, P.v_max_mps)
+    # The stick elsewhere: the paper's blend of the stick and the planned direction.
+    blend = run(0.3, 1.0, wall, goal=(4.0, 0.0), params=PLANNED)
+    assert blend.rule != "plan"
+    # Without a via point there is nothing to plan to.
+    assert run(1.0, 0.0, wall, params=PLANNED).rule != "plan"
+
+
+@pytest.mark.parametrize("params", [PARAMS, PLANNED], ids=["rules", "planned"])
+def test_closed_loop_goal_behind_a_single_obstacle_is_reached(params):
     occ = boxed_room(6.0, 4.0)
     occ[30:50, 50:70] = True  # a 1.0 m x 1.0 m block at x 2.5-3.5, y 1.5-2.5
     world = grid_world(occ)
     start, goal = (1.0, 2.0, 0.0), (5.0, 2.1)
     sim = Simulator(world, P, start)
-    reached, rules = drive(sim, goal, PARAMS, 120.0, 0.3)
+    reached, rules = drive(sim, goal, params, 120.0, 0.3)
     assert reached and not sim.collided
     assert sim.min_clearance_m > 0.0
-    around = [i for i, r in enumerate(rules) if r == "detour"]
-    assert around, "the block ahead on the way to the via point is passed by a detour"
-    assert "goal" in rules[around[-1] :], "and the robot heads for the via point once clear"
+    if params.plan_cell_m > 0.0:
+        assert set(rules) <= {"plan", "unblock"} and "plan" in rules
+    else:
+        around = [i for i, r in enumerate(rules) if r == "detour"]
+        assert around, "the block ahead on the way to the via point is passed by a detour"
+        assert "goal" in rules[around[-1] :], "and the robot heads for the via point once clear"
     # The straight line costs 4 m at 0.14 m/s (29 s); round the block well within 2x that.
     assert sim.time_s < 60.0
 

@@ -103,6 +103,34 @@ How each part maps to the paper
   crossed at angle a is only g cos(a) wide. Measured (``docs/assist.md``, notes): Jackal
   ``clutter:0-29`` 0/30 -> 5/30 (5 of the 9 cylinder fields, none of the 21 baffle worlds),
   ``random:1000-1029`` 26/30 -> 27/30, 0 collisions. ``squeeze_step_rad`` = 0 turns it off.
+- **Local planner** (deviation, issue 28; ``local_plan``): the narrow detour above picks a
+  heading from the current scan, so it entered a 1.2 x W gap at an angle (4 cm a side against
+  the sweep's 3 cm margin) and had no room to turn in place inside a column: 5 of 30
+  ``clutter`` worlds. With a via point (and ``plan_cell_m`` > 0) the assistant now plans on
+  the scan every cycle and the planner only replaces the *target's direction*: a grid in {R}
+  (``plan_window_m`` either side, ``plan_cell_m`` cells), a cell traversable when its
+  clearance is at least ``plan_clearance_min_m`` (W / 2 + 1 cm), cells nearer than
+  ``plan_clearance_pref_m`` dearer (cost ~ 1 / clearance), cells no beam crossed
+  ``plan_unknown_cost`` dearer, Dijkstra from the robot to the via point (or, when it lies
+  outside the window, out through the window's rim towards it). The rules steer at the path's
+  look-ahead point, or, when the path crosses a gap too narrow to turn in (clearance below
+  ``plan_narrow_m``, the footprint's reach + the sweep's margin), first at the gap's entry
+  point on its axis (where there is room to turn) and then along the axis through its middle
+  (``local_plan``'s docstring). With the stick in line with the via point (rule ``plan``)
+  the robot turns in place towards that point when it is more than ``plan_turn_rad`` off and
+  there is room (a slow arc when not), and drives no faster than ``plan_slow_per_s`` x the
+  path's clearance beyond half the width (at least ``plan_speed_min_mps``), never faster than
+  the stick asks; with the stick elsewhere the paper's blend averages the stick with the
+  planned direction (rule ``blend`` and the obstacle rules as before), and the override is
+  untouched. The plan replaces ``goal``, ``detour`` and wall following while it finds a way;
+  when the robot's own cell is not traversable (nothing to plan from) those rules decide as
+  before. The memory keeps the last path (``plan_path``, every second cell), moved into this
+  cycle's {R} by the velocity last sent, and cells along it cost ``keep_cost`` (0.7) times as
+  much: without it the robot rocked between two gaps of about the same cost. The pipeline's
+  footprint sweep still has the last word. Measured (``docs/assist.md``): Jackal, ``goal``
+  operator, via point at the goal, ``clutter:0-29`` 5/30 -> 27/30, held-out
+  ``clutter:13000-13039`` 39/40, ``random:1000-1029`` 27/30 -> 29/30, 0 collisions; about
+  3 ms a step (``bench/bench_assist_plan.py``). ``plan_cell_m`` = 0 turns the planner off.
 - **Wall following** (sec. V: "an obstacle in front while moving toward a target destination ...
   rotate to align with and then move parallel to the wall"). Entered when heading for the via
   point (rule ``goal``) with FRONT active at CLOSE or INTERMEDIATE, the corridor towards the via
@@ -162,7 +190,7 @@ Rules (names reported in ``AssistResult.rule``), in the order they are tried
 ``invalid`` (NaN / infinite stick or via point: stop), ``unknown`` (no scan point and the sensor
 does not declare no-return as free, DESIGN 5.9 NO_POINTS_UNKNOWN: nothing seen is not free: stop),
 ``idle`` (stick centred: stop), ``reverse`` (x_o < 0: the stick's eq. 4 command; the rules look
-ahead only, the sweep guards the reverse), ``override``, ``wall-follow-left`` /
+ahead only, the sweep guards the reverse), ``override``, ``plan``, ``wall-follow-left`` /
 ``wall-follow-right``, ``detour``, ``avoid-front``, ``gap``, ``avoid-left`` / ``avoid-right``,
 and with nothing active ``goal``, ``blend`` or ``free``; then ``unblock`` in place of any of
 them that the base was refused.
@@ -179,6 +207,8 @@ import numpy as np
 import numpy.typing as npt
 from egc_common.profiles import RobotProfile
 from egc_common.scan import ObstaclePoints, obstacle_points
+
+from egc_robot.filters.local_plan import LocalPlan, PlanSettings, moved_path, plan_target
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -202,12 +232,16 @@ RULES = (
     "avoid-left",
     "avoid-right",
     "unblock",
+    "plan",
     "goal",
     "blend",
     "free",
 )
 
 _SAME = 1e-9
+_KEEP_EVERY = 2  # the memory keeps every second cell of the path (``plan_keep_cost``)
+_SWEEP_MARGIN_M = 0.03  # the footprint sweep's margin (safety.SweepParams.margin_m)
+_PIONEER_REACH_M = math.hypot(0.2275, 0.1905)  # the Pioneer's half diagonal (DESIGN 3)
 _HALF_PI = 0.5 * math.pi
 Grid = tuple[tuple[int, int, int], tuple[int, int, int], tuple[int, int, int]]
 BoolGrid = tuple[tuple[bool, bool, bool], tuple[bool, bool, bool], tuple[bool, bool, bool]]
@@ -291,6 +325,33 @@ class AssistParams:
     squeeze_half_width_m: float = 0.2205
     squeeze_step_rad: float = math.radians(1.0)
     squeeze_centre_max_rad: float = math.radians(10.0)
+    # Local planner (rule ``plan``, module docstring; ``local_plan``): grid cell and half
+    # window (m; 0 cell: no planner), traversable clearance (half the width + 1 cm), the
+    # clearance above which a cell costs nothing extra, the cost weights (1), the clearance
+    # below which the footprint cannot turn in place (a gap), how far ahead gaps are looked
+    # for, the look-ahead on the path and along a gap's axis, where a gap's entry point may
+    # lie before its middle and how near counts as there (m).
+    plan_cell_m: float = 0.06
+    plan_window_m: float = 2.5
+    plan_clearance_min_m: float = 0.2005
+    plan_clearance_pref_m: float = _PIONEER_REACH_M + _SWEEP_MARGIN_M + 0.1
+    plan_clearance_weight: float = 3.0
+    plan_unknown_cost: float = 1.5
+    plan_heuristic_weight: float = 3.0
+    plan_narrow_m: float = _PIONEER_REACH_M + _SWEEP_MARGIN_M
+    plan_horizon_m: float = 1.5
+    plan_lookahead_m: float = 0.5
+    plan_axis_lookahead_m: float = 0.3
+    plan_approach_min_m: float = 0.3
+    plan_approach_max_m: float = 0.7
+    plan_entry_tolerance_m: float = 0.06
+    # Following the plan: turn in place above this heading error (rad); speed at most
+    # ``plan_slow_per_s`` x (the path's clearance ahead - half the width), never below
+    # ``plan_speed_min_mps`` (m/s) unless the stick asks for less.
+    plan_turn_rad: float = math.radians(30.0)
+    plan_align_rad: float = math.radians(10.0)  # the same along a gap's axis, with room
+    plan_slow_per_s: float = 3.0
+    plan_speed_min_mps: float = 0.15
     # A via point closer than this (m) gives no direction: joystick plus avoidance.
     goal_min_m: float = 0.05
     # dt larger than this (s) counts as this (a resumed link does not jump the confidence).
@@ -336,6 +397,15 @@ class AssistParams:
         for name in positive:
             if getattr(self, name) <= 0:
                 raise ValueError(f"assist.{name} must be positive")
+        if self.plan_cell_m > 0.0:
+            if not 0.0 < self.plan_clearance_min_m < self.plan_clearance_pref_m:
+                raise ValueError("assist needs 0 < plan_clearance_min_m < plan_clearance_pref_m")
+            if self.plan_window_m < 2.0 * self.plan_cell_m:
+                raise ValueError("assist.plan_window_m must be at least two plan cells")
+            if self.plan_unknown_cost < 1.0:
+                raise ValueError("assist.plan_unknown_cost must be at least 1")
+            if self.plan_approach_min_m > self.plan_approach_max_m:
+                raise ValueError("assist needs plan_approach_min_m <= plan_approach_max_m")
         if self.activation_threshold >= self.hit_max:
             raise ValueError("assist.activation_threshold must be below hit_max")
         if not 0.0 < self.override_confidence <= 1.0:
@@ -355,6 +425,8 @@ class AssistParams:
             "wall_lost_turn_rad",
             "squeeze_step_rad",
             "squeeze_centre_max_rad",
+            "plan_turn_rad",
+            "plan_align_rad",
         ):
             if getattr(self, name) > math.pi:
                 raise ValueError(f"assist.{name} must be in [0, pi]")
@@ -376,9 +448,31 @@ class AssistParams:
             "leave_clear_m": r_max + 2.0 * length,
             "detour_half_width_m": profile.width_m,
             "wall_retreat_m": length,
+            "plan_clearance_min_m": 0.5 * profile.width_m + 0.01,
+            "plan_narrow_m": profile.half_diagonal_m + _SWEEP_MARGIN_M,
+            "plan_clearance_pref_m": profile.half_diagonal_m + _SWEEP_MARGIN_M + 0.1,
         }
         derived.update(overrides)
         return AssistParams(**derived)
+
+    def plan_settings(self) -> PlanSettings:
+        """The local planner's settings (``plan_*``)."""
+        return PlanSettings(
+            cell_m=self.plan_cell_m,
+            window_m=self.plan_window_m,
+            clearance_min_m=self.plan_clearance_min_m,
+            clearance_pref_m=self.plan_clearance_pref_m,
+            clearance_weight=self.plan_clearance_weight,
+            unknown_cost=self.plan_unknown_cost,
+            heuristic_weight=self.plan_heuristic_weight,
+            narrow_m=self.plan_narrow_m,
+            horizon_m=self.plan_horizon_m,
+            lookahead_m=self.plan_lookahead_m,
+            axis_lookahead_m=self.plan_axis_lookahead_m,
+            approach_min_m=self.plan_approach_min_m,
+            approach_max_m=self.plan_approach_max_m,
+            entry_tolerance_m=self.plan_entry_tolerance_m,
+        )
 
     @staticmethod
     def from_mapping(
@@ -425,7 +519,9 @@ class AssistMemory:
     ``escape``: the unblocking try under way (0 ahead, 1 turn, 2 back; -1 none), ``escape_s``
     how long it has run, ``escape_turn`` the turn the rules wanted when it began; ``freed_by``
     / ``freed_ns``: the try that last freed the robot, and when; ``override_held_s``: how long
-    the sweep has held the override still; ``override_spent``: it yielded, for this stick cell.
+    the sweep has held the override still; ``override_spent``: it yielded, for this stick cell;
+    ``plan_path``: the local planner's last path in {R} then (every second cell; empty: none),
+    ``plan_phase``: its last phase ("" none, "path", "approach", "thread").
     """
 
     counts: Grid = _ZERO_GRID
@@ -450,6 +546,8 @@ class AssistMemory:
     freed_ns: int | None = None
     override_held_s: float = 0.0
     override_spent: bool = False
+    plan_path: tuple[tuple[float, float], ...] = ()
+    plan_phase: str = ""
 
     @staticmethod
     def initial() -> AssistMemory:
@@ -830,6 +928,9 @@ def assist_step(
     spent = memory.override_spent and cell is not None and cell == memory.stick_cell
     v_ref, w_ref = profile.v_max_mps * xs, profile.w_max_radps * ys
 
+    kept_path: tuple[tuple[float, float], ...] = ()
+    plan_phase = ""
+
     def result(
         v: float,
         w: float,
@@ -873,6 +974,8 @@ def assist_step(
             *unblock,
             override_held_s,
             spent,
+            kept_path,
+            plan_phase,
         )
         modified = abs(v - v_ref) > _SAME or abs(w - w_ref) > _SAME
         return AssistResult(
@@ -917,7 +1020,39 @@ def assist_step(
     theta: float
     detour_heading: float | None = None
     detour_turn = memory.detour
-    if source == "goal" and bearing is not None:
+    plan: LocalPlan | None = None
+    if bearing is not None and goal_xy_m is not None and params.plan_cell_m > 0.0 and len(obs):
+        previous = memory.plan_path
+        if sent is not None:
+            previous = moved_path(previous, sent[0], sent[1], dt)
+        plan = plan_target(
+            obs, goal_xy_m, params.plan_settings(), previous, memory.plan_phase == "thread"
+        )
+    if plan is not None:
+        plan_phase = plan.phase
+        kept_path = tuple((float(x), float(y)) for x, y in plan.path_xy_m[::_KEEP_EVERY].tolist())
+    if plan is not None and source == "blend":
+        # The planner replaces the target's direction; the stick still pulls (sec. V).
+        theta_d = _circular_mean(phi, math.atan2(plan.target_xy_m[1], plan.target_xy_m[0]))
+    if plan is not None and source == "goal":
+        theta, rule = math.atan2(plan.target_xy_m[1], plan.target_xy_m[0]), "plan"
+        cap = max(
+            params.plan_speed_min_mps,
+            params.plan_slow_per_s * (plan.clearance_ahead_m - 0.5 * profile.width_m),
+        )
+        if plan.phase == "approach":  # slow down onto the entry point: the turn is made there
+            reach_m = math.hypot(plan.target_xy_m[0], plan.target_xy_m[1])
+            cap = min(cap, max(params.plan_speed_min_mps, params.plan_slow_per_s * reach_m))
+        speed_scale = min(1.0, cap / max(drive * profile.v_max_mps, _SAME))
+        # Along a gap's axis the robot lines up closely before it drives (the gap leaves it
+        # centimetres); elsewhere only a large turn is made in place.
+        turn_rad = params.plan_align_rad if plan.phase == "thread" else params.plan_turn_rad
+        if abs(theta) > turn_rad:
+            if len(obs) == 0 or float(obs.r2.min()) >= params.plan_narrow_m**2:
+                speed_scale = 0.0  # room to turn: face the target first (an arc is swept wide)
+            else:  # no room to turn in place: a slow arc
+                speed_scale = min(speed_scale, params.plan_speed_min_mps / profile.v_max_mps)
+    elif source == "goal" and bearing is not None:
         side = memory.wall_side
         front = levels[FRONT]
         if side is None:
