@@ -592,7 +592,7 @@ class _Scene(NamedTuple):
 
         On the few dozen points in reach numpy's cost per call, not per element, is the time,
         so each quantity is computed once and written where the solver reads it (``out=``), and
-        the creep's nine calls are skipped when no row can creep."""
+        the creep's six calls are skipped when no row can creep."""
         p, alpha, profile = self.params, self.params.alpha_per_s, self.profile
         v0, w0, v_now, w_now = self.v0, self.w0, self.v_now, self.w_now
         x, y = xy.T
@@ -622,14 +622,18 @@ class _Scene(NamedTuple):
         omega_cmd, up_ref = _omega(u_ref, v0, w0, qx, qy)
         creep: FloatArray | float
         if nearest > 0.0 and _min(np.abs(nx)) >= CREEP_BELOW:
-            # No row creeps: |n_x| >= CREEP_BELOW makes reach_u >= CREEP_BELOW v_max below
-            # (rounding is monotonic), so every flank is 0 and, with every sd > 0, every creep
-            # +0.0: the general form's numbers without its nine numpy calls.
+            # No row creeps: |n_x| >= CREEP_BELOW makes U >= CREEP_BELOW v_max, so every kappa
+            # is 0 (to rounding) and, with every sd > 0, every creep +0.0: the general form's
+            # numbers without its six numpy calls.
             creep = 0.0
         else:
-            reach_u = np.abs(nx) * profile.v_max_mps + np.abs(b) * profile.w_max_radps
-            flank = np.maximum(1.0 - reach_u / (CREEP_BELOW * profile.v_max_mps), 0.0)
-            creep = (CREEP_PER_S * flank) * np.maximum(sd, 0.0)
+            # kappa = CREEP_PER_S (1 - U / (CREEP_BELOW v_max))^+ as one dot product of the
+            # constants with (|n_x|, |b|): U = |n_x| v_max + |b| w_max.
+            scale = CREEP_PER_S / (CREEP_BELOW * profile.v_max_mps)
+            weights = (scale * profile.v_max_mps, scale * profile.w_max_radps)
+            kappa = np.subtract(CREEP_PER_S, np.dot(weights, np.abs(abc[:2])))
+            creep = np.maximum(kappa, 0.0, out=kappa)
+            creep *= np.maximum(sd, 0.0)
         # bounds[0] = -max(alpha (sd - margin - m_extra), creep), (S)'s c with m_extra =
         # omega K u^+ at the current speed; bounds[1] = -max(alpha (sd - margin), creep), (C)'s
         # c before its division by the gain.
