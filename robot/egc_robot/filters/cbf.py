@@ -928,9 +928,18 @@ def _nearest_in(
     """The point of {z : gx zx + gy zy >= e} nearest to z0 (Euclidean), or None when no
     candidate is feasible. A few rows (the working set): plain Python beats numpy's per-call
     cost here."""
-    rows = [i for i in range(len(gx)) if gx[i] * gx[i] + gy[i] * gy[i] > _SAME]
+    rows: list[int] = []
+    bad: list[int] = []  # the rows z0 violates
     # (gx, gy, e, tolerance) of each row, for the feasibility tests.
-    checks = [(gx[i], gy[i], e[i], -_TOL * (1.0 + abs(e[i]))) for i in rows]
+    checks: list[tuple[float, float, float, float]] = []
+    for i, (ax, ay, ae) in enumerate(zip(gx, gy, e, strict=True)):
+        if ax * ax + ay * ay > _SAME:
+            rows.append(i)
+            checks.append((ax, ay, ae, -_TOL * (1.0 + abs(ae))))
+            if ax * z0x + ay * z0y - ae < 0.0:
+                bad.append(i)
+    if not bad:
+        return z0x, z0y
 
     def feasible(zx: float, zy: float) -> bool:  # a loop: all() over a generator costs more
         for ax, ay, ae, low in checks:  # noqa: SIM110
@@ -938,13 +947,11 @@ def _nearest_in(
                 return False
         return True
 
-    bad = [i for i in rows if gx[i] * z0x + gy[i] * z0y - e[i] < 0.0]
-    if not bad:
-        return z0x, z0y
     # One line: the projection onto a violated row, optimal whenever feasible (KKT).
     for i in bad:
-        step = (e[i] - gx[i] * z0x - gy[i] * z0y) / (gx[i] * gx[i] + gy[i] * gy[i])
-        zx, zy = z0x + step * gx[i], z0y + step * gy[i]
+        ax, ay = gx[i], gy[i]
+        step = (e[i] - ax * z0x - ay * z0y) / (ax * ax + ay * ay)
+        zx, zy = z0x + step * ax, z0y + step * ay
         if feasible(zx, zy):
             return zx, zy
     # Two lines: a vertex, one of whose rows the command violates (else KKT would put the
