@@ -554,7 +554,7 @@ class _Scene(NamedTuple):
             # One threshold for points ahead and behind: the few more rows a split by side
             # would leave out cost less than its two numpy calls over the whole scan.
             far = q_max + max(reach_f, reach_b)
-            xy = pts.xy[pts.r2 <= far * far]
+            xy = pts.xy.compress(pts.r2 <= far * far, axis=0)  # cheaper than xy[mask]
         unseen = [  # (direction, how far it saw, the footprint's extent that way)
             (sign, seen, extent)
             for sign, seen, extent, room in (
