@@ -616,9 +616,7 @@ class _Scene(NamedTuple):
         np.subtract(nx * qy, ny * qx, out=b)
         # Approach speeds u = nx v - b w under the command and under the current motion, and
         # how squarely each point lies in that motion's path (omega).
-        u_ref = nx * v0
-        if w0:
-            u_ref -= b * w0
+        u_ref = np.dot((-v0, -w0), abc[:2])  # u = n_x v - b w = -(a v + b w)
         omega_cmd, up_ref = _omega(u_ref, v0, w0, qx, qy)
         creep: FloatArray | float
         if nearest > 0.0 and _min(np.abs(nx)) >= CREEP_BELOW:
@@ -789,11 +787,10 @@ def _box_geometry(
     step)."""
     q = np.minimum(np.maximum(p, low), high)
     d = p - q
-    d2 = d * d
-    sd = np.sqrt(d2[0] + d2[1])
+    sd = np.hypot(d[0], d[1])
     nearest = _min(sd)
     if nearest > 0.0:  # no point inside
-        n = d * (1.0 / sd)
+        n = d / sd
         return sd, n[0], n[1], q[0], q[1], nearest
     half_l, half_w = float(high[0, 0]), float(high[1, 0])
     (x, y), (dx, dy), (qx, qy) = p, d, q
