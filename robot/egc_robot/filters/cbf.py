@@ -728,9 +728,10 @@ def _geometry(
             nx, ny = np.where(centre, 1.0, x / safe), np.where(centre, 0.0, y / safe)
         return sd, nx, ny, radius * nx, radius * ny, nearest
     qx, qy, dx, dy, dist = _polygon_nearest(xy, *shape.edges)
+    nearest = _min(dist)
+    if nearest > shape.inside_bound:  # every point outside and off the edge: sd = dist, n = d / sd
+        return dist, dx / dist, dy / dist, qx, qy, nearest
     candidates = dist <= shape.inside_bound
-    if not candidates.any():  # every point outside and off the edge: sd = dist, n = d / sd
-        return dist, dx / dist, dy / dist, qx, qy, _min(dist)
     inside = np.zeros(dist.size, dtype=np.bool_)
     inside[candidates] = signed_distance(fp, x[candidates], y[candidates]) < 0.0
     sd = np.where(inside, -dist, dist)
@@ -759,9 +760,10 @@ def _polygon_nearest(
     xy: FloatArray, start: FloatArray, edge: FloatArray, length2: FloatArray, both: ComplexArray
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
     """The polygon's nearest boundary point q of each point p of the (m, 2) ``xy``, p - q and
-    |p - q|: ``closest_boundary_xy``'s arithmetic to the bit (the projection onto each edge,
-    clamped to it, the nearest of those; a point on an edge keeps its exact zero distance),
-    with x + i y in one complex number where that is exact (sums, products by a real)."""
+    |p - q|: ``closest_boundary_xy``'s arithmetic (the projection onto each edge, clamped to
+    it, the nearest of those; a point on an edge keeps its exact zero distance), with x + i y
+    in one complex number where that is exact (sums, products by a real), and |p - q| as
+    ``np.abs`` (hypot: one call, equal to the square root of the sum of squares to rounding)."""
     d = xy[:, None, :] - start  # (m, N, 2)
     d *= edge
     t = d[..., 0] + d[..., 1]
@@ -770,13 +772,11 @@ def _polygon_nearest(
     c = t * both[1]
     c += both[0]  # the nearest point of each edge
     r = np.ascontiguousarray(xy).view(np.complex128) - c  # p minus it
-    rx, ry = r.real, r.imag
-    r2 = rx * rx
-    r2 += ry * ry
-    k = r2.argmin(axis=1)
+    dist = np.abs(r)
+    k = dist.argmin(axis=1)
     row = np.arange(k.size)
     q, pq = c[row, k], r[row, k]
-    return q.real, q.imag, pq.real, pq.imag, np.sqrt(r2[row, k])
+    return q.real, q.imag, pq.real, pq.imag, dist[row, k]
 
 
 def _box_geometry(
