@@ -144,6 +144,7 @@ _COVER_V = 0.05
 _COVER_W = 0.25
 _TOL = 1e-9  # a constraint is met when short of it by no more than this (m/s)
 _SAME = 1e-12
+_SAME_SPEED = 1e-6  # sqrt(_SAME): a point's speed below this counts as this (m/s)
 _EMPTY = np.empty(0)
 _NO_POINTS = np.empty((0, 2))
 _MAX_REPORTED = 64  # active constraints kept in a result (the view and the tool show them)
@@ -814,24 +815,19 @@ def _omega(
 ) -> tuple[FloatArray, FloatArray]:
     """(cos of the angle between n_i and the velocity of q_i under (v, w))^PATH_POWER, 0 for
     points the footprint does not approach (u_i <= 0), and max(u_i, 0).
-    cos^2 = u^2 / |velocity|^2."""
+    cos = u / |velocity|, the velocity (v - w q_y, w q_x)."""
     up = np.maximum(u, 0.0)
     if w == 0.0:
         if v == 0.0:
             return np.zeros(u.size), up
-        c2 = up / abs(v)  # cos: u = nx v <= |v|, no overflow, even for a subnormal v
-        c2 *= c2
+        cos = up / abs(v)  # u = nx v <= |v|, no overflow, even for a subnormal v
     else:
-        gx = v - w * qy
-        gx *= gx
-        gy = w * qx
-        gy *= gy
-        gx += gy
-        c2 = up * up
-        c2 /= np.maximum(gx, _SAME, out=gx)
-    np.minimum(c2, 1.0, out=c2)
-    c2 *= c2
-    return c2, up
+        speed = np.hypot(v - w * qy, w * qx)
+        cos = np.divide(up, np.maximum(speed, _SAME_SPEED, out=speed), out=speed)
+    np.minimum(cos, 1.0, out=cos)
+    np.square(cos, out=cos)
+    cos *= cos
+    return cos, up
 
 
 def _solve(
