@@ -462,7 +462,8 @@ class _Rows(NamedTuple):
     # (2, n): (S)'s c and (C)'s c before the division by its gain (for the report).
     bounds: FloatArray
     gain: FloatArray  # 1 + alpha K omega: (C) is -gain u >= bounds[1]
-    m_state_extra: FloatArray | None  # omega K u^+ at the current speed (None: standing)
+    alpha_m_state_extra: FloatArray | None  # alpha omega K u^+ at the current speed (or None)
+    alpha: float
     omega_cmd: FloatArray  # omega and u at the commanded speed (its margin, for the report)
     u_ref: FloatArray
     k_cmd: float
@@ -494,8 +495,8 @@ class _Rows(NamedTuple):
     def margins(self, point: IntArray, state: npt.NDArray[np.bool_]) -> FloatArray:
         """The margins m_i of (S) rows (``state``) and (C) rows of the given points (m)."""
         extra = self.omega_cmd[point] * self.k_cmd * np.maximum(self.u_ref[point], 0.0)
-        if self.m_state_extra is not None:
-            extra = np.where(state, self.m_state_extra[point], extra)
+        if self.alpha_m_state_extra is not None:
+            extra = np.where(state, self.alpha_m_state_extra[point] / self.alpha, extra)
         else:
             extra = np.where(state, 0.0, extra)
         out: FloatArray = self.margin_m + extra
@@ -635,33 +636,39 @@ class _Scene(NamedTuple):
             creep *= np.maximum(sd, 0.0)
         # bounds[0] = -max(alpha (sd - margin - m_extra), creep), (S)'s c with m_extra =
         # omega K u^+ at the current speed; bounds[1] = -max(alpha (sd - margin), creep), (C)'s
-        # c before its division by the gain.
+        # c before its division by the gain. Written min(alpha (margin - sd) [+ alpha m_extra],
+        # -creep), with alpha m_extra = (alpha K omega) u^+, whose first factor is the gain's.
         bounds = np.empty((2, n))
-        room = np.subtract(sd, p.margin_m, out=bounds[1])
-        m_extra: FloatArray | None = None
+        room = np.multiply(sd, -alpha, out=bounds[1])
+        room += alpha * p.margin_m
+        ak_omega: FloatArray | None = None
+        alpha_m_extra: FloatArray | None = None
         if v_now or w_now:
             if v_now == v0 and w_now == w0:  # a replay, a steady cycle: the same speeds twice
                 omega_now, up_now = omega_cmd, up_ref
             else:
-                u_now = nx * v_now - b * w_now
+                u_now = np.dot((-v_now, -w_now), abc[:2])
                 omega_now, up_now = _omega(u_now, v_now, w_now, qx, qy)
-            m_extra = (omega_now * self.k_now) * up_now
-            np.subtract(room, m_extra, out=bounds[0])
+            ak_omega = (alpha * self.k_now) * omega_now
+            alpha_m_extra = ak_omega * up_now
+            np.add(room, alpha_m_extra, out=bounds[0])
+            if omega_now is not omega_cmd or self.k_now != self.k_cmd:
+                ak_omega = None
         else:
             bounds[0] = room
-        bounds *= alpha
-        np.maximum(bounds, creep, out=bounds)
-        np.negative(bounds, out=bounds)
+        np.minimum(bounds, -creep, out=bounds)
         # (C): -gain u >= bounds[1], i.e. -u >= bounds[1] / gain; the point's row is the
         # tighter of (S) and (C): the same normal, the larger c.
-        gain = 1.0 + (alpha * self.k_cmd) * omega_cmd
+        if ak_omega is None:
+            ak_omega = (alpha * self.k_cmd) * omega_cmd
+        gain = np.add(ak_omega, 1.0, out=ak_omega)
         np.divide(bounds[1], gain, out=c)
         np.maximum(bounds[0], c, out=c)
         # The command falls short of each row by c + u (if positive).
         short = c + u_ref
         return _Rows(
-            x, y, n_scan, sd, abc, short, bounds, gain, m_extra, omega_cmd, u_ref, self.k_cmd,
-            p.margin_m, _max(short), nearest, v0, w0,
+            x, y, n_scan, sd, abc, short, bounds, gain, alpha_m_extra, alpha, omega_cmd, u_ref,
+            self.k_cmd, p.margin_m, _max(short), nearest, v0, w0,
         )  # fmt: skip
 
 
