@@ -791,11 +791,13 @@ def _box_geometry(
     p: FloatArray, low: FloatArray, high: FloatArray
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float]:
     """``_geometry`` of the rectangle ``low`` <= (x, y) <= ``high`` = (half_l, half_w), in
-    closed form, on the (2, m) points ``p`` (x and y ride along one axis: one numpy call per
-    step)."""
+    closed form, on the (2, m) points ``p``, the transpose of a C-contiguous (m, 2) array (x
+    and y ride along one axis: one numpy call per step)."""
     q = np.minimum(np.maximum(p, low), high)
     d = p - q
-    sd = np.hypot(d[0], d[1])
+    # |d| as the modulus of x + i y: p is the transpose of a C-contiguous (m, 2) array and the
+    # ufuncs keep that layout, so d.T is one too (no copy); hypot on the real rows costs ~3x.
+    sd = np.abs(d.T.view(np.complex128)).ravel()
     nearest = _min(sd)
     if nearest > 0.0:  # no point inside
         n = d / sd
