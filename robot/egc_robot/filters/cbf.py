@@ -79,8 +79,9 @@ the optimum at the command), the feasible one nearest the command. The rows are 
 points at once (numpy); the few the solver works on are projected in plain Python, cheaper than
 numpy's per-call cost at that size. That cost, not the arithmetic, is the filter's time on the
 few dozen points in reach (``bench/bench_filter.py``), so each quantity is one numpy call written
-where the solver reads it, the creep's calls are skipped when no row can creep, and a polygon's
-inside test runs only for points near its edge: the numbers are the formulas' own, bit for bit.
+where the solver reads it (lengths as the modulus of x + i y, products of several rows as one
+dot product), the creep's calls are skipped when no row can creep, and a polygon's inside test
+runs only for points near its edge: the numbers are the formulas', to rounding.
 
 Which points enter: a point whose barrier no command of a "cover" (a range of v and |w|) can
 violate is left out, by its distance from the footprint alone. The first cover runs from a
