@@ -80,13 +80,12 @@ def _expected(out: Path, f: str) -> dict[str, str]:
         cells["cost per call (x egc, 720 points)"] = "1.0x"
         cells["us per call (720 points)"] = f"{egc:.0f}"
     elif f in names:
-        us = max(
-            r["median_us"]
-            for r in bench["family"]
-            if r["filter"] in names[f] and r["points"] == 720
+        worst = max(
+            (r for r in bench["family"] if r["filter"] in names[f] and r["points"] == 720),
+            key=lambda r: r["ratio_to_egc"],
         )
-        cells["cost per call (x egc, 720 points)"] = f"{us / egc:.1f}x"
-        cells["us per call (720 points)"] = f"{us:.0f}"
+        cells["cost per call (x egc, 720 points)"] = f"{worst['ratio_to_egc']:.1f}x"
+        cells["us per call (720 points)"] = f"{worst['median_us']:.0f}"
     else:  # assist is not timed by bench filter; none computes nothing
         cells["cost per call (x egc, 720 points)"] = "–"
         cells["us per call (720 points)"] = "–"
@@ -126,6 +125,7 @@ def test_one_command_makes_the_table_from_its_parts(tmp_path: Path) -> None:
     bench = json.loads((out / "bench_filter.json").read_text())
     for r in bench["family"]:
         r["median_us"] *= 3
+        r["ratio_to_egc"] *= 3
     (out / "bench_filter.json").write_text(json.dumps(bench))
     assert main([*argv, "--reuse"]) == 0
     again = _table(page)
