@@ -1,4 +1,4 @@
-"""Issue 28 benchmark: the cost of ``assist``'s local planner per control cycle.
+"""Issue 28 benchmark: the cost of assist's local planner per control cycle
 
 Scans (the simulator's 360-beam lidar) from poses drawn in dense-clutter worlds
 (``clutter:0-4``, the Jackal), the via point at each world's goal. ``assist_step`` runs with the

@@ -620,7 +620,29 @@ def _generic(r: Result) -> list[str]:
     )
 
 
+def _assist_plan(r: Result) -> list[str]:
+    """``bench assist_plan``: assist_step with and without its local planner, call for call."""
+    rows = [
+        [
+            name,
+            _num(r[name]["median_ms"], 2),
+            _num(r[name]["p95_ms"], 2),
+            _num(r[name]["max_ms"], 2),
+        ]
+        for name in ("planned", "rules")
+    ]
+    return [
+        f"{r['poses']} clutter poses x {r['repeats']} calls (Jackal, 360 beams), the step with "
+        "the planner and with the rules alone, alternately:",
+        "",
+        *_table(["assist_step", "median ms", "p95 ms", "max ms"], rows),
+        "",
+        f"Planned over rules (medians): {_num(r['ratio_median'], 1)}x.",
+    ]
+
+
 RENDERERS: dict[str, Callable[[Result], list[str]]] = {
+    "assist_plan": _assist_plan,
     "filter": _filter,
     "sim": _sim,
     "link": _link,
