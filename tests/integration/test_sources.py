@@ -401,6 +401,13 @@ def test_a_supervisor_takes_control_at_once_and_the_other_operator_is_told_who(
     line (plain lines in its log) says who took control."""
     start_robot(procs, port, tmp_path, '[[operator]]\nid = "sup"\npriority = 100\n')
     observer.start_scans()
+    # The robot has the scans before op starts: op's centred half second must find the sensor
+    # fresh, or the robot holds for a centred stick that never comes (op's stick stays forward).
+    observer.wait_for(
+        "the robot's telemetry with a scan",
+        lambda: (t := observer.last_telemetry()) is not None and len(t.scan_xy) > 0,
+        30.0,
+    )
     stick = joystick_file(tmp_path / "op.csv", [(0, 0, 0, 1), (0.5, 0.5, 0, 1), (60, 0.5, 0, 1)])
     with_status = [a for a in operator_args(port, "op", stick) if a != "--no-status"]
     procs.start("op", *with_status)
