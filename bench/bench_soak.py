@@ -4,8 +4,8 @@ A real robot process (``--driver sim``, the simulated camera unless ``--camera n
 real operator process (the ``demo`` script on a loop, its view served to the web viewer's gRPC
 buffer as ``--serve-web`` does, with the camera panel) talk Zenoh on loopback for ``--minutes``.
 Every ``--sample-s`` seconds this script reads each process's CPU time (utime + stime) and RSS
-from /proc; at the end it reads the robot's ``--summary``, whose ``view_timeline`` has, per
-second, the largest view age the operator reported while driving.
+from /proc (and the 1-min load average); at the end it reads the robot's ``--summary``, whose
+``view_timeline`` has, per second, the largest view age the operator reported while driving.
 
 It compares the first window (``--window-minutes``, default a sixth of the run, at most 10)
 with the last one, after ``--warmup-s`` (start-up costs are not a trend):
@@ -83,6 +83,27 @@ def window_stats(
     return {"cpu_pct": round(cpu_pct, 2), "rss_mb": round(rss, 1)}
 
 
+def _mean_load(samples: list[dict[str, Any]], t0: float, t1: float) -> float:
+    return round(statistics.fmean(s["load_1m"] for s in samples if t0 <= s["t_s"] <= t1), 2)
+
+
+def minute_series(samples: list[dict[str, Any]], names: list[str]) -> list[dict[str, Any]]:
+    """Per minute of the run: each process's CPU % of a core and mean RSS MB, and the machine's
+    1-min load average: the trend behind the two windows (a climb, a step, or the load)."""
+    out: list[dict[str, Any]] = []
+    t0 = samples[0]["t_s"]
+    for minute in range(int((samples[-1]["t_s"] - t0) // 60)):
+        lo, hi = t0 + 60 * minute, t0 + 60 * (minute + 1)
+        inside = [s for s in samples if lo <= s["t_s"] <= hi]
+        if len(inside) < 2:
+            continue
+        row: dict[str, Any] = {"minute": minute, "load_1m": _mean_load(samples, lo, hi)}
+        for name in names:
+            row[name] = window_stats(samples, name, lo, hi)
+        out.append(row)
+    return out
+
+
 def lag_ms(timeline: list[dict[str, Any]], t0_s: float, t1_s: float) -> float | None:
     ages = [
         p["view_age_ms"]
@@ -119,7 +140,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         t_end = time.monotonic() + duration_s
         while True:
             now = time.monotonic()
-            sample: dict[str, Any] = {"t_s": now - start}
+            sample: dict[str, Any] = {"t_s": now - start, "load_1m": os.getloadavg()[0]}
             for name, proc in procs.items():
                 if proc.poll() is not None:
                     raise SystemExit(
@@ -164,6 +185,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "first": lag_ms(timeline, base + first[0], base + first[1]),
         "last": lag_ms(timeline, base + last[0], base + last[1]),
     }
+    out["load_1m"] = {
+        "first": _mean_load(samples, *first),
+        "last": _mean_load(samples, *last),
+    }
+    out["minutes_series"] = minute_series(samples, list(procs))
     out["camera_summary"] = summary.get("camera")
     out["checks"] = checks(out)
     return out

@@ -562,6 +562,19 @@ def _soak(r: Result) -> list[str]:
         "",
         f"View lag (median of the per-second view ages while driving): {_num(lag['first'], 0)} "
         f"-> {_num(lag['last'], 0)} ms.",
+        *_soak_load(r),
+    ]
+
+
+def _soak_load(r: Result) -> list[str]:
+    """The machine's load in each window (results from before it was recorded have none)."""
+    load = r.get("load_1m")
+    if not load:
+        return []
+    return [
+        "",
+        f"Load average (1 min) in the windows: {_num(load['first'], 1)} -> "
+        f"{_num(load['last'], 1)}; `minutes_series` in the JSON has each minute's figures.",
     ]
 
 

@@ -28,16 +28,19 @@
   included), and ``loop_overrun_p99`` (``loop_late_ms`` p99 over the period: above 0.5 the
   loop missed its period by more than half in more than 1 % of its cycles; ``bench fleet``).
 
-Memory stays bounded however long the robot runs: each series keeps at most ``SERIES_CAP``
-samples (``_Series``: every value while it fits, then every other one, evenly in time), with
-its count and maximum exact; the timeline keeps an hour. A soak with lists that grew with every
-command grew the robot by 34 MB an hour (issue 31).
+Memory is fixed when the robot starts, however long it runs: each series keeps at most
+``SERIES_CAP`` samples in a buffer allocated (and touched) up front (``_Series``: every value
+while it fits, then every other one, evenly in time), with its count and maximum exact; the
+timeline is a preallocated table of an hour of seconds. A soak with lists that grew with every
+command grew the robot by 34 MB an hour; series that grew to a 100,000-sample cap and a
+timeline of per-second dicts, by 6-7 MB in its first hour (issue 31).
 """
 
 from __future__ import annotations
 
 import math
 from collections import Counter
+from collections.abc import Callable
 from typing import Any, Protocol
 
 import numpy as np
@@ -46,7 +49,20 @@ from egc_common.messages import Odometry
 from egc_robot.pipeline import INTERVENING_NAMES
 
 _MAX_TIMELINE_S = 3600
-SERIES_CAP = 100_000  # samples kept per series: 0.8 MB; 33 min of 50 Hz commands, exact
+_TIMELINE_LEAD_S = 2  # seconds kept before the first one seen: sources' stamps interleave
+_TIMELINE_KEYS = (
+    "view_age_ms",
+    "view_age_p50_ms",
+    "kbps",
+    "budget_kbps",
+    "cam_frames",
+    "camera_age_ms",
+    "cmd_age_ms",
+)
+_COLUMN = {key: i for i, key in enumerate(_TIMELINE_KEYS)}
+# Samples kept per series: 128 kB each; 5.5 min of 50 Hz commands exact, then >= 8,192 samples
+# evenly spread over the run (a p99 from 80 samples above it at the least).
+SERIES_CAP = 16_384
 
 
 class CycleRecord(Protocol):
@@ -72,7 +88,7 @@ class _Series:
 
     def __init__(self, cap: int = SERIES_CAP) -> None:
         self._cap = max(2, cap)
-        self._buf = np.empty(min(1024, self._cap))
+        self._buf = np.full(self._cap, np.nan)  # written now: the pages are resident from the start
         self._len = 0
         self._stride = 1
         self._skipped = 0
@@ -86,22 +102,60 @@ class _Series:
         if self._skipped < self._stride:
             return
         self._skipped = 0
-        if self._len == self._buf.size:
-            if self._buf.size < self._cap:
-                grown = np.empty(min(2 * self._buf.size, self._cap))
-                grown[: self._len] = self._buf
-                self._buf = grown
-            else:
-                kept = self._buf[: self._len : 2]
-                self._len = kept.size
-                self._buf[: self._len] = kept
-                self._stride *= 2
+        if self._len == self._cap:
+            kept = self._buf[: self._len : 2]
+            self._len = kept.size
+            self._buf[: self._len] = kept
+            self._stride *= 2
         self._buf[self._len] = value
         self._len += 1
 
     @property
     def values(self) -> np.ndarray:
         return self._buf[: self._len]
+
+
+class _Timeline:
+    """``view_timeline``'s table: a row per second of the robot's clock from just before the
+    first one seen, for ``_MAX_TIMELINE_S`` seconds, a column per key; NaN where nothing was
+    recorded. Allocated (and touched) up front, so an hour of it costs no memory later."""
+
+    def __init__(self) -> None:
+        self._rows = np.full((_TIMELINE_LEAD_S + _MAX_TIMELINE_S, len(_TIMELINE_KEYS)), np.nan)
+        self._first_s: int | None = None
+
+    def put(
+        self,
+        now_ns: int,
+        key: str,
+        value: float,
+        combine: Callable[[float, float], float] | None = None,
+    ) -> bool:
+        """Record ``value`` under ``key`` in ``now_ns``'s second, combined with what is there
+        (``max``, ``min``; None: replace); False when that second is outside the table."""
+        second = now_ns // 1_000_000_000
+        if self._first_s is None:
+            self._first_s = second - _TIMELINE_LEAD_S
+        row = second - self._first_s
+        if not 0 <= row < self._rows.shape[0]:
+            return False
+        column = _COLUMN[key]
+        old = float(self._rows[row, column])
+        self._rows[row, column] = value if combine is None or old != old else combine(old, value)
+        return True
+
+    def entries(self) -> list[dict[str, float]]:
+        """The seconds with anything recorded, in order: ``{"t_s": second, key: value, ...}``."""
+        if self._first_s is None:
+            return []
+        out: list[dict[str, float]] = []
+        for row in np.flatnonzero(~np.isnan(self._rows).all(axis=1)):
+            entry: dict[str, float] = {"t_s": int(self._first_s + row)}
+            for key, value in zip(_TIMELINE_KEYS, self._rows[row].tolist(), strict=True):
+                if value == value:
+                    entry[key] = int(value) if key == "cam_frames" else value
+            out.append(entry)
+        return out
 
 
 class RunStats:
@@ -131,7 +185,7 @@ class RunStats:
         self.telemetry_sent = 0
         self.telemetry_bytes = 0
         self.operator_lost = 0
-        self._timeline: dict[int, dict[str, float]] = {}
+        self._timeline = _Timeline()
         self._loop_late_ms = _Series()
         self._loop_period_ns: int | None = None
 
@@ -154,10 +208,9 @@ class RunStats:
                 self._loop_delay_ms.add(telemetry.loop_delay_ms)
             if telemetry.view_age_ms is not None:
                 self._view_age_ms.add(telemetry.view_age_ms)
-                entry = self._second(telemetry.stamp_ns)
-                if entry is not None:
-                    age = max(entry.get("view_age_ms", 0.0), telemetry.view_age_ms)
-                    entry["view_age_ms"] = age
+                if self._timeline.put(
+                    telemetry.stamp_ns, "view_age_ms", telemetry.view_age_ms, max
+                ):
                     self._second_ages(telemetry.stamp_ns).append(telemetry.view_age_ms)
         limiting = telemetry.limiter in INTERVENING_NAMES
         if limiting:
@@ -179,9 +232,8 @@ class RunStats:
     def on_camera_age(self, age_ms: float, now_ns: int | None = None) -> None:
         """An accepted command's ``camera_age_ms`` (DESIGN 12), received at ``now_ns``."""
         self._camera_age_ms.add(float(age_ms))
-        entry = None if now_ns is None else self._second(now_ns)
-        if entry is not None:
-            entry["camera_age_ms"] = min(entry.get("camera_age_ms", math.inf), float(age_ms))
+        if now_ns is not None:
+            self._timeline.put(now_ns, "camera_age_ms", float(age_ms), min)
 
     def on_view_rate(
         self,
@@ -199,13 +251,11 @@ class RunStats:
         elif second > self._rate_second:
             self._rate_second = second
             self._downlink_kbps.add(kbps)
-            entry = self._second(now_ns)
-            if entry is not None:
-                entry["kbps"] = round(kbps, 1)
+            if self._timeline.put(now_ns, "kbps", round(kbps, 1)):
                 if budget_kbps is not None:
-                    entry["budget_kbps"] = round(budget_kbps, 1)
+                    self._timeline.put(now_ns, "budget_kbps", round(budget_kbps, 1))
                 if camera_frames is not None and self._camera_frames is not None:
-                    entry["cam_frames"] = camera_frames - self._camera_frames
+                    self._timeline.put(now_ns, "cam_frames", camera_frames - self._camera_frames)
             self._camera_frames = camera_frames
 
     def _second_ages(self, now_ns: int) -> list[float]:
@@ -217,17 +267,10 @@ class RunStats:
         return self._ages
 
     def _flush_ages(self) -> None:
-        entry = None if self._ages_second is None else self._timeline.get(self._ages_second)
-        if entry is not None and self._ages:
-            entry["view_age_p50_ms"] = float(np.median(self._ages))
-        self._ages = []
-
-    def _second(self, now_ns: int) -> dict[str, float] | None:
-        second = now_ns // 1_000_000_000
-        entry = self._timeline.get(second)
-        if entry is None and len(self._timeline) < _MAX_TIMELINE_S:
-            entry = self._timeline[second] = {}
-        return entry
+        if self._ages_second is not None and self._ages:
+            median = float(np.median(self._ages))
+            self._timeline.put(self._ages_second * 1_000_000_000, "view_age_p50_ms", median)
+        self._ages.clear()
 
     def on_telemetry_sent(self, nbytes: int) -> None:
         self.telemetry_sent += 1
@@ -244,9 +287,8 @@ class RunStats:
     def on_latency(self, latency_ns: int, now_ns: int | None = None) -> None:
         """An accepted command's latency (its age on arrival), received at ``now_ns``."""
         self._latencies_ms.add(latency_ns / 1e6)
-        entry = None if now_ns is None else self._second(now_ns)
-        if entry is not None:
-            entry["cmd_age_ms"] = max(entry.get("cmd_age_ms", 0.0), round(latency_ns / 1e6, 1))
+        if now_ns is not None:
+            self._timeline.put(now_ns, "cmd_age_ms", round(latency_ns / 1e6, 1), max)
 
     def summary(self) -> dict[str, Any]:
         self._flush_ages()
@@ -273,7 +315,7 @@ class RunStats:
             else None,
             "operator_lost": self.operator_lost,
             **self._loop_summary(),
-            "view_timeline": [{"t_s": t, **v} for t, v in sorted(self._timeline.items())],
+            "view_timeline": self._timeline.entries(),
         }
 
     def _loop_summary(self) -> dict[str, Any]:

@@ -101,3 +101,34 @@ def test_a_long_run_keeps_bounded_samples_with_exact_count_and_max():
     assert small.values.size <= 8 and small.n == 100 and small.max == 99.0
     assert np.all(np.diff(small.values) > 0)  # in order, spread over the whole run
     assert small.values[-1] >= 80.0 and small.values[0] <= 10.0
+
+
+def test_memory_is_fixed_from_the_start():
+    """Issue 31's soak: what the statistics hold is allocated when they start, so a robot's RSS
+    does not climb through its first hour. Four minutes of 50 Hz commands and 20 Hz cycles with
+    every timeline column filled: nothing retained grows after the first minute."""
+    import tracemalloc
+
+    second = 1_000_000_000
+    stats = RunStats()
+    tracemalloc.start()
+    try:
+        after_first_minute = 0
+        for k in range(4 * 60 * 50):
+            t = 100 * second + k * 20_000_000
+            stats.on_latency(5_000_000 + k % 7 * 1_000_000, t)
+            stats.on_camera_age(100.0 + k % 5, t)
+            if k % 5 == 0:
+                stats.on_view_rate(t, 300.0, budget_kbps=350.0, camera_frames=k // 5)
+            if k % 2 == 0:
+                view = Telemetry(k, t, "DRIVING", "shared", 0.1, 0.0, 0.1, 0.0, 1.0, 40.0 + k % 3)
+                stats.on_cycle(view)
+                stats.on_loop_start(1_000_000, 50_000_000)
+            if k == 60 * 50:
+                after_first_minute = tracemalloc.get_traced_memory()[0]
+        grown = tracemalloc.get_traced_memory()[0] - after_first_minute
+    finally:
+        tracemalloc.stop()
+    assert grown < 20_000, f"{grown} bytes more after four minutes than after one"
+    timeline = stats.summary()["view_timeline"]
+    assert len(timeline) == 240 and timeline[-1]["t_s"] == 339

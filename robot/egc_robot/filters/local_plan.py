@@ -40,6 +40,9 @@ Steps (DESIGN 6, ``assist``; the paper has no planner, see the deviation in ``as
    ``axis_lookahead_m`` ahead of its own projection on the axis (pure pursuit of the axis
    line), so it enters straight and centred. Without a gap ahead the target is the path
    point ``lookahead_m`` along it.
+
+scipy's ndimage, sparse and spatial are imported when the first plan is made: a robot that
+never plans does not carry their ~20 MB (issue 31's soak).
 """
 
 from __future__ import annotations
@@ -47,14 +50,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 from egc_common.scan import ObstaclePoints
-from scipy.ndimage import distance_transform_edt
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import dijkstra
-from scipy.spatial import cKDTree
+
+if TYPE_CHECKING:
+    from scipy.sparse import csr_matrix
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -165,6 +168,9 @@ def clearances(obstacles: ObstaclePoints, layout: _Layout, s: PlanSettings) -> F
     """Each cell's distance to the nearest scan point, capped at ``clearance_pref_m``: a
     distance transform of the points on the grid, made exact (k-d tree) where it decides
     traversability (within a cell of ``clearance_min_m``)."""
+    from scipy.ndimage import distance_transform_edt
+    from scipy.spatial import cKDTree
+
     n = 2 * layout.half + 1
     if len(obstacles) == 0:
         return np.full((n, n), s.clearance_pref_m)
@@ -192,6 +198,8 @@ def _graph(
     length x the cost of the cell it enters, inf into a cell that is not traversable (never
     taken); past the window's border a cell's neighbour is itself (a loop, never taken).
     Every row has its 8 entries, so the CSR is built without a sort."""
+    from scipy.sparse import csr_matrix
+
     entered = np.where(trav, cost, np.inf).ravel()
     weights = entered[layout.neighbours] * (_LENGTHS * cell_m)
     size = len(entered)
@@ -251,6 +259,8 @@ def plan_target(
             for dc in (-1, 0, 1):
                 along_kept[kr[inside] + dr, kc[inside] + dc] = True
         cost = np.where(along_kept, s.keep_cost * cost, cost)
+    from scipy.sparse.csgraph import dijkstra
+
     graph = _graph(trav, cost, s.cell_m, layout)
     start = half * n + half
     dist, pred = dijkstra(graph, directed=True, indices=start, return_predecessors=True)
