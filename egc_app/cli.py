@@ -58,6 +58,17 @@ def build_parser() -> CliArgumentParser:
     return parser
 
 
+def _leaving(code: int) -> int:
+    """``code``, or exit with it at once when a Zenoh session given up on is still opening
+    (``egc_common.transport.still_opening``: a normal exit would abort the process)."""
+    transport = sys.modules.get("egc_common.transport")
+    if transport is not None and transport.still_opening():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args_list = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
@@ -79,9 +90,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(module.run(args) or 0)
     except UsageError as exc:
         print(f"egc-teleop {name}: error: {exc}", file=sys.stderr)
-        return 2
+        return _leaving(2)
     except KeyboardInterrupt:
-        return 130
+        return _leaving(130)
     except BrokenPipeError:  # `egc-teleop episode ... | head`: the reader has gone, quietly
         # Python flushes stdout again at exit; point it at /dev/null so that raises nothing.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

@@ -347,6 +347,15 @@ def zenoh_reason(config: zenoh.Config, timeout_s: float = 10.0) -> str | None:
 
 
 _OPEN_NOTICE_S = 2.0
+_OPENER_NAME = "zenoh-open"
+
+
+def still_opening() -> bool:
+    """True while a session given up on (``open_config``'s ``give_up_s``, or Ctrl-C) is still
+    inside ``zenoh.open`` in its helper thread. Such a process must leave with ``os._exit``:
+    at interpreter shutdown that native call is torn down mid-way and the process aborts
+    ("FATAL: exception not rethrown", exit 134) after it already said why it stops."""
+    return any(t.name == _OPENER_NAME and t.is_alive() for t in threading.enumerate())
 
 
 def open_config(config: zenoh.Config, give_up_s: float | None = None) -> zenoh.Session:
@@ -367,7 +376,7 @@ def open_config(config: zenoh.Config, give_up_s: float | None = None) -> zenoh.S
         except BaseException as exc:
             result.append(exc)
 
-    opener = threading.Thread(target=open_it, name="zenoh-open", daemon=True)
+    opener = threading.Thread(target=open_it, name=_OPENER_NAME, daemon=True)
     started = time.monotonic()
     opener.start()
     opener.join(_OPEN_NOTICE_S if give_up_s is None else min(_OPEN_NOTICE_S, give_up_s))
