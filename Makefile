@@ -43,7 +43,7 @@ typecheck: venv
 # prints its summary (tests/suite_budget.py). A guard against hangs, not a speed target.
 SUITE_BUDGET_S ?= 2700
 pytest: venv
-	EGC_SUITE_BUDGET_S=$(SUITE_BUDGET_S) $(BIN)/pytest -n 2 --dist loadgroup
+	EGC_SUITE_BUDGET_S=$(SUITE_BUDGET_S) $(BIN)/pytest -n 2 --dist worksteal
 
 bench: venv
 	$(BIN)/egc-teleop bench all

@@ -18,3 +18,15 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 def pytest_configure(config: pytest.Config) -> None:
     suite_budget.configure(config)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The longest tests (marked ``browser`` or ``slow``) first, each group in its collected
+    order: with ``--dist worksteal`` the run then ends on short tests that both workers share,
+    not on one worker finishing a minute-long test while the other waits (the two screenshot
+    tests, collected last, made that tail)."""
+    items.sort(
+        key=lambda item: (
+            0 if item.get_closest_marker("browser") else 1 if item.get_closest_marker("slow") else 2
+        )
+    )

@@ -92,6 +92,7 @@ def _expected(out: Path, f: str) -> dict[str, str]:
     return cells
 
 
+@pytest.mark.slow
 def test_one_command_makes_the_table_from_its_parts(tmp_path: Path) -> None:
     out, cache = tmp_path / "intervention", tmp_path / "cache"
     argv = ["--out", str(out), "--quick", "--cache", str(cache), "--jobs", "1"]

@@ -70,6 +70,7 @@ def test_one_second_outage_holds_then_resumes_without_centring(port, procs, obse
     finish(procs, observer)
 
 
+@pytest.mark.slow
 def test_three_second_outage_holds_then_waits_for_a_centred_stick(port, procs, observer, tmp_path):
     start_robot(procs, observer, port)
     relay_port, t0 = start_relay(procs, port, f"outage={OUTAGE_START_S}+3")

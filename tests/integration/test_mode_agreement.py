@@ -47,6 +47,7 @@ POINT = RunPoint(
 )
 
 
+@pytest.mark.slow
 def test_simulated_and_emulated_agree_on_one_grid_point(tmp_path):
     simulated = run_simulated(POINT)
     emulated = run_emulated(POINT, tmp_path / "emulated")
@@ -93,6 +94,7 @@ VIA_POINT = RunPoint(
 )
 
 
+@pytest.mark.slow
 def test_both_modes_steer_to_the_operators_via_point(tmp_path):
     simulated = run_simulated(VIA_POINT)
     emulated = run_emulated(VIA_POINT, tmp_path / "emulated")

@@ -123,6 +123,7 @@ def listed(net: netns.TwoHosts, config: Path) -> dict[str, dict[str, Any]]:
     return {row["robot"]: row for row in map(json.loads, out.splitlines())}
 
 
+@pytest.mark.slow
 @needs_netns
 def test_an_operator_at_one_site_drives_only_the_robots_its_certificate_allows(pki, tmp_path):
     tls = {"/etc/egc/tls/": f"{pki}/"}

@@ -26,6 +26,7 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 DURATION_S = 20.0
 
 
+@pytest.mark.slow
 def test_demo_through_192_kbits_keeps_driving_with_a_fresh_view_and_camera(tmp_path):
     summary_path = tmp_path / "demo.json"
     proc = subprocess.run(
