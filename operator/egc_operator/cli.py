@@ -57,7 +57,6 @@ from egc_common.transport import (
     options_from_args,
 )
 
-from egc_operator import view as view_mod
 from egc_operator.command_source import (
     CommandSource,
     TrackSource,
@@ -71,6 +70,7 @@ from egc_operator.operator_node import OperatorNode, View
 from egc_operator.status_line import FleetLine, StatusLine
 from egc_operator.terminal_input import TerminalInput
 from egc_operator.via_route import Route, RouteError, route_from_options
+from egc_operator.viewer_target import add_view_arguments
 
 log = logging.getLogger("egc.operator")
 
@@ -152,7 +152,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING"))
     # Test hook: shift this process's clock to check clock sync across machines (issue 4).
     parser.add_argument("--clock-offset-s", type=float, default=0.0, help=argparse.SUPPRESS)
-    view_mod.add_view_arguments(parser, with_connect=False)
+    add_view_arguments(parser, with_connect=False)
     parser.add_argument(
         "--connect",
         action=_ConnectAction,
@@ -199,6 +199,20 @@ def _number(table: dict[str, Any], key: str, default: float) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise UsageError(f"config key {key} must be a number, got {value!r}")
     return float(value)
+
+
+def _open_view(args: argparse.Namespace, robot_id: str | None) -> View | None:
+    """The operator view (``egc_operator.view.open_view``); None with ``--no-view``, without
+    loading the view module: rerun and pyarrow cost an operator ~1 s of a core to import and
+    ~60 MB it never uses then (issue 31)."""
+    if args.no_view:
+        print("egc-teleop: operator view disabled (--no-view)", file=sys.stderr)
+        return None
+    from egc_operator.view import open_view
+
+    if robot_id is None:
+        return open_view(args, "fleet", fleet=True)
+    return open_view(args, robot_id)
 
 
 def _open_source(args: argparse.Namespace, cfg: dict[str, Any]) -> CommandSource:
@@ -280,17 +294,15 @@ def run(args: argparse.Namespace) -> int:
     # The view first: a --save file that cannot be written or a --serve-web port in use is a
     # usage error (exit 2) before anything connects or drives.
     try:
-        if robot_id is None:
-            view: View = view_mod.open_view(args, "fleet", fleet=True)
-        else:
-            view = view_mod.open_view(args, robot_id)
+        view = _open_view(args, robot_id)
     except BaseException:
         source.close()
         raise
     try:
         session = open_session(options_from_args(args), give_up_s=args.duration)
     except BaseException:
-        view.close()
+        if view is not None:
+            view.close()
         source.close()
         raise
     stop = threading.Event()
@@ -340,7 +352,7 @@ def _run_fleet(
     args: argparse.Namespace,
     session: Any,
     source: CommandSource,
-    view: View,
+    view: View | None,
     stop: threading.Event,
     operator_id: str,
     first: str | None,
@@ -393,7 +405,8 @@ def _run_fleet(
             typing.stop()
         if status is not None:
             status.finish()
-        view.close()
+        if view is not None:
+            view.close()
         source.close()
         session.close()
         if fleet.switches:

@@ -183,33 +183,6 @@ SERIES_STYLE = (
 )
 
 
-def add_view_arguments(parser: argparse.ArgumentParser, *, with_connect: bool = True) -> None:
-    """The viewer-target options: --serve-web PORT, --connect URL, --save FILE.rrd, --no-view.
-
-    ``with_connect=False`` leaves ``--connect`` to the caller, which must then store a viewer URL
-    in ``args.connect`` itself (the operator shares that option with its Zenoh endpoints).
-    """
-    group = parser.add_argument_group(
-        "operator view (Rerun)",
-        "default: spawn a local viewer when a display exists, else save to "
-        "./egc-operator-<robot>-<time>.rrd",
-    )
-    group.add_argument(
-        "--serve-web",
-        metavar="PORT",
-        type=int,
-        help="serve the web viewer on PORT (data on gRPC port PORT+1)",
-    )
-    if with_connect:
-        group.add_argument(
-            "--connect",
-            metavar="URL",
-            help="stream to a running viewer, e.g. rerun+http://HOST:9876/proxy",
-        )
-    group.add_argument("--save", metavar="FILE.rrd", help="save the view to a recording file")
-    group.add_argument("--no-view", action="store_true", help="no operator view at all")
-
-
 def open_view(
     args: argparse.Namespace,
     robot_id: str,

@@ -17,6 +17,7 @@ not open a window) is not an error: driving does not depend on it, the view says
 
 from __future__ import annotations
 
+import argparse
 import os
 import shlex
 import shutil
@@ -26,10 +27,12 @@ import urllib.parse
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
-import rerun as rr
-import rerun.blueprint as rrb
+if TYPE_CHECKING:  # rerun (with pyarrow, ~60 MB) is loaded only when a view is attached
+    import rerun as rr
+    import rerun.blueprint as rrb
+
 from egc_common.cli_args import check_writable
 from egc_common.errors import UsageError
 
@@ -205,6 +208,8 @@ def open_hint(where: Path, display: bool, rerun: str = "rerun") -> str:
 
 def attach(rec: rr.RecordingStream, target: ViewerTarget, blueprint: rrb.Blueprint) -> str:
     """Connect ``rec`` to ``target`` with ``blueprint`` as default layout; say where, in a line."""
+    import rerun as rr
+
     if target.kind == "save":
         assert target.path is not None
         rec.save(target.path, default_blueprint=blueprint)
@@ -235,3 +240,30 @@ def attach(rec: rr.RecordingStream, target: ViewerTarget, blueprint: rrb.Bluepri
         rr.spawn(executable_path=_rerun_executable(), default_blueprint=blueprint, recording=rec)
         return "operator view in a spawned Rerun viewer"
     return "operator view disabled (--no-view)"
+
+
+def add_view_arguments(parser: argparse.ArgumentParser, *, with_connect: bool = True) -> None:
+    """The viewer-target options: --serve-web PORT, --connect URL, --save FILE.rrd, --no-view.
+
+    ``with_connect=False`` leaves ``--connect`` to the caller, which must then store a viewer URL
+    in ``args.connect`` itself (the operator shares that option with its Zenoh endpoints).
+    """
+    group = parser.add_argument_group(
+        "operator view (Rerun)",
+        "default: spawn a local viewer when a display exists, else save to "
+        "./egc-operator-<robot>-<time>.rrd",
+    )
+    group.add_argument(
+        "--serve-web",
+        metavar="PORT",
+        type=int,
+        help="serve the web viewer on PORT (data on gRPC port PORT+1)",
+    )
+    if with_connect:
+        group.add_argument(
+            "--connect",
+            metavar="URL",
+            help="stream to a running viewer, e.g. rerun+http://HOST:9876/proxy",
+        )
+    group.add_argument("--save", metavar="FILE.rrd", help="save the view to a recording file")
+    group.add_argument("--no-view", action="store_true", help="no operator view at all")

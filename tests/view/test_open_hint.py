@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 from egc_operator import viewer_target
-from egc_operator.view import add_view_arguments, open_view
-from egc_operator.viewer_target import open_hint
+from egc_operator.view import open_view
+from egc_operator.viewer_target import add_view_arguments, open_hint
 
 from tests.view.conftest import telemetry
 

@@ -19,8 +19,8 @@ from egc_common.child_process import die_with_parent
 from egc_common.errors import UsageError
 from egc_common.transport import free_tcp_port
 from egc_operator import view_blueprint as paths
-from egc_operator.view import add_view_arguments, open_view
-from egc_operator.viewer_target import ViewerTarget, choose_target
+from egc_operator.view import open_view
+from egc_operator.viewer_target import ViewerTarget, add_view_arguments, choose_target
 
 from tests.view.conftest import telemetry
 from tests.view.rrd import read_recording

@@ -20,7 +20,8 @@ from pathlib import Path
 import pytest
 from egc_common.errors import UsageError
 from egc_common.transport import free_tcp_port
-from egc_operator.view import add_view_arguments, open_view
+from egc_operator.view import open_view
+from egc_operator.viewer_target import add_view_arguments
 
 from tests.view.conftest import telemetry
 
