@@ -193,7 +193,10 @@ def provenance(r: Result) -> str:
     usable = machine.get("cores_usable")
     cores_s = f"{cores} cores" if usable in (None, cores) else f"{cores} cores ({usable} usable)"
     options = " ".join(run.get("options") or [])
-    command = f"`egc-teleop bench {run.get('bench', '?')}{' ' + options if options else ''}`"
+    bench = str(run.get("bench", "?"))
+    # a variant's file (soak-none.json) is written by its benchmark's command (bench soak)
+    bench = next((k for k, names in VARIANTS.items() if bench in names), bench)
+    command = f"`egc-teleop bench {bench}{' ' + options if options else ''}`"
     return (
         f"Measured {str(run.get('date', '?')).replace('T', ' ').replace('+00:00', ' UTC')} at commit `{commit}` on {machine.get('cpu', '?')} "
         f"({cores_s}, {machine.get('arch', '?')}), Python {machine.get('python', '?')}; load "
