@@ -111,7 +111,6 @@ Cases, each never less safe than stopping (as EGC's DESIGN 5.9 rules):
 from __future__ import annotations
 
 import enum
-import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
@@ -148,6 +147,18 @@ _SAME = 1e-12
 _SAME_SPEED = 1e-6  # sqrt(_SAME): a point's speed below this counts as this (m/s)
 _EMPTY = np.empty(0)
 _NO_POINTS = np.empty((0, 2))
+
+
+def _constant(value: float) -> FloatArray:
+    """A read-only 0-d array: as an operand numpy takes it as it is, while it converts a Python
+    float on every call (~0.3 us, on calls of ~0.5 us)."""
+    out = np.array(value)
+    out.setflags(write=False)
+    return out
+
+
+_ZERO, _NEG_ZERO, _ONE = _constant(0.0), _constant(-0.0), _constant(1.0)
+_SAME_SPEED_0D = _constant(_SAME_SPEED)
 _MAX_REPORTED = 64  # active constraints kept in a result (the view and the tool show them)
 
 
@@ -284,9 +295,12 @@ class TightRows:
     unseen: npt.NDArray[np.bool_]
 
 
-@dataclass(frozen=True, slots=True)
-class CbfResult:
-    """The filtered command and the intermediates the view, the tool and the tests show."""
+class CbfResult(NamedTuple):
+    """The filtered command and the intermediates the view, the tool and the tests show.
+
+    Immutable and typed like the module's frozen dataclasses, but built on every call: a named
+    tuple is built in one step (a frozen dataclass sets its twelve fields one at a time through
+    ``object.__setattr__``, a few us of the filter's time)."""
 
     v_mps: float
     w_radps: float
@@ -359,8 +373,6 @@ def cbf_filter(
     if pts.count == 0 and not params.no_return_is_free:
         return _stop(CbfCase.NO_POINTS_UNKNOWN, v0, w0, params, tau, k_now)
 
-    sv = math.sqrt(params.weight_v) / profile.v_max_mps  # z = (sv v, sw w): Euclidean QP
-    sw = math.sqrt(params.weight_w) / profile.w_max_radps
     shape = _shape(profile.footprint)
     scene = _Scene(
         profile, params, v0, w0, v_now, w_now, k_now, k_cmd, shape.x_back, shape.x_front,
@@ -386,12 +398,16 @@ def cbf_filter(
         return CbfResult(
             v0, w0, False, case, params.margin_m, tau, k_now, 0, 0, None, math.inf, ahead
         )
-    rows = scene.rows(*reach)
-    if rows.worst_for_command <= _TOL:  # the command keeps every barrier: unchanged, to the bit
+    approach = scene.approach(*reach)
+    rows = None if scene.keeps_clear(approach) else scene.rows(approach)
+    if rows is None or rows.worst_for_command <= _TOL:
+        # The command keeps every barrier: unchanged, to the bit.
         return CbfResult(
-            v0, w0, False, CbfCase.CLEAR, params.margin_m, tau, k_now, rows.n, 0, None,
-            rows.nearest, ahead,
+            v0, w0, False, CbfCase.CLEAR, params.margin_m, tau, k_now, approach.sd.size, 0,
+            None, approach.nearest, ahead,
         )  # fmt: skip
+    sv = math.sqrt(params.weight_v) / profile.v_max_mps  # z = (sv v, sw w): Euclidean QP
+    sw = math.sqrt(params.weight_w) / profile.w_max_radps
     rounds_total = 0
     for attempt in range(_MAX_COVERS + 1):
         v_out, w_out, rounds, case, working = _solve(
@@ -411,7 +427,7 @@ def cbf_filter(
             )
         wider = scene.points_in_reach(pts, cover[:2], cover[2])
         assert wider is not None  # it holds the command's points
-        rows = scene.rows(*wider)
+        rows = scene.rows(scene.approach(*wider))
     # A stop computed as the projection onto a line through the origin comes out as 1e-17.
     v_out = 0.0 if abs(v_out) <= _SAME else v_out
     w_out = 0.0 if abs(w_out) <= _SAME else w_out
@@ -444,19 +460,39 @@ class _Working(NamedTuple):
         gain = rows.gain[point]
         state = rows.bounds[1][point] / gain != c[point]
         scale = np.where(state, 1.0, gain)
+        x, y = rows.points[point].T.copy()
         return TightRows(
-            rows.x[point], rows.y[point], a[point] * scale, b[point] * scale,
+            x, y, a[point] * scale, b[point] * scale,
             np.where(state, c[point], rows.bounds[1][point]), rows.sd[point],
             rows.margins(point, state), state, point >= rows.n_scan,
         )  # fmt: skip
 
 
+class _Approach(NamedTuple):
+    """What the command's CLEAR test and the rows share (``_Scene.approach``): the points'
+    geometry, each row's normal (a, b) and how fast the command and the current motion
+    approach each point."""
+
+    points: FloatArray  # (n, 2): the scan points in reach, then the unseen edges' points
+    n_scan: int  # the first n_scan points are scan points, the rest unseen edges
+    sd: FloatArray
+    nx: FloatArray
+    qx: FloatArray  # the footprint's nearest point q_i
+    qy: FloatArray
+    nearest: float  # min sd_i
+    abc: FloatArray  # (3, n): a = -n_x and b filled in, c for ``_Scene.rows``
+    u_ref: FloatArray  # u_i(v0, w0), and its positive part
+    up_ref: FloatArray
+    up_now: FloatArray | None  # u_i(v_now, w_now)^+ (up_ref itself when the same), None at rest
+    bounds: FloatArray  # (2, n), bounds[1] = alpha (margin - sd_i) (``_Rows.bounds``)
+
+
 class _Rows(NamedTuple):
     """Every point's half-plane a v + b w >= c, the tighter of its (S) and (C)."""
 
-    x: FloatArray
-    y: FloatArray
-    n_scan: int  # the first n_scan points are scan points, the rest unseen edges
+    points: FloatArray  # (n, 2) as ``_Approach.points``
+    n_scan: int
+    n: int
     sd: FloatArray
     abc: FloatArray  # (3, n): a = -n_x, b, c of each point's row
     short: FloatArray  # by how much the command falls short of each row (> 0: violated)
@@ -473,10 +509,6 @@ class _Rows(NamedTuple):
     nearest: float
     v0: float  # the command the rows were checked against
     w0: float
-
-    @property
-    def n(self) -> int:
-        return self.x.size
 
     @property
     def a(self) -> FloatArray:
@@ -590,43 +622,83 @@ class _Scene(NamedTuple):
             p.margin_m + u_b / alpha + (b_now if b_now > b_cmd else b_cmd),
         )
 
-    def rows(self, xy: FloatArray, n_scan: int, unseen: list[tuple[float, float, float]]) -> _Rows:
-        """The half-plane of each point (module docstring): the tighter of its (S) and (C).
-
-        On the few dozen points in reach numpy's cost per call, not per element, is the time,
-        so each quantity is computed once and written where the solver reads it (``out=``), and
-        the creep's six calls are skipped when no row can creep."""
-        p, alpha, profile = self.params, self.params.alpha_per_s, self.profile
+    def approach(
+        self, xy: FloatArray, n_scan: int, unseen: list[tuple[float, float, float]]
+    ) -> _Approach:
+        """Each point's geometry (``_geometry``; the unseen edges as walls across the axis),
+        its row's normal (a, b) = (-n_x, n_x q_y - n_y q_x), the approach speeds
+        u_i = n_x v - b_i w under the command and the current motion (their positive parts),
+        and alpha (margin - sd_i). On the few dozen points in reach numpy's cost per call, not
+        per element, is the time: each quantity is one call, written where it is read."""
+        alpha = self.params.alpha_per_s
         v0, w0, v_now, w_now = self.v0, self.w0, self.v_now, self.w_now
-        x, y = xy.T
         sd, nx, ny, qx, qy, nearest = _geometry(xy, self.shape)
+        points = xy
         if unseen:
             # A wall across the axis where the laser stopped seeing, met first by the
             # footprint's front (back) extent: n = (+-1, 0), q = (front or back, 0).
             extra = np.array(
                 [(s * seen, 0.0, seen - ext, s, 0.0, s * ext, 0.0) for s, seen, ext in unseen]
             ).T
-            x, y = np.concatenate((x, extra[0])), np.concatenate((y, extra[1]))
+            points = np.concatenate((xy, extra[:2].T))
             sd, nx, ny, qx, qy = (
                 np.concatenate((g, e)) for g, e in zip((sd, nx, ny, qx, qy), extra[2:], strict=True)
             )
             nearest = _min(sd)
         n = sd.size
-        # One row per point: a = -n_x, b, c (written in place: numpy's cost is per call here).
         abc = np.empty((3, n))
-        a, b, c = abc
-        np.negative(nx, out=a)
-        np.subtract(nx * qy, ny * qx, out=b)
-        # Approach speeds u = nx v - b w under the command and under the current motion, and
-        # how squarely each point lies in that motion's path (omega).
-        u_ref = np.dot((-v0, -w0), abc[:2])  # u = n_x v - b w = -(a v + b w)
-        omega_cmd, up_ref = _omega(u_ref, v0, w0, qx, qy)
-        creep: FloatArray | float
-        if nearest > 0.0 and _min(np.abs(nx)) >= CREEP_BELOW:
+        ab = abc[:2]
+        np.negative(nx, out=abc[0])
+        np.subtract(nx * qy, ny * qx, out=abc[1])
+        u_ref = np.array((-v0, -w0)).dot(ab)  # u = n_x v - b w = -(a v + b w)
+        up_ref = np.maximum(u_ref, _ZERO)
+        up_now: FloatArray | None = None
+        if v_now == v0 and w_now == w0:  # a replay, a steady cycle: the same speeds twice
+            if v_now or w_now:
+                up_now = up_ref
+        elif v_now or w_now:
+            up_now = np.maximum(np.array((-v_now, -w_now)).dot(ab), _ZERO)
+        bounds = np.empty((2, n))
+        room = np.multiply(sd, -alpha, out=bounds[1])
+        room += alpha * self.params.margin_m
+        return _Approach(
+            points, n_scan, sd, nx, qx, qy, nearest, abc, u_ref, up_ref, up_now, bounds
+        )  # fmt: skip
+
+    def keeps_clear(self, ap: _Approach) -> bool:
+        """True when the command provably keeps every row, a test cheaper than the rows for
+        the common case (careful driving: points in reach, none approached too fast).
+
+        omega_i <= 1, creep >= 0 and K_now <= K_cmd make
+        u_ref^+ + alpha K_cmd max(u_ref^+, u_now^+) <= alpha (sd_i - margin) sufficient for
+        (S) and (C) (module docstring), so the rows' shortfalls are <= 0 where it holds. Its
+        rounding (~1e-15) is far inside the rows' tolerance ``_TOL``: it never says CLEAR
+        where the rows would not (``test_cbf``: it agrees with them)."""
+        ak = self.params.alpha_per_s * self.k_cmd
+        up, up_now = ap.up_ref, ap.up_now
+        if up_now is None or up_now is up:
+            need = np.multiply(up, 1.0 + ak)
+        else:
+            need = np.maximum(up, up_now)
+            need *= ak
+            need += up
+        need += ap.bounds[1]  # alpha (margin - sd)
+        return bool(need[need.argmax()] <= 0.0)
+
+    def rows(self, ap: _Approach) -> _Rows:
+        """The half-plane of each point (module docstring): the tighter of its (S) and (C);
+        the creep's calls are skipped when no row can creep."""
+        p, alpha, profile = self.params, self.params.alpha_per_s, self.profile
+        v0, w0, v_now, w_now = self.v0, self.w0, self.v_now, self.w_now
+        sd, qx, qy, abc, bounds = ap.sd, ap.qx, ap.qy, ap.abc, ap.bounds
+        # How squarely each point lies in the commanded (current) motion's path (omega).
+        omega_cmd = _omega(ap.up_ref, v0, w0, qx, qy)
+        neg_creep: FloatArray
+        if ap.nearest > 0.0 and _min(np.abs(ap.nx)) >= CREEP_BELOW:
             # No row creeps: |n_x| >= CREEP_BELOW makes U >= CREEP_BELOW v_max, so every kappa
             # is 0 (to rounding) and, with every sd > 0, every creep +0.0: the general form's
             # numbers without its six numpy calls.
-            creep = 0.0
+            neg_creep = _NEG_ZERO
         else:
             # kappa = CREEP_PER_S (1 - U / (CREEP_BELOW v_max))^+ as one dot product of the
             # constants with (|n_x|, |b|): U = |n_x| v_max + |b| w_max.
@@ -635,42 +707,85 @@ class _Scene(NamedTuple):
             kappa = np.subtract(CREEP_PER_S, np.dot(weights, np.abs(abc[:2])))
             creep = np.maximum(kappa, 0.0, out=kappa)
             creep *= np.maximum(sd, 0.0)
+            neg_creep = np.negative(creep, out=creep)
         # bounds[0] = -max(alpha (sd - margin - m_extra), creep), (S)'s c with m_extra =
         # omega K u^+ at the current speed; bounds[1] = -max(alpha (sd - margin), creep), (C)'s
         # c before its division by the gain. Written min(alpha (margin - sd) [+ alpha m_extra],
         # -creep), with alpha m_extra = (alpha K omega) u^+, whose first factor is the gain's.
-        bounds = np.empty((2, n))
-        room = np.multiply(sd, -alpha, out=bounds[1])
-        room += alpha * p.margin_m
+        room = bounds[1]
         ak_omega: FloatArray | None = None
         alpha_m_extra: FloatArray | None = None
-        if v_now or w_now:
-            if v_now == v0 and w_now == w0:  # a replay, a steady cycle: the same speeds twice
-                omega_now, up_now = omega_cmd, up_ref
+        if ap.up_now is not None:
+            if ap.up_now is ap.up_ref:
+                omega_now = omega_cmd
             else:
-                u_now = np.dot((-v_now, -w_now), abc[:2])
-                omega_now, up_now = _omega(u_now, v_now, w_now, qx, qy)
+                omega_now = _omega(ap.up_now, v_now, w_now, qx, qy)
             ak_omega = (alpha * self.k_now) * omega_now
-            alpha_m_extra = ak_omega * up_now
+            alpha_m_extra = ak_omega * ap.up_now
             np.add(room, alpha_m_extra, out=bounds[0])
             if omega_now is not omega_cmd or self.k_now != self.k_cmd:
                 ak_omega = None
         else:
             bounds[0] = room
-        np.minimum(bounds, -creep, out=bounds)
+        np.minimum(bounds, neg_creep, out=bounds)
         # (C): -gain u >= bounds[1], i.e. -u >= bounds[1] / gain; the point's row is the
         # tighter of (S) and (C): the same normal, the larger c.
         if ak_omega is None:
             ak_omega = (alpha * self.k_cmd) * omega_cmd
-        gain = np.add(ak_omega, 1.0, out=ak_omega)
+        gain = np.add(ak_omega, _ONE, out=ak_omega)
+        c = abc[2]
         np.divide(bounds[1], gain, out=c)
         np.maximum(bounds[0], c, out=c)
         # The command falls short of each row by c + u (if positive).
-        short = c + u_ref
+        short = c + ap.u_ref
         return _Rows(
-            x, y, n_scan, sd, abc, short, bounds, gain, alpha_m_extra, alpha, omega_cmd, u_ref,
-            self.k_cmd, p.margin_m, _max(short), nearest, v0, w0,
+            ap.points, ap.n_scan, sd.size, sd, abc, short, bounds, gain, alpha_m_extra, alpha,
+            omega_cmd, ap.u_ref, self.k_cmd, p.margin_m, _max(short), ap.nearest, v0, w0,
         )  # fmt: skip
+
+
+class _Edges:
+    """A polygon's edges laid out for ``_polygon_nearest``: starts s and vectors e as x + i y,
+    e's components and squared lengths, each repeated once per point (``tiled``), so that
+    every step is one numpy call on two arrays of the same shape. (Broadcasting m points
+    against N edges costs about three times as much per call on a few dozen points.) The
+    repeats grow as needed; a mutable cache behind the frozen ``_Shape``."""
+
+    def __init__(self, fp: Footprint) -> None:
+        edges = fp._edges
+        if edges is None:
+            raise ValueError("a polygon footprint has edges")
+        start, edge, length2 = edges
+        self.count = len(start)
+        self._base = (
+            np.ascontiguousarray(start).view(np.complex128).ravel(),
+            np.ascontiguousarray(edge).view(np.complex128).ravel(),
+            np.ascontiguousarray(edge[:, 0]),
+            np.ascontiguousarray(edge[:, 1]),
+            np.ascontiguousarray(length2),
+        )
+        self._tiles = self._repeat(64)
+
+    def _repeat(
+        self, m: int
+    ) -> tuple[int, ComplexArray, ComplexArray, FloatArray, FloatArray, FloatArray, IntArray]:
+        start, edge, ex, ey, length2 = self._base
+        s: ComplexArray = np.tile(start, m)
+        e: ComplexArray = np.tile(edge, m)
+        return (
+            m, s, e, np.tile(ex, m), np.tile(ey, m), np.tile(length2, m),
+            np.arange(0, m * self.count, self.count),
+        )  # fmt: skip
+
+    def tiled(
+        self, m: int
+    ) -> tuple[ComplexArray, ComplexArray, FloatArray, FloatArray, FloatArray, IntArray]:
+        """s, e, e_x, e_y, |e|^2 for m points (m x N, point-major) and each point's offset."""
+        tiles = self._tiles
+        if tiles[0] < m:
+            tiles = self._tiles = self._repeat(max(m, 2 * tiles[0]))
+        k = m * self.count
+        return tiles[1][:k], tiles[2][:k], tiles[3][:k], tiles[4][:k], tiles[5][:k], tiles[6][:m]
 
 
 class _Shape(NamedTuple):
@@ -681,34 +796,45 @@ class _Shape(NamedTuple):
     reach: float
     footprint: Footprint
     box: tuple[FloatArray, FloatArray] | None  # a centred rectangle's corners, as (2, 1)
-    edges: tuple[FloatArray, FloatArray, FloatArray, ComplexArray] | None  # a polygon's
+    edges: _Edges | None  # a polygon's
     # A distance from a polygon's edge beyond which no point is inside it: half the shorter
     # side of its bounding box (a point inside is nearer the box's edge than that, and the
     # box holds the polygon), widened far beyond any rounding.
     inside_bound: float
 
 
-@functools.lru_cache(maxsize=32)
+# ``_shape``'s cache, by the footprint's identity (its hash runs over its vertices, microseconds
+# on every call); each entry keeps its footprint alive, so an id is never reused while cached.
+_SHAPES: dict[int, tuple[Footprint, _Shape]] = {}
+
+
 def _shape(fp: Footprint) -> _Shape:
-    """``_Shape`` of a footprint (numpy reductions and a hash: once per call, not per step)."""
+    """``_Shape`` of a footprint (numpy reductions: once per footprint, not per call)."""
+    hit = _SHAPES.get(id(fp))
+    if hit is not None and hit[0] is fp:
+        return hit[1]
     x0, x1, y0, y1 = fp.bounds
     box = fp.centred_box
     corners = None
     if box is not None:
         high = np.array([[box[0]], [box[1]]])
         corners = (-high, high)
-    edges = None if fp.is_disc or box is not None else _polygon_edges(fp)
+    edges = None if fp.is_disc or box is not None else _Edges(fp)
     inside = 0.5 * min(x1 - x0, y1 - y0) * (1.0 + 1e-9) + 1e-9
-    return _Shape(x0, x1, fp.reach_m, fp, corners, edges, inside)
+    shape = _Shape(x0, x1, fp.reach_m, fp, corners, edges, inside)
+    if len(_SHAPES) >= 32:
+        _SHAPES.clear()
+    _SHAPES[id(fp)] = (fp, shape)
+    return shape
 
 
 def _min(a: FloatArray) -> float:
-    """min of a non-empty array (``ndarray.min`` without its Python wrapper)."""
-    return float(np.minimum.reduce(a))
+    """min of a non-empty array (the element ``argmin`` finds: a reduction costs ~3x)."""
+    return float(a[a.argmin()])
 
 
 def _max(a: FloatArray) -> float:
-    return float(np.maximum.reduce(a))
+    return float(a[a.argmax()])
 
 
 def _geometry(
@@ -736,7 +862,7 @@ def _geometry(
             safe = np.where(centre, 1.0, r)
             nx, ny = np.where(centre, 1.0, x / safe), np.where(centre, 0.0, y / safe)
         return sd, nx, ny, radius * nx, radius * ny, nearest
-    qx, qy, dx, dy, dist = _polygon_nearest(xy, *shape.edges)
+    qx, qy, dx, dy, dist = _polygon_nearest(xy, shape.edges)
     nearest = _min(dist)
     if nearest > shape.inside_bound:  # every point outside and off the edge: sd = dist, n = d / sd
         return dist, dx / dist, dy / dist, qx, qy, nearest
@@ -754,38 +880,32 @@ def _geometry(
     return sd, nx, ny, qx, qy, _min(sd)
 
 
-def _polygon_edges(fp: Footprint) -> tuple[FloatArray, FloatArray, FloatArray, ComplexArray]:
-    """A polygon's edges: starts (N, 2), vectors (N, 2), squared lengths (N,) (as
-    ``closest_boundary_xy`` takes them), and the starts and vectors as x + i y (2, N)."""
-    edges = fp._edges
-    if edges is None:
-        raise ValueError("a polygon footprint has edges")
-    start, edge, length2 = edges
-    both = np.ascontiguousarray(np.stack((start, edge))).view(np.complex128)[..., 0]
-    return start, edge, length2, both
-
-
 def _polygon_nearest(
-    xy: FloatArray, start: FloatArray, edge: FloatArray, length2: FloatArray, both: ComplexArray
+    xy: FloatArray, edges: _Edges
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
     """The polygon's nearest boundary point q of each point p of the (m, 2) ``xy``, p - q and
     |p - q|: ``closest_boundary_xy``'s arithmetic (the projection onto each edge, clamped to
     it, the nearest of those; a point on an edge keeps its exact zero distance), with x + i y
     in one complex number where that is exact (sums, products by a real), and |p - q| as
-    ``np.abs`` (hypot: one call, equal to the square root of the sum of squares to rounding)."""
-    d = xy[:, None, :] - start  # (m, N, 2)
-    d *= edge
-    t = d[..., 0] + d[..., 1]
+    ``np.abs`` (hypot: one call, equal to the square root of the sum of squares to rounding).
+    Each point against each edge as one (m N,) array, point-major (``_Edges.tiled``)."""
+    p = np.ascontiguousarray(xy).view(np.complex128).ravel()
+    m = p.size
+    s, e, ex, ey, length2, offsets = edges.tiled(m)
+    pr = p.repeat(edges.count)
+    d = pr - s
+    t = d.real * ex
+    t += d.imag * ey
     t /= length2
-    np.minimum(np.maximum(t, 0.0, out=t), 1.0, out=t)
-    c = t * both[1]
-    c += both[0]  # the nearest point of each edge
-    r = np.ascontiguousarray(xy).view(np.complex128) - c  # p minus it
+    np.minimum(np.maximum(t, _ZERO, out=t), _ONE, out=t)
+    c = t * e
+    c += s  # the nearest point of each edge
+    r = np.subtract(pr, c, out=d)  # p minus it
     dist = np.abs(r)
-    k = dist.argmin(axis=1)
-    row = np.arange(k.size)
-    q, pq = c[row, k], r[row, k]
-    return q.real, q.imag, pq.real, pq.imag, dist[row, k]
+    k = dist.reshape(m, edges.count).argmin(axis=1)
+    k += offsets
+    q, pq = c.take(k), r.take(k)
+    return q.real, q.imag, pq.real, pq.imag, dist.take(k)
 
 
 def _box_geometry(
@@ -820,24 +940,21 @@ def _box_geometry(
     return sd, dx / norm, dy / norm, qx, qy, _min(sd)
 
 
-def _omega(
-    u: FloatArray, v: float, w: float, qx: FloatArray, qy: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """(cos of the angle between n_i and the velocity of q_i under (v, w))^PATH_POWER, 0 for
-    points the footprint does not approach (u_i <= 0), and max(u_i, 0).
+def _omega(up: FloatArray, v: float, w: float, qx: FloatArray, qy: FloatArray) -> FloatArray:
+    """(cos of the angle between n_i and the velocity of q_i under (v, w))^PATH_POWER from
+    u_i^+ (``up``), 0 for points the footprint does not approach.
     cos = u / |velocity|, the velocity (v - w q_y, w q_x)."""
-    up = np.maximum(u, 0.0)
     if w == 0.0:
         if v == 0.0:
-            return np.zeros(u.size), up
+            return np.zeros(up.size)
         cos = up / abs(v)  # u = nx v <= |v|, no overflow, even for a subnormal v
     else:
         speed = np.hypot(v - w * qy, w * qx)
-        cos = np.divide(up, np.maximum(speed, _SAME_SPEED, out=speed), out=speed)
-    np.minimum(cos, 1.0, out=cos)
+        cos = np.divide(up, np.maximum(speed, _SAME_SPEED_0D, out=speed), out=speed)
+    np.minimum(cos, _ONE, out=cos)
     np.square(cos, out=cos)
     cos *= cos
-    return cos, up
+    return cos
 
 
 def _solve(
@@ -866,7 +983,8 @@ def _solve(
         if found is None:
             break
         v, w = found
-        short = np.dot((-v, -w, 1.0), abc)  # c - (a v + b w): every row's shortfall
+        # c - (a v + b w): every row's shortfall (``np.dot`` of a tuple costs twice as much).
+        short = np.array((-v, -w, 1.0)).dot(abc)
         if _max(short) <= _TOL:
             return v, w, rounds, CbfCase.SOLVED, working
         add = _most_violated(short, k)
@@ -877,28 +995,12 @@ def _solve(
 
 def _most_violated(short: FloatArray, k: int) -> IntArray:
     """Indices of the (at most) ``k`` rows with the largest ``short`` above the tolerance."""
+    if _min(short) > _TOL:  # every row: the same partition without the mask and the indexing
+        return (-short).argpartition(k)[:k] if short.size > k else np.arange(short.size)
     bad: IntArray = (short > _TOL).nonzero()[0]
     if bad.size > k:
-        if bad.size == short.size:  # every row: the same partition without the indexing
-            return (-short).argpartition(k)[:k]
-        bad = bad[(-short[bad]).argpartition(k)[:k]]
+        bad = bad.take((-short.take(bad)).argpartition(k)[:k])
     return bad
-
-
-def _project(
-    a: FloatArray,
-    b: FloatArray,
-    c: FloatArray,
-    v0: float,
-    w0: float,
-    sv: float,
-    sw: float,
-    profile: RobotProfile,
-) -> tuple[float, float] | None:
-    """The closest point to (v0, w0) (weighted) in the polygon of the rows and the box, or None
-    when none of the candidates is feasible (empty polygon, through rounding)."""
-    gx, gy = (a * (1.0 / sv)).tolist(), (b * (1.0 / sw)).tolist()
-    return _project_scaled(gx, gy, c.tolist(), v0, w0, sv, sw, profile)
 
 
 def _project_scaled(
@@ -911,8 +1013,10 @@ def _project_scaled(
     sw: float,
     profile: RobotProfile,
 ) -> tuple[float, float] | None:
-    """``_project`` of rows already scaled (gx = a / sv, gy = b / sw, e = c; the lists are
-    extended). The box's rows join only when the answer without them leaves it."""
+    """The closest point to (v0, w0) (weighted) in the polygon of the rows and the box, or None
+    when none of the candidates is feasible (empty polygon, through rounding). The rows come
+    scaled to the Euclidean problem, z = (sv v, sw w): gx = a / sv, gy = b / sw, e = c (the
+    lists are extended). The box's rows join only when the answer without them leaves it."""
     vm, wm = profile.v_max_mps, profile.w_max_radps
     z0x, z0y = sv * v0, sw * w0
     found = _nearest_in(gx, gy, e, z0x, z0y)
