@@ -146,6 +146,7 @@ _TOL = 1e-9  # a constraint is met when short of it by no more than this (m/s)
 _SAME = 1e-12
 _SAME_SPEED = 1e-6  # sqrt(_SAME): a point's speed below this counts as this (m/s)
 _EMPTY = np.empty(0)
+_EMPTY_C = np.empty(0, dtype=np.complex128)
 _NO_POINTS = np.empty((0, 2))
 
 
@@ -158,6 +159,7 @@ def _constant(value: float) -> FloatArray:
 
 
 _ZERO, _NEG_ZERO, _ONE = _constant(0.0), _constant(-0.0), _constant(1.0)
+_CREEP_PER_S = _constant(CREEP_PER_S)
 _SAME_SPEED_0D = _constant(_SAME_SPEED)
 _MAX_REPORTED = 64  # active constraints kept in a result (the view and the tool show them)
 
@@ -470,21 +472,20 @@ class _Working(NamedTuple):
 
 class _Approach(NamedTuple):
     """What the command's CLEAR test and the rows share (``_Scene.approach``): the points'
-    geometry, each row's normal (a, b) and how fast the command and the current motion
-    approach each point."""
+    geometry, each row's normal (a, b), the velocities of the footprint's nearest points and
+    how fast the command and the current motion approach each point."""
 
     points: FloatArray  # (n, 2): the scan points in reach, then the unseen edges' points
     n_scan: int  # the first n_scan points are scan points, the rest unseen edges
     sd: FloatArray
-    nx: FloatArray
-    qx: FloatArray  # the footprint's nearest point q_i
-    qy: FloatArray
+    normal: ComplexArray  # n_i as n_x + i n_y
     nearest: float  # min sd_i
     abc: FloatArray  # (3, n): a = -n_x and b filled in, c for ``_Scene.rows``
-    u_ref: FloatArray  # u_i(v0, w0), and its positive part
+    u_ref: FloatArray  # u_i(v0, w0) and its positive part
     up_ref: FloatArray
+    vel_ref: ComplexArray | None  # q_i's velocity under (v0, w0); None when w0 = 0 (it is v0)
     up_now: FloatArray | None  # u_i(v_now, w_now)^+ (up_ref itself when the same), None at rest
-    bounds: FloatArray  # (2, n), bounds[1] = alpha (margin - sd_i) (``_Rows.bounds``)
+    vel_now: ComplexArray | None
 
 
 class _Rows(NamedTuple):
@@ -571,44 +572,42 @@ class _Scene(NamedTuple):
         with u the largest approach.
         """
         x_back, x_front, q_max = self.x_back, self.x_front, self.q_max
-        reach_f, reach_b = self._reach_sd(v_range, w_bound)
+        seen_ahead, seen_behind = pts.seen_ahead_m, pts.seen_behind_m
+        reach_f, reach_b = self._reach_sd(v_range[0], v_range[1], w_bound)
         if quiet is not None:
-            quiet_f, quiet_b = self._reach_sd((quiet[0], quiet[0]), quiet[1])
-            unseen_near = (
-                pts.seen_ahead_m - x_front < quiet_f or pts.seen_behind_m + x_back < quiet_b
-            )
-            if not unseen_near:
+            quiet_f, quiet_b = self._reach_sd(quiet[0], quiet[0], quiet[1])
+            if not (seen_ahead - x_front < quiet_f or seen_behind + x_back < quiet_b):
                 if pts.count == 0:
                     return None
                 index = pts.prepared_index
                 r2_min = index.r2_sorted[0] if index is not None else _min(pts.r2)
-                if r2_min > (q_max + max(quiet_f, quiet_b)) ** 2:
+                quiet_r = q_max + (quiet_b if quiet_b > quiet_f else quiet_f)
+                if r2_min > quiet_r * quiet_r:
                     return None
         xy = _NO_POINTS
-        if pts.count:
+        n_scan = pts.count
+        if n_scan:
             # One threshold for points ahead and behind: the few more rows a split by side
             # would leave out cost less than its two numpy calls over the whole scan.
-            far = q_max + max(reach_f, reach_b)
+            far = q_max + (reach_b if reach_b > reach_f else reach_f)
             xy = pts.xy.compress(pts.r2 <= far * far, axis=0)  # cheaper than xy[mask]
-        unseen = [  # (direction, how far it saw, the footprint's extent that way)
-            (sign, seen, extent)
-            for sign, seen, extent, room in (
-                (1.0, pts.seen_ahead_m, x_front, reach_f),
-                (-1.0, pts.seen_behind_m, -x_back, reach_b),
-            )
-            if seen - extent < room
-        ]
-        n_scan = len(xy)
+            n_scan = len(xy)
+        # (direction, how far it saw, the footprint's extent that way)
+        unseen: list[tuple[float, float, float]] = []
+        if seen_ahead - x_front < reach_f:
+            unseen.append((1.0, seen_ahead, x_front))
+        if seen_behind + x_back < reach_b:
+            unseen.append((-1.0, seen_behind, -x_back))
         if n_scan == 0 and not unseen:
             return None
         return xy, n_scan, unseen
 
-    def _reach_sd(self, v_range: tuple[float, float], w_bound: float) -> tuple[float, float]:
+    def _reach_sd(self, v_min: float, v_max: float, w_bound: float) -> tuple[float, float]:
         """How far from the footprint (m) a point ahead and a point behind can have its barrier
-        violated by a command with v in ``v_range`` and |w| <= ``w_bound``."""
+        violated by a command with v in [``v_min``, ``v_max``] and |w| <= ``w_bound``."""
         p, alpha, q_max = self.params, self.params.alpha_per_s, self.q_max
         turn = q_max * w_bound
-        w_now, v_now, v_lo, v_hi = self.w_now, self.v_now, -v_range[0], v_range[1]
+        w_now, v_now, v_lo, v_hi = self.w_now, self.v_now, -v_min, v_max
         turn_now = q_max * (w_now if w_now >= 0.0 else -w_now)
         # max(a, b) written as b if b > a else a (the builtin's result, without its call).
         u_f = (0.0 if v_hi < 0.0 else v_hi) + turn
@@ -626,43 +625,38 @@ class _Scene(NamedTuple):
         self, xy: FloatArray, n_scan: int, unseen: list[tuple[float, float, float]]
     ) -> _Approach:
         """Each point's geometry (``_geometry``; the unseen edges as walls across the axis),
-        its row's normal (a, b) = (-n_x, n_x q_y - n_y q_x), the approach speeds
-        u_i = n_x v - b_i w under the command and the current motion (their positive parts),
-        and alpha (margin - sd_i). On the few dozen points in reach numpy's cost per call, not
-        per element, is the time: each quantity is one call, written where it is read."""
-        alpha = self.params.alpha_per_s
+        its row's normal (a, b) = (-n_x, n_x q_y - n_y q_x), and the approach speeds
+        u_i = n_x v - b_i w under the command and the current motion (their positive parts).
+
+        On the few dozen points in reach numpy's cost per call, not per element, is the time:
+        each quantity is one call, written where it is read."""
         v0, w0, v_now, w_now = self.v0, self.w0, self.v_now, self.w_now
-        sd, nx, ny, qx, qy, nearest = _geometry(xy, self.shape)
+        sd, normal, q, nearest = _geometry(xy, self.shape)
         points = xy
         if unseen:
             # A wall across the axis where the laser stopped seeing, met first by the
             # footprint's front (back) extent: n = (+-1, 0), q = (front or back, 0).
-            extra = np.array(
-                [(s * seen, 0.0, seen - ext, s, 0.0, s * ext, 0.0) for s, seen, ext in unseen]
-            ).T
-            points = np.concatenate((xy, extra[:2].T))
-            sd, nx, ny, qx, qy = (
-                np.concatenate((g, e)) for g, e in zip((sd, nx, ny, qx, qy), extra[2:], strict=True)
-            )
+            points = np.concatenate((xy, [(s * seen, 0.0) for s, seen, _ in unseen]))
+            sd = np.concatenate((sd, [seen - ext for _, seen, ext in unseen]))
+            normal = np.concatenate((normal, [complex(s) for s, _, _ in unseen]))
+            q = np.concatenate((q, [complex(s * ext) for s, _, ext in unseen]))
             nearest = _min(sd)
-        n = sd.size
-        abc = np.empty((3, n))
+        nx, ny, qx, qy = normal.real, normal.imag, q.real, q.imag
+        abc = np.empty((3, sd.size))
         ab = abc[:2]
         np.negative(nx, out=abc[0])
         np.subtract(nx * qy, ny * qx, out=abc[1])
-        u_ref = np.array((-v0, -w0)).dot(ab)  # u = n_x v - b w = -(a v + b w)
+        vel_ref, u_ref = _velocity(v0, w0, q, ab)
         up_ref = np.maximum(u_ref, _ZERO)
-        up_now: FloatArray | None = None
+        up_now = vel_now = None
         if v_now == v0 and w_now == w0:  # a replay, a steady cycle: the same speeds twice
             if v_now or w_now:
-                up_now = up_ref
+                up_now, vel_now = up_ref, vel_ref
         elif v_now or w_now:
-            up_now = np.maximum(np.array((-v_now, -w_now)).dot(ab), _ZERO)
-        bounds = np.empty((2, n))
-        room = np.multiply(sd, -alpha, out=bounds[1])
-        room += alpha * self.params.margin_m
+            vel_now, u_now = _velocity(v_now, w_now, q, ab)
+            up_now = np.maximum(u_now, _ZERO)
         return _Approach(
-            points, n_scan, sd, nx, qx, qy, nearest, abc, u_ref, up_ref, up_now, bounds
+            points, n_scan, sd, normal, nearest, abc, u_ref, up_ref, vel_ref, up_now, vel_now
         )  # fmt: skip
 
     def keeps_clear(self, ap: _Approach) -> bool:
@@ -674,52 +668,52 @@ class _Scene(NamedTuple):
         (S) and (C) (module docstring), so the rows' shortfalls are <= 0 where it holds. Its
         rounding (~1e-15) is far inside the rows' tolerance ``_TOL``: it never says CLEAR
         where the rows would not (``test_cbf``: it agrees with them)."""
-        ak = self.params.alpha_per_s * self.k_cmd
+        p, k = self.params, self.k_cmd
         up, up_now = ap.up_ref, ap.up_now
+        # Divided by alpha: u_ref^+ / alpha + K max(u_ref^+, u_now^+) - sd <= -margin.
         if up_now is None or up_now is up:
-            need = np.multiply(up, 1.0 + ak)
+            need = np.multiply(up, 1.0 / p.alpha_per_s + k)
         else:
             need = np.maximum(up, up_now)
-            need *= ak
-            need += up
-        need += ap.bounds[1]  # alpha (margin - sd)
-        return bool(need[need.argmax()] <= 0.0)
+            need *= k
+            need += up * (1.0 / p.alpha_per_s)
+        need -= ap.sd
+        return bool(need[need.argmax()] <= -p.margin_m)
 
     def rows(self, ap: _Approach) -> _Rows:
         """The half-plane of each point (module docstring): the tighter of its (S) and (C);
         the creep's calls are skipped when no row can creep."""
         p, alpha, profile = self.params, self.params.alpha_per_s, self.profile
-        v0, w0, v_now, w_now = self.v0, self.w0, self.v_now, self.w_now
-        sd, qx, qy, abc, bounds = ap.sd, ap.qx, ap.qy, ap.abc, ap.bounds
+        v0, w0, sd, abc = self.v0, self.w0, ap.sd, ap.abc
         # How squarely each point lies in the commanded (current) motion's path (omega).
-        omega_cmd = _omega(ap.up_ref, v0, w0, qx, qy)
-        neg_creep: FloatArray
-        if ap.nearest > 0.0 and _min(np.abs(ap.nx)) >= CREEP_BELOW:
-            # No row creeps: |n_x| >= CREEP_BELOW makes U >= CREEP_BELOW v_max, so every kappa
-            # is 0 (to rounding) and, with every sd > 0, every creep +0.0: the general form's
-            # numbers without its six numpy calls.
-            neg_creep = _NEG_ZERO
-        else:
+        omega_cmd = _omega(ap.up_ref, v0, ap.vel_ref)
+        neg_creep: FloatArray | None = None  # None: -0.0 for every row
+        if not (ap.nearest > 0.0 and _min(np.abs(ap.normal.real)) >= CREEP_BELOW):
             # kappa = CREEP_PER_S (1 - U / (CREEP_BELOW v_max))^+ as one dot product of the
-            # constants with (|n_x|, |b|): U = |n_x| v_max + |b| w_max.
+            # constants with (|n_x|, |b|): U = |n_x| v_max + |b| w_max. (Else no row creeps:
+            # |n_x| >= CREEP_BELOW makes U >= CREEP_BELOW v_max, so every kappa is 0 (to
+            # rounding) and, with every sd > 0, every creep +0.0: the general form's numbers
+            # without its calls.)
             scale = CREEP_PER_S / (CREEP_BELOW * profile.v_max_mps)
-            weights = (scale * profile.v_max_mps, scale * profile.w_max_radps)
-            kappa = np.subtract(CREEP_PER_S, np.dot(weights, np.abs(abc[:2])))
-            creep = np.maximum(kappa, 0.0, out=kappa)
-            creep *= np.maximum(sd, 0.0)
+            weights = np.array((scale * profile.v_max_mps, scale * profile.w_max_radps))
+            kappa = np.subtract(_CREEP_PER_S, weights.dot(np.abs(abc[:2])))
+            creep = np.maximum(kappa, _ZERO, out=kappa)
+            creep *= np.maximum(sd, _ZERO)
             neg_creep = np.negative(creep, out=creep)
         # bounds[0] = -max(alpha (sd - margin - m_extra), creep), (S)'s c with m_extra =
         # omega K u^+ at the current speed; bounds[1] = -max(alpha (sd - margin), creep), (C)'s
         # c before its division by the gain. Written min(alpha (margin - sd) [+ alpha m_extra],
         # -creep), with alpha m_extra = (alpha K omega) u^+, whose first factor is the gain's.
-        room = bounds[1]
+        bounds = np.empty((2, sd.size))
+        room = np.multiply(sd, -alpha, out=bounds[1])
+        room += alpha * p.margin_m
         ak_omega: FloatArray | None = None
         alpha_m_extra: FloatArray | None = None
         if ap.up_now is not None:
             if ap.up_now is ap.up_ref:
                 omega_now = omega_cmd
             else:
-                omega_now = _omega(ap.up_now, v_now, w_now, qx, qy)
+                omega_now = _omega(ap.up_now, self.v_now, ap.vel_now)
             ak_omega = (alpha * self.k_now) * omega_now
             alpha_m_extra = ak_omega * ap.up_now
             np.add(room, alpha_m_extra, out=bounds[0])
@@ -727,7 +721,11 @@ class _Scene(NamedTuple):
                 ak_omega = None
         else:
             bounds[0] = room
-        np.minimum(bounds, neg_creep, out=bounds)
+        if neg_creep is None:
+            np.minimum(bounds, _NEG_ZERO, out=bounds)
+        else:  # row by row: broadcasting (n,) against (2, n) costs about twice as much
+            np.minimum(bounds[0], neg_creep, out=bounds[0])
+            np.minimum(bounds[1], neg_creep, out=bounds[1])
         # (C): -gain u >= bounds[1], i.e. -u >= bounds[1] / gain; the point's row is the
         # tighter of (S) and (C): the same normal, the larger c.
         if ak_omega is None:
@@ -788,6 +786,27 @@ class _Edges:
         return tiles[1][:k], tiles[2][:k], tiles[3][:k], tiles[4][:k], tiles[5][:k], tiles[6][:m]
 
 
+class _Box:
+    """A rectangle centred on {R}: its corners (-half_l, -half_w) and (half_l, half_w), each
+    repeated as an (m, 2) array for ``_box_geometry`` (``_Edges``' reason: same-shape calls)."""
+
+    def __init__(self, half_l: float, half_w: float) -> None:
+        self.half_l, self.half_w = half_l, half_w
+        self._high = np.array([[half_l, half_w]])
+        self._tiles = self._repeat(64)
+
+    def _repeat(self, m: int) -> tuple[int, FloatArray, FloatArray]:
+        high: FloatArray = np.tile(self._high, (m, 1))
+        return m, -high, high
+
+    def corners(self, m: int) -> tuple[FloatArray, FloatArray]:
+        """The low and the high corner, as (m, 2) arrays."""
+        tiles = self._tiles
+        if tiles[0] < m:
+            tiles = self._tiles = self._repeat(max(m, 2 * tiles[0]))
+        return tiles[1][:m], tiles[2][:m]
+
+
 class _Shape(NamedTuple):
     """What the filter reads of a footprint, derived once per shape (``_shape``)."""
 
@@ -795,7 +814,7 @@ class _Shape(NamedTuple):
     x_front: float
     reach: float
     footprint: Footprint
-    box: tuple[FloatArray, FloatArray] | None  # a centred rectangle's corners, as (2, 1)
+    box: _Box | None  # a centred rectangle
     edges: _Edges | None  # a polygon's
     # A distance from a polygon's edge beyond which no point is inside it: half the shorter
     # side of its bounding box (a point inside is nearer the box's edge than that, and the
@@ -814,14 +833,11 @@ def _shape(fp: Footprint) -> _Shape:
     if hit is not None and hit[0] is fp:
         return hit[1]
     x0, x1, y0, y1 = fp.bounds
-    box = fp.centred_box
-    corners = None
-    if box is not None:
-        high = np.array([[box[0]], [box[1]]])
-        corners = (-high, high)
+    half = fp.centred_box
+    box = None if half is None else _Box(*half)
     edges = None if fp.is_disc or box is not None else _Edges(fp)
     inside = 0.5 * min(x1 - x0, y1 - y0) * (1.0 + 1e-9) + 1e-9
-    shape = _Shape(x0, x1, fp.reach_m, fp, corners, edges, inside)
+    shape = _Shape(x0, x1, fp.reach_m, fp, box, edges, inside)
     if len(_SHAPES) >= 32:
         _SHAPES.clear()
     _SHAPES[id(fp)] = (fp, shape)
@@ -839,33 +855,34 @@ def _max(a: FloatArray) -> float:
 
 def _geometry(
     xy: FloatArray, shape: _Shape
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float]:
-    """Signed distance sd, unit normal (nx, ny) and the footprint's nearest point (qx, qy) of
-    each point of the (m, 2) ``xy``, and min(sd) (inf for no point). The normal is the
+) -> tuple[FloatArray, ComplexArray, ComplexArray, float]:
+    """Signed distance sd, unit normal n and the footprint's nearest point q (both as x + i y)
+    of each point of the (m, 2) ``xy``, and min(sd) (inf for no point). The normal is the
     gradient of sd: from q towards the point outside, from the point towards q inside (the
     outward normal of the nearest edge)."""
     if len(xy) == 0:
-        return _EMPTY, _EMPTY, _EMPTY, _EMPTY, _EMPTY, math.inf
+        return _EMPTY, _EMPTY_C, _EMPTY_C, math.inf
     if shape.box is not None:
-        return _box_geometry(xy.T, *shape.box)
-    x, y = xy.T
+        return _box_geometry(xy, shape.box)
+    p = np.ascontiguousarray(xy).view(np.complex128).ravel()
     fp = shape.footprint
     if shape.edges is None:  # a disc
+        x, y = xy.T
         r = np.sqrt(x * x + y * y)
         radius = fp.radius_m
         sd = r - radius
         nearest = _min(sd)
         if nearest > -radius:  # no point at the centre (r = 0 would give sd = -radius)
-            nx, ny = x / r, y / r
+            normal = _divided(p, r)
         else:
             centre = r <= 0.0
-            safe = np.where(centre, 1.0, r)
-            nx, ny = np.where(centre, 1.0, x / safe), np.where(centre, 0.0, y / safe)
-        return sd, nx, ny, radius * nx, radius * ny, nearest
-    qx, qy, dx, dy, dist = _polygon_nearest(xy, shape.edges)
+            normal = np.where(centre, 1.0, _divided(p, np.where(centre, 1.0, r)))
+        return sd, normal, radius * normal, nearest
+    q, pq, dist = _polygon_nearest(p, shape.edges)
     nearest = _min(dist)
     if nearest > shape.inside_bound:  # every point outside and off the edge: sd = dist, n = d / sd
-        return dist, dx / dist, dy / dist, qx, qy, nearest
+        return dist, _divided(pq, dist), q, nearest
+    x, y = xy.T
     candidates = dist <= shape.inside_bound
     inside = np.zeros(dist.size, dtype=np.bool_)
     inside[candidates] = signed_distance(fp, x[candidates], y[candidates]) < 0.0
@@ -873,23 +890,31 @@ def _geometry(
     on_edge = dist <= 0.0
     safe = np.where(on_edge, 1.0, dist)
     sign = np.where(sd < 0.0, -1.0, 1.0)  # inside: towards the edge, i.e. outwards
-    nx, ny = sign * dx / safe, sign * dy / safe
+    normal = _divided(pq * sign, safe)
     if on_edge.any():  # on the edge itself: away from the origin, as outwards as any
         r = np.maximum(np.sqrt(x * x + y * y), _SAME)
-        nx, ny = np.where(on_edge, x / r, nx), np.where(on_edge, y / r, ny)
-    return sd, nx, ny, qx, qy, _min(sd)
+        normal = np.where(on_edge, _divided(p, r), normal)
+    return sd, normal, q, _min(sd)
+
+
+def _divided(d: ComplexArray, norm: FloatArray) -> ComplexArray:
+    """d / norm part by part: numpy divides a complex by a real through its reciprocal, a
+    rounding away from the formulas' n = (d_x / |d|, d_y / |d|)."""
+    out = np.empty(d.size, dtype=np.complex128)
+    np.divide(d.real, norm, out=out.real)
+    np.divide(d.imag, norm, out=out.imag)
+    return out
 
 
 def _polygon_nearest(
-    xy: FloatArray, edges: _Edges
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """The polygon's nearest boundary point q of each point p of the (m, 2) ``xy``, p - q and
-    |p - q|: ``closest_boundary_xy``'s arithmetic (the projection onto each edge, clamped to
-    it, the nearest of those; a point on an edge keeps its exact zero distance), with x + i y
-    in one complex number where that is exact (sums, products by a real), and |p - q| as
-    ``np.abs`` (hypot: one call, equal to the square root of the sum of squares to rounding).
-    Each point against each edge as one (m N,) array, point-major (``_Edges.tiled``)."""
-    p = np.ascontiguousarray(xy).view(np.complex128).ravel()
+    p: ComplexArray, edges: _Edges
+) -> tuple[ComplexArray, ComplexArray, FloatArray]:
+    """The polygon's nearest boundary point q of each point p (x + i y), p - q and |p - q|:
+    ``closest_boundary_xy``'s arithmetic (the projection onto each edge, clamped to it, the
+    nearest of those; a point on an edge keeps its exact zero distance), with x + i y in one
+    complex number where that is exact (sums, products by a real), and |p - q| as ``np.abs``
+    (hypot: one call, equal to the square root of the sum of squares to rounding). Each point
+    against each edge as one (m N,) array, point-major (``_Edges.tiled``)."""
     m = p.size
     s, e, ex, ey, length2, offsets = edges.tiled(m)
     pr = p.repeat(edges.count)
@@ -904,27 +929,23 @@ def _polygon_nearest(
     dist = np.abs(r)
     k = dist.reshape(m, edges.count).argmin(axis=1)
     k += offsets
-    q, pq = c.take(k), r.take(k)
-    return q.real, q.imag, pq.real, pq.imag, dist.take(k)
+    return c.take(k), r.take(k), dist.take(k)
 
 
 def _box_geometry(
-    p: FloatArray, low: FloatArray, high: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float]:
-    """``_geometry`` of the rectangle ``low`` <= (x, y) <= ``high`` = (half_l, half_w), in
-    closed form, on the (2, m) points ``p``, the transpose of a C-contiguous (m, 2) array (x
-    and y ride along one axis: one numpy call per step)."""
-    q = np.minimum(np.maximum(p, low), high)
-    d = p - q
-    # |d| as the modulus of x + i y: p is the transpose of a C-contiguous (m, 2) array and the
-    # ufuncs keep that layout, so d.T is one too (no copy); hypot on the real rows costs ~3x.
-    sd = np.abs(d.T.view(np.complex128)).ravel()
+    xy: FloatArray, box: _Box
+) -> tuple[FloatArray, ComplexArray, ComplexArray, float]:
+    """``_geometry`` of the rectangle ``box``, in closed form, on the C-contiguous (m, 2) ``xy``
+    (the nearest point q is xy clamped to the corners; p - q as x + i y, a view)."""
+    low, high = box.corners(len(xy))
+    q = np.minimum(np.maximum(xy, low), high)
+    d = np.subtract(xy, q).view(np.complex128).ravel()
+    sd = np.abs(d)
     nearest = _min(sd)
     if nearest > 0.0:  # no point inside
-        n = d / sd
-        return sd, n[0], n[1], q[0], q[1], nearest
-    half_l, half_w = float(high[0, 0]), float(high[1, 0])
-    (x, y), (dx, dy), (qx, qy) = p, d, q
+        return sd, _divided(d, sd), q.view(np.complex128).ravel(), nearest
+    half_l, half_w = box.half_l, box.half_w
+    x, y, qx, qy = xy[:, 0], xy[:, 1], q[:, 0], q[:, 1]
     inside = sd <= 0.0
     xi, yi = x[inside], y[inside]
     to_front, to_back = half_l - xi, xi + half_l
@@ -932,24 +953,37 @@ def _box_geometry(
     depth = np.minimum(np.minimum(to_front, to_back), np.minimum(to_left, to_right))
     ex = np.where(to_front == depth, 1.0, np.where(to_back == depth, -1.0, 0.0))
     ey = np.where(ex != 0.0, 0.0, np.where(to_left == depth, 1.0, -1.0))
-    dx[inside], dy[inside] = ex, ey
+    d[inside] = ex + 1j * ey  # the outward normal of the nearest edge, of length 1
     qx[inside] = np.where(ex != 0.0, ex * half_l, xi)
     qy[inside] = np.where(ey != 0.0, ey * half_w, yi)
     sd[inside] = -depth
-    norm = np.where(inside, 1.0, sd)
-    return sd, dx / norm, dy / norm, qx, qy, _min(sd)
+    return sd, _divided(d, np.where(inside, 1.0, sd)), q.view(np.complex128).ravel(), _min(sd)
 
 
-def _omega(up: FloatArray, v: float, w: float, qx: FloatArray, qy: FloatArray) -> FloatArray:
-    """(cos of the angle between n_i and the velocity of q_i under (v, w))^PATH_POWER from
-    u_i^+ (``up``), 0 for points the footprint does not approach.
-    cos = u / |velocity|, the velocity (v - w q_y, w q_x)."""
+def _velocity(
+    v: float, w: float, q: ComplexArray, ab: FloatArray
+) -> tuple[ComplexArray | None, FloatArray]:
+    """The velocity v + i w q of each footprint point q (x + i y) under (v, w), None for w = 0
+    (it is v), and the approach speed u = n_x v - b w = -(a v + b w) (``ab``: the rows' a, b).
+    (q times i w is (-w q_y, w q_x) to the bit: each part one product and an exact zero.)"""
+    u: FloatArray = np.array((-v, -w)).dot(ab)
     if w == 0.0:
+        return None, u
+    vel = q * complex(0.0, w)
+    vel += v
+    return vel, u
+
+
+def _omega(up: FloatArray, v: float, vel: ComplexArray | None) -> FloatArray:
+    """(cos of the angle between n_i and the velocity of q_i under (v, w))^PATH_POWER from
+    u_i^+ (``up``), 0 for points the footprint does not approach: cos = u / |velocity|
+    (``vel``; None for w = 0: then it is v)."""
+    if vel is None:
         if v == 0.0:
             return np.zeros(up.size)
         cos = up / abs(v)  # u = nx v <= |v|, no overflow, even for a subnormal v
     else:
-        speed = np.hypot(v - w * qy, w * qx)
+        speed = np.hypot(vel.real, vel.imag)
         cos = np.divide(up, np.maximum(speed, _SAME_SPEED_0D, out=speed), out=speed)
     np.minimum(cos, _ONE, out=cos)
     np.square(cos, out=cos)
@@ -973,13 +1007,10 @@ def _solve(
     by how much the command falls short of each row (m/s, > 0: violated): the order in which
     rows join, not the answer."""
     working = _most_violated(short, k)
-    isv, isw = 1.0 / sv, 1.0 / sw
     for rounds in range(1, _MAX_ROUNDS + 1):
-        # Only the working rows become Python floats, scaled to the Euclidean problem.
-        ga, gb, e = abc.take(working, axis=1).tolist()
-        found = _project_scaled(
-            [g * isv for g in ga], [g * isw for g in gb], e, v0, w0, sv, sw, profile
-        )
+        # Only the working rows become Python floats.
+        a, b, c = abc.take(working, axis=1).tolist()
+        found = _project(a, b, c, v0, w0, sv, sw, profile)
         if found is None:
             break
         v, w = found
@@ -1003,48 +1034,43 @@ def _most_violated(short: FloatArray, k: int) -> IntArray:
     return bad
 
 
-def _project_scaled(
-    gx: list[float],
-    gy: list[float],
-    e: list[float],
+def _project(
+    a: list[float],
+    b: list[float],
+    c: list[float],
     v0: float,
     w0: float,
     sv: float,
     sw: float,
     profile: RobotProfile,
 ) -> tuple[float, float] | None:
-    """The closest point to (v0, w0) (weighted) in the polygon of the rows and the box, or None
-    when none of the candidates is feasible (empty polygon, through rounding). The rows come
-    scaled to the Euclidean problem, z = (sv v, sw w): gx = a / sv, gy = b / sw, e = c (the
-    lists are extended). The box's rows join only when the answer without them leaves it."""
+    """The closest point to (v0, w0) (weighted) in the polygon of the rows a v + b w >= c and
+    the box, or None when none of the candidates is feasible (empty polygon, through rounding).
+    Solved in z = (sv v, sw w), where the distance is Euclidean (rows a / sv, b / sw, c); the
+    box's rows join only when the answer without them leaves it."""
+    isv, isw = 1.0 / sv, 1.0 / sw
+    rows = [(ax * isv, ay * isw, ae) for ax, ay, ae in zip(a, b, c, strict=True)]
     vm, wm = profile.v_max_mps, profile.w_max_radps
     z0x, z0y = sv * v0, sw * w0
-    found = _nearest_in(gx, gy, e, z0x, z0y)
+    found = _nearest_in(rows, z0x, z0y)
     if found is not None and abs(found[0]) <= sv * vm and abs(found[1]) <= sw * wm:
         return found[0] / sv, found[1] / sw
-    gx += [1.0 / sv, -1.0 / sv, 0.0, 0.0]
-    gy += [0.0, 0.0, 1.0 / sw, -1.0 / sw]
-    e += [-vm, -vm, -wm, -wm]
-    found = _nearest_in(gx, gy, e, z0x, z0y)
+    rows += [(isv, 0.0, -vm), (-isv, 0.0, -vm), (0.0, isw, -wm), (0.0, -isw, -wm)]
+    found = _nearest_in(rows, z0x, z0y)
     return None if found is None else (found[0] / sv, found[1] / sw)
 
 
 def _nearest_in(
-    gx: list[float], gy: list[float], e: list[float], z0x: float, z0y: float
+    rows: list[tuple[float, float, float]], z0x: float, z0y: float
 ) -> tuple[float, float] | None:
-    """The point of {z : gx zx + gy zy >= e} nearest to z0 (Euclidean), or None when no
-    candidate is feasible. A few rows (the working set): plain Python beats numpy's per-call
-    cost here."""
-    rows: list[int] = []
-    bad: list[int] = []  # the rows z0 violates
-    # (gx, gy, e, tolerance) of each row, for the feasibility tests.
-    checks: list[tuple[float, float, float, float]] = []
-    for i, (ax, ay, ae) in enumerate(zip(gx, gy, e, strict=True)):
-        if ax * ax + ay * ay > _SAME:
-            rows.append(i)
-            checks.append((ax, ay, ae, -_TOL * (1.0 + abs(ae))))
-            if ax * z0x + ay * z0y - ae < 0.0:
-                bad.append(i)
+    """The point of {z : gx zx + gy zy >= e} nearest to z0 (Euclidean; ``rows``: (gx, gy, e)),
+    or None when no candidate is feasible. A few rows (the working set): plain Python beats
+    numpy's per-call cost here."""
+    # (gx, gy, e, tolerance) of each usable row, for the feasibility tests.
+    checks = [
+        (ax, ay, ae, -_TOL * (1.0 + abs(ae))) for ax, ay, ae in rows if ax * ax + ay * ay > _SAME
+    ]
+    bad = [i for i, (ax, ay, ae, _) in enumerate(checks) if ax * z0x + ay * z0y - ae < 0.0]
     if not bad:
         return z0x, z0y
 
@@ -1056,8 +1082,8 @@ def _nearest_in(
 
     # One line: the projection onto a violated row, optimal whenever feasible (KKT).
     for i in bad:
-        ax, ay = gx[i], gy[i]
-        step = (e[i] - ax * z0x - ay * z0y) / (ax * ax + ay * ay)
+        ax, ay, ae, _ = checks[i]
+        step = (ae - ax * z0x - ay * z0y) / (ax * ax + ay * ay)
         zx, zy = z0x + step * ax, z0y + step * ay
         if feasible(zx, zy):
             return zx, zy
@@ -1065,15 +1091,18 @@ def _nearest_in(
     # optimum at the command itself); the feasible one nearest the command.
     best: tuple[float, float] | None = None
     best_d2 = math.inf
+    violated = set(bad)
     for i in bad:
-        for j in rows:
-            if j == i or (j in bad and j < i):
+        gxi, gyi, ei, _ = checks[i]
+        bound_i = _SAME * math.hypot(gxi, gyi)
+        for j, (gxj, gyj, ej, _) in enumerate(checks):
+            if j == i or (j < i and j in violated):
                 continue
-            det = gx[i] * gy[j] - gy[i] * gx[j]
-            if abs(det) <= _SAME * math.hypot(gx[i], gy[i]) * math.hypot(gx[j], gy[j]):
+            det = gxi * gyj - gyi * gxj
+            if abs(det) <= bound_i * math.hypot(gxj, gyj):
                 continue
-            zx = (e[i] * gy[j] - e[j] * gy[i]) / det
-            zy = (gx[i] * e[j] - gx[j] * e[i]) / det
+            zx = (ei * gyj - ej * gyi) / det
+            zy = (gxi * ej - gxj * ei) / det
             d2 = (zx - z0x) ** 2 + (zy - z0y) ** 2
             if d2 < best_d2 and feasible(zx, zy):
                 best, best_d2 = (zx, zy), d2
