@@ -1049,43 +1049,38 @@ def _project(
     Solved in z = (sv v, sw w), where the distance is Euclidean (rows a / sv, b / sw, c); the
     box's rows join only when the answer without them leaves it."""
     isv, isw = 1.0 / sv, 1.0 / sw
-    rows = [(ax * isv, ay * isw, ae) for ax, ay, ae in zip(a, b, c, strict=True)]
+    checks: list[tuple[float, float, float, float]] = []  # (gx, gy, e, tolerance) of each row
+    for ax, ay, ae in zip(a, b, c, strict=True):
+        gx, gy = ax * isv, ay * isw
+        if gx * gx + gy * gy > _SAME:  # a row with no normal cannot bind
+            checks.append((gx, gy, ae, -_TOL * (1.0 + abs(ae))))
     vm, wm = profile.v_max_mps, profile.w_max_radps
     z0x, z0y = sv * v0, sw * w0
-    found = _nearest_in(rows, z0x, z0y)
+    found = _nearest_in(checks, z0x, z0y)
     if found is not None and abs(found[0]) <= sv * vm and abs(found[1]) <= sw * wm:
         return found[0] / sv, found[1] / sw
-    rows += [(isv, 0.0, -vm), (-isv, 0.0, -vm), (0.0, isw, -wm), (0.0, -isw, -wm)]
-    found = _nearest_in(rows, z0x, z0y)
+    low_v, low_w = -_TOL * (1.0 + abs(-vm)), -_TOL * (1.0 + abs(-wm))
+    checks += [(isv, 0.0, -vm, low_v), (-isv, 0.0, -vm, low_v)]
+    checks += [(0.0, isw, -wm, low_w), (0.0, -isw, -wm, low_w)]
+    found = _nearest_in(checks, z0x, z0y)
     return None if found is None else (found[0] / sv, found[1] / sw)
 
 
 def _nearest_in(
-    rows: list[tuple[float, float, float]], z0x: float, z0y: float
+    checks: list[tuple[float, float, float, float]], z0x: float, z0y: float
 ) -> tuple[float, float] | None:
-    """The point of {z : gx zx + gy zy >= e} nearest to z0 (Euclidean; ``rows``: (gx, gy, e)),
-    or None when no candidate is feasible. A few rows (the working set): plain Python beats
-    numpy's per-call cost here."""
-    # (gx, gy, e, tolerance) of each usable row, for the feasibility tests.
-    checks = [
-        (ax, ay, ae, -_TOL * (1.0 + abs(ae))) for ax, ay, ae in rows if ax * ax + ay * ay > _SAME
-    ]
+    """The point of {z : gx zx + gy zy >= e} nearest to z0 (Euclidean; ``checks``: (gx, gy, e,
+    the tolerance of the feasibility test) of each row), or None when no candidate is
+    feasible. A few rows (the working set): plain Python beats numpy's per-call cost here."""
     bad = [i for i, (ax, ay, ae, _) in enumerate(checks) if ax * z0x + ay * z0y - ae < 0.0]
     if not bad:
         return z0x, z0y
-
-    def feasible(zx: float, zy: float) -> bool:  # a loop: all() over a generator costs more
-        for ax, ay, ae, low in checks:  # noqa: SIM110
-            if not ax * zx + ay * zy - ae >= low:
-                return False
-        return True
-
     # One line: the projection onto a violated row, optimal whenever feasible (KKT).
     for i in bad:
         ax, ay, ae, _ = checks[i]
         step = (ae - ax * z0x - ay * z0y) / (ax * ax + ay * ay)
         zx, zy = z0x + step * ax, z0y + step * ay
-        if feasible(zx, zy):
+        if _feasible(checks, zx, zy):
             return zx, zy
     # Two lines: a vertex, one of whose rows the command violates (else KKT would put the
     # optimum at the command itself); the feasible one nearest the command.
@@ -1104,9 +1099,17 @@ def _nearest_in(
             zx = (ei * gyj - ej * gyi) / det
             zy = (gxi * ej - gxj * ei) / det
             d2 = (zx - z0x) ** 2 + (zy - z0y) ** 2
-            if d2 < best_d2 and feasible(zx, zy):
+            if d2 < best_d2 and _feasible(checks, zx, zy):
                 best, best_d2 = (zx, zy), d2
     return best
+
+
+def _feasible(checks: list[tuple[float, float, float, float]], zx: float, zy: float) -> bool:
+    """z meets every row to its tolerance (a loop: all() over a generator costs more)."""
+    for ax, ay, ae, low in checks:  # noqa: SIM110
+        if not ax * zx + ay * zy - ae >= low:
+            return False
+    return True
 
 
 def _stop_and_turn(
