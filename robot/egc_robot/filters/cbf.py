@@ -114,7 +114,7 @@ import enum
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
-from typing import NamedTuple
+from typing import Literal, NamedTuple, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -376,9 +376,12 @@ def cbf_filter(
         return _stop(CbfCase.NO_POINTS_UNKNOWN, v0, w0, params, tau, k_now)
 
     shape = _shape(profile.footprint)
+    q_max = shape.reach
+    turn_now = q_max * (w_now if w_now >= 0.0 else -w_now)
     scene = _Scene(
         profile, params, v0, w0, v_now, w_now, k_now, k_cmd, shape.x_back, shape.x_front,
-        shape.reach, shape,
+        q_max, shape, k_now * ((0.0 if v_now < 0.0 else v_now) + turn_now),
+        k_now * ((0.0 if -v_now < 0.0 else -v_now) + turn_now),
     )  # fmt: skip
     # Rows are built for the points some command within a "cover" could approach too fast:
     # first the command's own (from a standstill to it: slowing down needs no more points; a
@@ -394,20 +397,20 @@ def cbf_filter(
         max(v0, 0.0),
         min(abs(w0) + _COVER_W * profile.w_max_radps, profile.w_max_radps),
     )
-    reach = scene.points_in_reach(pts, cover[:2], cover[2], quiet=(v0, abs(w0)))
+    reach = scene.points_in_reach(pts, cover, quiet=True)
     if reach is None:
         case = CbfCase.NO_POINTS_FREE if pts.count == 0 else CbfCase.CLEAR
         return CbfResult(
             v0, w0, False, case, params.margin_m, tau, k_now, 0, 0, None, math.inf, ahead
         )
-    approach = scene.approach(*reach)
-    rows = None if scene.keeps_clear(approach) else scene.rows(approach)
-    if rows is None or rows.worst_for_command <= _TOL:
+    first = scene.rows(*reach, clear_test=True)
+    if isinstance(first, _Clear) or first.worst_for_command <= _TOL:
         # The command keeps every barrier: unchanged, to the bit.
         return CbfResult(
-            v0, w0, False, CbfCase.CLEAR, params.margin_m, tau, k_now, approach.sd.size, 0,
-            None, approach.nearest, ahead,
+            v0, w0, False, CbfCase.CLEAR, params.margin_m, tau, k_now, first.n, 0, None,
+            float(first.nearest), ahead,
         )  # fmt: skip
+    rows = first
     sv = math.sqrt(params.weight_v) / profile.v_max_mps  # z = (sv v, sw w): Euclidean QP
     sw = math.sqrt(params.weight_w) / profile.w_max_radps
     rounds_total = 0
@@ -427,9 +430,9 @@ def cbf_filter(
                 max(v0, min(profile.v_max_mps, v0 + norm0 / sv)),
                 max(abs(w0), min(profile.w_max_radps, abs(w0) + norm0 / sw)),
             )
-        wider = scene.points_in_reach(pts, cover[:2], cover[2])
+        wider = scene.points_in_reach(pts, cover)
         assert wider is not None  # it holds the command's points
-        rows = scene.rows(scene.approach(*wider))
+        rows = scene.rows(*wider)
     # A stop computed as the projection onto a line through the origin comes out as 1e-17.
     v_out = 0.0 if abs(v_out) <= _SAME else v_out
     w_out = 0.0 if abs(w_out) <= _SAME else w_out
@@ -437,7 +440,7 @@ def cbf_filter(
     modified = bool(v_out != v0 or w_out != w0)
     return CbfResult(
         v_out, w_out, modified, case, params.margin_m, tau, k_now, rows.n, rounds_total, found,
-        rows.nearest, ahead,
+        float(rows.nearest), ahead,
     )  # fmt: skip
 
 
@@ -470,28 +473,18 @@ class _Working(NamedTuple):
         )  # fmt: skip
 
 
-class _Approach(NamedTuple):
-    """What the command's CLEAR test and the rows share (``_Scene.approach``): the points'
-    geometry, each row's normal (a, b), the velocities of the footprint's nearest points and
-    how fast the command and the current motion approach each point."""
+class _Clear(NamedTuple):
+    """``_Scene.rows``' answer when the command provably keeps every row: how many points were
+    in reach and the smallest sd_i, all a CLEAR result reports."""
 
-    points: FloatArray  # (n, 2): the scan points in reach, then the unseen edges' points
-    n_scan: int  # the first n_scan points are scan points, the rest unseen edges
-    sd: FloatArray
-    normal: ComplexArray  # n_i as n_x + i n_y
-    nearest: float  # min sd_i
-    abc: FloatArray  # (3, n): a = -n_x and b filled in, c for ``_Scene.rows``
-    u_ref: FloatArray  # u_i(v0, w0) and its positive part
-    up_ref: FloatArray
-    vel_ref: ComplexArray | None  # q_i's velocity under (v0, w0); None when w0 = 0 (it is v0)
-    up_now: FloatArray | None  # u_i(v_now, w_now)^+ (up_ref itself when the same), None at rest
-    vel_now: ComplexArray | None
+    n: int
+    nearest: float
 
 
 class _Rows(NamedTuple):
     """Every point's half-plane a v + b w >= c, the tighter of its (S) and (C)."""
 
-    points: FloatArray  # (n, 2) as ``_Approach.points``
+    points: FloatArray  # (n, 2): the scan points in reach, then the unseen edges' points
     n_scan: int
     n: int
     sd: FloatArray
@@ -554,18 +547,21 @@ class _Scene(NamedTuple):
     x_front: float
     q_max: float
     shape: _Shape
+    # K_now times the current motion's largest approach ahead and behind (m): (S)'s part of
+    # ``_reach_sd``, the same for every cover.
+    now_f: float
+    now_b: float
 
     def points_in_reach(
         self,
         pts: ObstaclePoints,
-        v_range: tuple[float, float],
-        w_bound: float,
-        quiet: tuple[float, float] | None = None,
+        cover: tuple[float, float, float],
+        quiet: bool = False,
     ) -> tuple[FloatArray, int, list[tuple[float, float, float]]] | None:
         """The points (an (m, 2) array of x, y), how many are scan points, and the unseen
-        edges, that a command with v in ``v_range`` and |w| <= ``w_bound`` could approach faster
-        than their barriers allow; None when there is none, or when ``quiet`` = (v, |w|) of the
-        command itself could approach none of them too fast (then nothing changes it).
+        edges, that a command of the ``cover`` (v_min <= v <= v_max, |w| <= w_bound) could
+        approach faster than their barriers allow; None when there is none, or, ``quiet``,
+        when the command itself could approach none of them too fast (then nothing changes it).
 
         A point farther from the footprint than reach_sd has slack in (S) and (C):
         (S) alpha (sd - margin - K u_now) >= u and (C) alpha (sd - margin) >= u (1 + alpha K)
@@ -573,14 +569,16 @@ class _Scene(NamedTuple):
         """
         x_back, x_front, q_max = self.x_back, self.x_front, self.q_max
         seen_ahead, seen_behind = pts.seen_ahead_m, pts.seen_behind_m
-        reach_f, reach_b = self._reach_sd(v_range[0], v_range[1], w_bound)
-        if quiet is not None:
-            quiet_f, quiet_b = self._reach_sd(quiet[0], quiet[0], quiet[1])
+        reach_f, reach_b = self._reach_sd(*cover)
+        if quiet:
+            v0, w0 = self.v0, self.w0
+            quiet_f, quiet_b = self._reach_sd(v0, v0, w0 if w0 >= 0.0 else -w0)
             if not (seen_ahead - x_front < quiet_f or seen_behind + x_back < quiet_b):
                 if pts.count == 0:
                     return None
                 index = pts.prepared_index
-                r2_min = index.r2_sorted[0] if index is not None else _min(pts.r2)
+                r2 = pts.r2
+                r2_min = index.r2_sorted[0] if index is not None else r2[r2.argmin()]
                 quiet_r = q_max + (quiet_b if quiet_b > quiet_f else quiet_f)
                 if r2_min > quiet_r * quiet_r:
                     return None
@@ -605,33 +603,64 @@ class _Scene(NamedTuple):
     def _reach_sd(self, v_min: float, v_max: float, w_bound: float) -> tuple[float, float]:
         """How far from the footprint (m) a point ahead and a point behind can have its barrier
         violated by a command with v in [``v_min``, ``v_max``] and |w| <= ``w_bound``."""
-        p, alpha, q_max = self.params, self.params.alpha_per_s, self.q_max
-        turn = q_max * w_bound
-        w_now, v_now, v_lo, v_hi = self.w_now, self.v_now, -v_min, v_max
-        turn_now = q_max * (w_now if w_now >= 0.0 else -w_now)
+        p, k, f_now, b_now = self.params, self.k_cmd, self.now_f, self.now_b
+        turn, v_lo = self.q_max * w_bound, -v_min
         # max(a, b) written as b if b > a else a (the builtin's result, without its call).
-        u_f = (0.0 if v_hi < 0.0 else v_hi) + turn
+        u_f = (0.0 if v_max < 0.0 else v_max) + turn
         u_b = (0.0 if v_lo < 0.0 else v_lo) + turn
-        s_f = (0.0 if v_now < 0.0 else v_now) + turn_now
-        s_b = (0.0 if -v_now < 0.0 else -v_now) + turn_now
-        f_cmd, f_now = u_f * self.k_cmd, self.k_now * s_f
-        b_cmd, b_now = u_b * self.k_cmd, self.k_now * s_b
+        f_cmd, b_cmd, margin, alpha = u_f * k, u_b * k, p.margin_m, p.alpha_per_s
         return (
-            p.margin_m + u_f / alpha + (f_now if f_now > f_cmd else f_cmd),
-            p.margin_m + u_b / alpha + (b_now if b_now > b_cmd else b_cmd),
+            margin + u_f / alpha + (f_now if f_now > f_cmd else f_cmd),
+            margin + u_b / alpha + (b_now if b_now > b_cmd else b_cmd),
         )
 
-    def approach(
-        self, xy: FloatArray, n_scan: int, unseen: list[tuple[float, float, float]]
-    ) -> _Approach:
-        """Each point's geometry (``_geometry``; the unseen edges as walls across the axis),
-        its row's normal (a, b) = (-n_x, n_x q_y - n_y q_x), and the approach speeds
-        u_i = n_x v - b_i w under the command and the current motion (their positive parts).
+    @overload
+    def rows(
+        self,
+        xy: FloatArray,
+        n_scan: int,
+        unseen: list[tuple[float, float, float]],
+        clear_test: Literal[False] = False,
+    ) -> _Rows: ...
+
+    @overload
+    def rows(
+        self,
+        xy: FloatArray,
+        n_scan: int,
+        unseen: list[tuple[float, float, float]],
+        clear_test: Literal[True],
+    ) -> _Rows | _Clear: ...
+
+    def rows(
+        self,
+        xy: FloatArray,
+        n_scan: int,
+        unseen: list[tuple[float, float, float]],
+        clear_test: bool = False,
+    ) -> _Rows | _Clear:
+        """The half-plane of each point (module docstring), the tighter of its (S) and (C).
 
         On the few dozen points in reach numpy's cost per call, not per element, is the time:
-        each quantity is one call, written where it is read."""
+        each quantity is one call, written where it is read, in one pass:
+
+        1. each point's sd_i, n_i and q_i (``_geometry``; the unseen edges as walls across the
+           axis), its row's normal (a, b) = (-n_x, n_x q_y - n_y q_x), and the approach speeds
+           u_i = n_x v - b_i w = -(a v + b w) under the command and the current motion;
+        2. with ``clear_test``, ``_Clear`` when the command provably keeps every row, a test
+           cheaper than the rows for the common case (careful driving: points in reach, none
+           approached too fast): omega_i <= 1, creep >= 0 and K_now <= K_cmd make
+           u_ref^+ + alpha K_cmd max(u_ref^+, u_now^+) <= alpha (sd_i - margin) sufficient for
+           (S) and (C). Its rounding (~1e-15) is far inside the rows' tolerance ``_TOL``: it
+           never says CLEAR where the rows would not (``test_cbf``: it agrees with them);
+        3. omega_i, the creep (its calls skipped when no row can creep), (S), (C) and c."""
+        p, alpha, profile = self.params, self.params.alpha_per_s, self.profile
         v0, w0, v_now, w_now = self.v0, self.w0, self.v_now, self.w_now
-        sd, normal, q, nearest = _geometry(xy, self.shape)
+        box = self.shape.box
+        if box is not None and len(xy):
+            sd, normal, q, nearest = _box_geometry(xy, box)
+        else:
+            sd, normal, q, nearest = _geometry(xy, self.shape)
         points = xy
         if unseen:
             # A wall across the axis where the laser stopped seeing, met first by the
@@ -641,54 +670,40 @@ class _Scene(NamedTuple):
             normal = np.concatenate((normal, [complex(s) for s, _, _ in unseen]))
             q = np.concatenate((q, [complex(s * ext) for s, _, ext in unseen]))
             nearest = _min(sd)
-        nx, ny, qx, qy = normal.real, normal.imag, q.real, q.imag
-        abc = np.empty((3, sd.size))
+        n = sd.size
+        nx = normal.real
+        abc = np.empty((3, n))
         ab = abc[:2]
         np.negative(nx, out=abc[0])
-        np.subtract(nx * qy, ny * qx, out=abc[1])
-        vel_ref, u_ref = _velocity(v0, w0, q, ab)
+        np.subtract(nx * q.imag, normal.imag * q.real, out=abc[1])
+        u_ref = np.array((-v0, -w0)).dot(ab)
         up_ref = np.maximum(u_ref, _ZERO)
-        up_now = vel_now = None
+        up_now: FloatArray | None = None  # None at rest
         if v_now == v0 and w_now == w0:  # a replay, a steady cycle: the same speeds twice
             if v_now or w_now:
-                up_now, vel_now = up_ref, vel_ref
+                up_now = up_ref
         elif v_now or w_now:
-            vel_now, u_now = _velocity(v_now, w_now, q, ab)
-            up_now = np.maximum(u_now, _ZERO)
-        return _Approach(
-            points, n_scan, sd, normal, nearest, abc, u_ref, up_ref, vel_ref, up_now, vel_now
-        )  # fmt: skip
-
-    def keeps_clear(self, ap: _Approach) -> bool:
-        """True when the command provably keeps every row, a test cheaper than the rows for
-        the common case (careful driving: points in reach, none approached too fast).
-
-        omega_i <= 1, creep >= 0 and K_now <= K_cmd make
-        u_ref^+ + alpha K_cmd max(u_ref^+, u_now^+) <= alpha (sd_i - margin) sufficient for
-        (S) and (C) (module docstring), so the rows' shortfalls are <= 0 where it holds. Its
-        rounding (~1e-15) is far inside the rows' tolerance ``_TOL``: it never says CLEAR
-        where the rows would not (``test_cbf``: it agrees with them)."""
-        p, k = self.params, self.k_cmd
-        up, up_now = ap.up_ref, ap.up_now
-        # Divided by alpha: u_ref^+ / alpha + K max(u_ref^+, u_now^+) - sd <= -margin.
-        if up_now is None or up_now is up:
-            need = np.multiply(up, 1.0 / p.alpha_per_s + k)
-        else:
-            need = np.maximum(up, up_now)
-            need *= k
-            need += up * (1.0 / p.alpha_per_s)
-        need -= ap.sd
-        return bool(need[need.argmax()] <= -p.margin_m)
-
-    def rows(self, ap: _Approach) -> _Rows:
-        """The half-plane of each point (module docstring): the tighter of its (S) and (C);
-        the creep's calls are skipped when no row can creep."""
-        p, alpha, profile = self.params, self.params.alpha_per_s, self.profile
-        v0, w0, sd, abc = self.v0, self.w0, ap.sd, ap.abc
+            up_now = np.maximum(np.array((-v_now, -w_now)).dot(ab), _ZERO)
+        # bounds[1] = alpha (margin - sd) for now (the clip by -creep comes below).
+        bounds = np.empty((2, n))
+        room = np.multiply(sd, -alpha, out=bounds[1])
+        room += alpha * p.margin_m
+        if clear_test:
+            ak = alpha * self.k_cmd
+            if up_now is None or up_now is up_ref:
+                need = np.multiply(up_ref, 1.0 + ak)
+            else:
+                need = np.maximum(up_ref, up_now)
+                need *= ak
+                need += up_ref
+            need += room
+            if need[need.argmax()] <= 0.0:
+                return _Clear(n, nearest)
         # How squarely each point lies in the commanded (current) motion's path (omega).
-        omega_cmd = _omega(ap.up_ref, v0, ap.vel_ref)
+        omega_cmd = _omega(up_ref, v0, w0, q)
         neg_creep: FloatArray | None = None  # None: -0.0 for every row
-        if not (ap.nearest > 0.0 and _min(np.abs(ap.normal.real)) >= CREEP_BELOW):
+        abs_nx = np.abs(nx)
+        if not (nearest > 0.0 and abs_nx[abs_nx.argmin()] >= CREEP_BELOW):
             # kappa = CREEP_PER_S (1 - U / (CREEP_BELOW v_max))^+ as one dot product of the
             # constants with (|n_x|, |b|): U = |n_x| v_max + |b| w_max. (Else no row creeps:
             # |n_x| >= CREEP_BELOW makes U >= CREEP_BELOW v_max, so every kappa is 0 (to
@@ -696,7 +711,7 @@ class _Scene(NamedTuple):
             # without its calls.)
             scale = CREEP_PER_S / (CREEP_BELOW * profile.v_max_mps)
             weights = np.array((scale * profile.v_max_mps, scale * profile.w_max_radps))
-            kappa = np.subtract(_CREEP_PER_S, weights.dot(np.abs(abc[:2])))
+            kappa = np.subtract(_CREEP_PER_S, weights.dot(np.abs(ab)))
             creep = np.maximum(kappa, _ZERO, out=kappa)
             creep *= np.maximum(sd, _ZERO)
             neg_creep = np.negative(creep, out=creep)
@@ -704,18 +719,15 @@ class _Scene(NamedTuple):
         # omega K u^+ at the current speed; bounds[1] = -max(alpha (sd - margin), creep), (C)'s
         # c before its division by the gain. Written min(alpha (margin - sd) [+ alpha m_extra],
         # -creep), with alpha m_extra = (alpha K omega) u^+, whose first factor is the gain's.
-        bounds = np.empty((2, sd.size))
-        room = np.multiply(sd, -alpha, out=bounds[1])
-        room += alpha * p.margin_m
         ak_omega: FloatArray | None = None
         alpha_m_extra: FloatArray | None = None
-        if ap.up_now is not None:
-            if ap.up_now is ap.up_ref:
+        if up_now is not None:
+            if up_now is up_ref:
                 omega_now = omega_cmd
             else:
-                omega_now = _omega(ap.up_now, self.v_now, ap.vel_now)
+                omega_now = _omega(up_now, v_now, w_now, q)
             ak_omega = (alpha * self.k_now) * omega_now
-            alpha_m_extra = ak_omega * ap.up_now
+            alpha_m_extra = ak_omega * up_now
             np.add(room, alpha_m_extra, out=bounds[0])
             if omega_now is not omega_cmd or self.k_now != self.k_cmd:
                 ak_omega = None
@@ -735,10 +747,10 @@ class _Scene(NamedTuple):
         np.divide(bounds[1], gain, out=c)
         np.maximum(bounds[0], c, out=c)
         # The command falls short of each row by c + u (if positive).
-        short = c + ap.u_ref
+        short = c + u_ref
         return _Rows(
-            ap.points, ap.n_scan, sd.size, sd, abc, short, bounds, gain, alpha_m_extra, alpha,
-            omega_cmd, ap.u_ref, self.k_cmd, p.margin_m, _max(short), ap.nearest, v0, w0,
+            points, n_scan, n, sd, abc, short, bounds, gain, alpha_m_extra, alpha, omega_cmd,
+            u_ref, self.k_cmd, p.margin_m, short[short.argmax()], nearest, v0, w0,
         )  # fmt: skip
 
 
@@ -793,18 +805,16 @@ class _Box:
     def __init__(self, half_l: float, half_w: float) -> None:
         self.half_l, self.half_w = half_l, half_w
         self._high = np.array([[half_l, half_w]])
-        self._tiles = self._repeat(64)
+        self.corners: tuple[int, FloatArray, FloatArray] = (0, _NO_POINTS, _NO_POINTS)
+        self.repeat(64)
 
-    def _repeat(self, m: int) -> tuple[int, FloatArray, FloatArray]:
-        high: FloatArray = np.tile(self._high, (m, 1))
-        return m, -high, high
-
-    def corners(self, m: int) -> tuple[FloatArray, FloatArray]:
-        """The low and the high corner, as (m, 2) arrays."""
-        tiles = self._tiles
-        if tiles[0] < m:
-            tiles = self._tiles = self._repeat(max(m, 2 * tiles[0]))
-        return tiles[1][:m], tiles[2][:m]
+    def repeat(self, m: int) -> tuple[int, FloatArray, FloatArray]:
+        """(rows, low, high): the corners repeated for at least m points (kept in
+        ``corners``, which grows when a scan needs more)."""
+        size = max(m, 2 * self.corners[0])
+        high: FloatArray = np.tile(self._high, (size, 1))
+        self.corners = (size, -high, high)
+        return self.corners
 
 
 class _Shape(NamedTuple):
@@ -847,10 +857,6 @@ def _shape(fp: Footprint) -> _Shape:
 def _min(a: FloatArray) -> float:
     """min of a non-empty array (the element ``argmin`` finds: a reduction costs ~3x)."""
     return float(a[a.argmin()])
-
-
-def _max(a: FloatArray) -> float:
-    return float(a[a.argmax()])
 
 
 def _geometry(
@@ -937,13 +943,19 @@ def _box_geometry(
 ) -> tuple[FloatArray, ComplexArray, ComplexArray, float]:
     """``_geometry`` of the rectangle ``box``, in closed form, on the C-contiguous (m, 2) ``xy``
     (the nearest point q is xy clamped to the corners; p - q as x + i y, a view)."""
-    low, high = box.corners(len(xy))
-    q = np.minimum(np.maximum(xy, low), high)
+    m = len(xy)
+    size, low, high = box.corners
+    if size < m:
+        size, low, high = box.repeat(m)
+    q = np.minimum(np.maximum(xy, low[:m]), high[:m])
     d = np.subtract(xy, q).view(np.complex128).ravel()
     sd = np.abs(d)
-    nearest = _min(sd)
+    nearest = float(sd[sd.argmin()])
     if nearest > 0.0:  # no point inside
-        return sd, _divided(d, sd), q.view(np.complex128).ravel(), nearest
+        normal = np.empty(m, dtype=np.complex128)  # d / sd (``_divided``)
+        np.divide(d.real, sd, out=normal.real)
+        np.divide(d.imag, sd, out=normal.imag)
+        return sd, normal, q.view(np.complex128).ravel(), nearest
     half_l, half_w = box.half_l, box.half_w
     x, y, qx, qy = xy[:, 0], xy[:, 1], q[:, 0], q[:, 1]
     inside = sd <= 0.0
@@ -960,29 +972,18 @@ def _box_geometry(
     return sd, _divided(d, np.where(inside, 1.0, sd)), q.view(np.complex128).ravel(), _min(sd)
 
 
-def _velocity(
-    v: float, w: float, q: ComplexArray, ab: FloatArray
-) -> tuple[ComplexArray | None, FloatArray]:
-    """The velocity v + i w q of each footprint point q (x + i y) under (v, w), None for w = 0
-    (it is v), and the approach speed u = n_x v - b w = -(a v + b w) (``ab``: the rows' a, b).
-    (q times i w is (-w q_y, w q_x) to the bit: each part one product and an exact zero.)"""
-    u: FloatArray = np.array((-v, -w)).dot(ab)
-    if w == 0.0:
-        return None, u
-    vel = q * complex(0.0, w)
-    vel += v
-    return vel, u
-
-
-def _omega(up: FloatArray, v: float, vel: ComplexArray | None) -> FloatArray:
+def _omega(up: FloatArray, v: float, w: float, q: ComplexArray) -> FloatArray:
     """(cos of the angle between n_i and the velocity of q_i under (v, w))^PATH_POWER from
-    u_i^+ (``up``), 0 for points the footprint does not approach: cos = u / |velocity|
-    (``vel``; None for w = 0: then it is v)."""
-    if vel is None:
+    u_i^+ (``up``), 0 for points the footprint does not approach: cos = u / |velocity|, the
+    velocity v + i w q = (v - w q_y, w q_x) (q times i w is (-w q_y, w q_x) to the bit: each
+    part one product and an exact zero)."""
+    if w == 0.0:
         if v == 0.0:
             return np.zeros(up.size)
         cos = up / abs(v)  # u = nx v <= |v|, no overflow, even for a subnormal v
     else:
+        vel = q * complex(0.0, w)
+        vel += v
         speed = np.hypot(vel.real, vel.imag)
         cos = np.divide(up, np.maximum(speed, _SAME_SPEED_0D, out=speed), out=speed)
     np.minimum(cos, _ONE, out=cos)
@@ -1016,7 +1017,7 @@ def _solve(
         v, w = found
         # c - (a v + b w): every row's shortfall (``np.dot`` of a tuple costs twice as much).
         short = np.array((-v, -w, 1.0)).dot(abc)
-        if _max(short) <= _TOL:
+        if short[short.argmax()] <= _TOL:
             return v, w, rounds, CbfCase.SOLVED, working
         add = _most_violated(short, k)
         working = np.concatenate((working, add))
@@ -1026,7 +1027,7 @@ def _solve(
 
 def _most_violated(short: FloatArray, k: int) -> IntArray:
     """Indices of the (at most) ``k`` rows with the largest ``short`` above the tolerance."""
-    if _min(short) > _TOL:  # every row: the same partition without the mask and the indexing
+    if short[short.argmin()] > _TOL:  # every row: the same partition, no mask and indexing
         return (-short).argpartition(k)[:k] if short.size > k else np.arange(short.size)
     bad: IntArray = (short > _TOL).nonzero()[0]
     if bad.size > k:
