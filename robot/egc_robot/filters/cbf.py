@@ -614,6 +614,25 @@ class _Scene(NamedTuple):
             margin + u_b / alpha + (b_now if b_now > b_cmd else b_cmd),
         )
 
+    def _creep_bound(self) -> float:
+        """A distance (m) beyond which no point's creep changes its row (``rows`` skips the
+        creep's calls when every point is farther): the creep is kappa sd^+ <= CREEP_PER_S sd^+,
+        and a point that can creep (U < CREEP_BELOW v_max) is approached by the current motion
+        at u_now <= U max(|v_now| / v_max, |w_now| / w_max) = CREEP_BELOW v_max s_now, so its
+        slack in (S), alpha (sd - margin) - alpha K_now omega u_now^+ (and so in (C)), is
+        above its creep where (alpha - CREEP_PER_S) sd > alpha (margin + K_now CREEP_BELOW
+        v_max s_now): min(bound, -creep) is then min(bound, -0.0) to the bit. Widened far
+        beyond any rounding; inf when alpha <= CREEP_PER_S."""
+        p, profile = self.params, self.profile
+        alpha = p.alpha_per_s
+        if alpha <= CREEP_PER_S:
+            return math.inf
+        v_max = profile.v_max_mps
+        v_now, w_now = abs(self.v_now), abs(self.w_now)
+        s_now = max(v_now / v_max, w_now / profile.w_max_radps)
+        bound = alpha * (p.margin_m + self.k_now * CREEP_BELOW * v_max * s_now)
+        return bound / (alpha - CREEP_PER_S) * (1.0 + 1e-9) + 1e-9
+
     @overload
     def rows(
         self,
@@ -702,13 +721,15 @@ class _Scene(NamedTuple):
         # How squarely each point lies in the commanded (current) motion's path (omega).
         omega_cmd = _omega(up_ref, v0, w0, q)
         neg_creep: FloatArray | None = None  # None: -0.0 for every row
-        abs_nx = np.abs(nx)
-        if not (nearest > 0.0 and abs_nx[abs_nx.argmin()] >= CREEP_BELOW):
+        no_creep = nearest > self._creep_bound() or (
+            nearest > 0.0 and _min(np.abs(nx)) >= CREEP_BELOW
+        )
+        if not no_creep:
             # kappa = CREEP_PER_S (1 - U / (CREEP_BELOW v_max))^+ as one dot product of the
-            # constants with (|n_x|, |b|): U = |n_x| v_max + |b| w_max. (Else no row creeps:
-            # |n_x| >= CREEP_BELOW makes U >= CREEP_BELOW v_max, so every kappa is 0 (to
-            # rounding) and, with every sd > 0, every creep +0.0: the general form's numbers
-            # without its calls.)
+            # constants with (|n_x|, |b|): U = |n_x| v_max + |b| w_max. (Else the creep changes
+            # no row: every point beyond ``_creep_bound``, or |n_x| >= CREEP_BELOW for every
+            # row, which makes U >= CREEP_BELOW v_max, so every kappa is 0 (to rounding) and,
+            # with every sd > 0, every creep +0.0: the general form's numbers without its calls.)
             scale = CREEP_PER_S / (CREEP_BELOW * profile.v_max_mps)
             weights = np.array((scale * profile.v_max_mps, scale * profile.w_max_radps))
             kappa = np.subtract(_CREEP_PER_S, weights.dot(np.abs(ab)))
