@@ -160,7 +160,7 @@ def _constant(value: float) -> FloatArray:
 
 _ZERO, _NEG_ZERO, _ONE = _constant(0.0), _constant(-0.0), _constant(1.0)
 _CREEP_PER_S = _constant(CREEP_PER_S)
-_SAME_SPEED_0D = _constant(_SAME_SPEED)
+_SAME_SPEED_0D, _TOL_0D = _constant(_SAME_SPEED), _constant(_TOL)
 _MAX_REPORTED = 64  # active constraints kept in a result (the view and the tool show them)
 
 
@@ -588,7 +588,7 @@ class _Scene(NamedTuple):
             # One threshold for points ahead and behind: the few more rows a split by side
             # would leave out cost less than its two numpy calls over the whole scan.
             far = q_max + (reach_b if reach_b > reach_f else reach_f)
-            xy = pts.xy.compress(pts.r2 <= far * far, axis=0)  # cheaper than xy[mask]
+            xy = pts.xy.compress(pts.r2 <= far * far, 0)  # cheaper than xy[mask]
             n_scan = len(xy)
         # (direction, how far it saw, the footprint's extent that way)
         unseen: list[tuple[float, float, float]] = []
@@ -1026,7 +1026,7 @@ def _solve(
     working = _most_violated(short, k)
     for rounds in range(1, _MAX_ROUNDS + 1):
         # Only the working rows become Python floats.
-        a, b, c = abc.take(working, axis=1).tolist()
+        a, b, c = abc.take(working, 1).tolist()
         found = _project(a, b, c, v0, w0, sv, sw, profile)
         if found is None:
             break
@@ -1043,10 +1043,10 @@ def _solve(
 
 def _most_violated(short: FloatArray, k: int) -> IntArray:
     """Indices of the (at most) ``k`` rows with the largest ``short`` above the tolerance."""
-    if short[short.argmin()] > _TOL:  # every row: the same partition, no mask and indexing
-        return (-short).argpartition(k)[:k] if short.size > k else np.arange(short.size)
-    bad: IntArray = (short > _TOL).nonzero()[0]
+    bad: IntArray = (short > _TOL_0D).nonzero()[0]
     if bad.size > k:
+        if bad.size == short.size:  # every row: the same partition without the indexing
+            return (-short).argpartition(k)[:k]
         bad = bad.take((-short.take(bad)).argpartition(k)[:k])
     return bad
 
@@ -1065,31 +1065,39 @@ def _project(
     the box, or None when none of the candidates is feasible (empty polygon, through rounding).
     Solved in z = (sv v, sw w), where the distance is Euclidean (rows a / sv, b / sw, c); the
     box's rows join only when the answer without them leaves it."""
-    isv, isw = 1.0 / sv, 1.0 / sw
+    isv, isw, tol = 1.0 / sv, 1.0 / sw, -_TOL
+    z0x, z0y = sv * v0, sw * w0
     checks: list[tuple[float, float, float, float]] = []  # (gx, gy, e, tolerance) of each row
+    bad: list[int] = []  # the rows z0 violates (their places in checks)
     for ax, ay, ae in zip(a, b, c, strict=True):
         gx, gy = ax * isv, ay * isw
         if gx * gx + gy * gy > _SAME:  # a row with no normal cannot bind
-            checks.append((gx, gy, ae, -_TOL * (1.0 + abs(ae))))
+            if gx * z0x + gy * z0y < ae:
+                bad.append(len(checks))
+            checks.append((gx, gy, ae, tol * (1.0 + (ae if ae >= 0.0 else -ae))))
     vm, wm = profile.v_max_mps, profile.w_max_radps
-    z0x, z0y = sv * v0, sw * w0
-    found = _nearest_in(checks, z0x, z0y)
+    found = _nearest_in(checks, bad, z0x, z0y)
     if found is not None and abs(found[0]) <= sv * vm and abs(found[1]) <= sw * wm:
         return found[0] / sv, found[1] / sw
     low_v, low_w = -_TOL * (1.0 + abs(-vm)), -_TOL * (1.0 + abs(-wm))
-    checks += [(isv, 0.0, -vm, low_v), (-isv, 0.0, -vm, low_v)]
-    checks += [(0.0, isw, -wm, low_w), (0.0, -isw, -wm, low_w)]
-    found = _nearest_in(checks, z0x, z0y)
+    for gx, gy, ae, low in (
+        (isv, 0.0, -vm, low_v), (-isv, 0.0, -vm, low_v),
+        (0.0, isw, -wm, low_w), (0.0, -isw, -wm, low_w),
+    ):  # fmt: skip
+        if gx * z0x + gy * z0y - ae < 0.0:
+            bad.append(len(checks))
+        checks.append((gx, gy, ae, low))
+    found = _nearest_in(checks, bad, z0x, z0y)
     return None if found is None else (found[0] / sv, found[1] / sw)
 
 
 def _nearest_in(
-    checks: list[tuple[float, float, float, float]], z0x: float, z0y: float
+    checks: list[tuple[float, float, float, float]], bad: list[int], z0x: float, z0y: float
 ) -> tuple[float, float] | None:
     """The point of {z : gx zx + gy zy >= e} nearest to z0 (Euclidean; ``checks``: (gx, gy, e,
-    the tolerance of the feasibility test) of each row), or None when no candidate is
-    feasible. A few rows (the working set): plain Python beats numpy's per-call cost here."""
-    bad = [i for i, (ax, ay, ae, _) in enumerate(checks) if ax * z0x + ay * z0y - ae < 0.0]
+    the tolerance of the feasibility test) of each row; ``bad``: those z0 violates, in
+    order), or None when no candidate is feasible. A few rows (the working set): plain Python
+    beats numpy's per-call cost here."""
     if not bad:
         return z0x, z0y
     # One line: the projection onto a violated row, optimal whenever feasible (KKT).
@@ -1097,7 +1105,10 @@ def _nearest_in(
         ax, ay, ae, _ = checks[i]
         step = (ae - ax * z0x - ay * z0y) / (ax * ax + ay * ay)
         zx, zy = z0x + step * ax, z0y + step * ay
-        if _feasible(checks, zx, zy):
+        for gx, gy, ge, low in checks:
+            if not gx * zx + gy * zy - ge >= low:
+                break
+        else:  # feasible
             return zx, zy
     # Two lines: a vertex, one of whose rows the command violates (else KKT would put the
     # optimum at the command itself); the feasible one nearest the command.
