@@ -992,7 +992,8 @@ def _omega(up: FloatArray, v: float, w: float, q: ComplexArray) -> FloatArray:
     """(cos of the angle between n_i and the velocity of q_i under (v, w))^PATH_POWER from
     u_i^+ (``up``), 0 for points the footprint does not approach: cos = u / |velocity|, the
     velocity v + i w q = (v - w q_y, w q_x) (q times i w is (-w q_y, w q_x) to the bit: each
-    part one product and an exact zero)."""
+    part one product and an exact zero), its length the modulus of x + i y (``np.abs``: within
+    an ulp of hypot's, at a tenth of hypot's instructions on the real and imaginary views)."""
     if w == 0.0:
         if v == 0.0:
             return np.zeros(up.size)
@@ -1000,7 +1001,7 @@ def _omega(up: FloatArray, v: float, w: float, q: ComplexArray) -> FloatArray:
     else:
         vel = q * complex(0.0, w)
         vel += v
-        speed = np.hypot(vel.real, vel.imag)
+        speed = np.abs(vel)
         cos = np.divide(up, np.maximum(speed, _SAME_SPEED_0D, out=speed), out=speed)
     np.minimum(cos, _ONE, out=cos)
     np.square(cos, out=cos)
