@@ -388,7 +388,7 @@ def test_stop_and_turn_keeps_the_rotation_every_row_allows():
 def test_the_closed_form_projection_is_the_weighted_nearest_feasible_point(rows, cmd):
     a, b, c = (np.array(col, dtype=np.float64) for col in zip(*rows, strict=True))
     sv, sw = 1.0 / JACKAL.v_max_mps, 1.0 / JACKAL.w_max_radps
-    found = _project(a, b, c, *cmd, sv, sw, JACKAL)
+    found = _project(a.tolist(), b.tolist(), c.tolist(), *cmd, sv, sw, JACKAL)
     assert found is not None  # c <= 0: the origin is always feasible
     v, w = found
     assert (a * v + b * w - c >= -1e-7).all()

@@ -111,11 +111,10 @@ Cases, each never less safe than stopping (as EGC's DESIGN 5.9 rules):
 from __future__ import annotations
 
 import enum
-import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
-from typing import NamedTuple
+from typing import Literal, NamedTuple, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -147,7 +146,21 @@ _TOL = 1e-9  # a constraint is met when short of it by no more than this (m/s)
 _SAME = 1e-12
 _SAME_SPEED = 1e-6  # sqrt(_SAME): a point's speed below this counts as this (m/s)
 _EMPTY = np.empty(0)
+_EMPTY_C = np.empty(0, dtype=np.complex128)
 _NO_POINTS = np.empty((0, 2))
+
+
+def _constant(value: float) -> FloatArray:
+    """A read-only 0-d array: as an operand numpy takes it as it is, while it converts a Python
+    float on every call (~0.3 us, on calls of ~0.5 us)."""
+    out = np.array(value)
+    out.setflags(write=False)
+    return out
+
+
+_ZERO, _NEG_ZERO, _ONE = _constant(0.0), _constant(-0.0), _constant(1.0)
+_CREEP_PER_S = _constant(CREEP_PER_S)
+_SAME_SPEED_0D, _TOL_0D = _constant(_SAME_SPEED), _constant(_TOL)
 _MAX_REPORTED = 64  # active constraints kept in a result (the view and the tool show them)
 
 
@@ -284,9 +297,12 @@ class TightRows:
     unseen: npt.NDArray[np.bool_]
 
 
-@dataclass(frozen=True, slots=True)
-class CbfResult:
-    """The filtered command and the intermediates the view, the tool and the tests show."""
+class CbfResult(NamedTuple):
+    """The filtered command and the intermediates the view, the tool and the tests show.
+
+    Immutable and typed like the module's frozen dataclasses, but built on every call: a named
+    tuple is built in one step (a frozen dataclass sets its twelve fields one at a time through
+    ``object.__setattr__``, a few us of the filter's time)."""
 
     v_mps: float
     w_radps: float
@@ -359,12 +375,13 @@ def cbf_filter(
     if pts.count == 0 and not params.no_return_is_free:
         return _stop(CbfCase.NO_POINTS_UNKNOWN, v0, w0, params, tau, k_now)
 
-    sv = math.sqrt(params.weight_v) / profile.v_max_mps  # z = (sv v, sw w): Euclidean QP
-    sw = math.sqrt(params.weight_w) / profile.w_max_radps
     shape = _shape(profile.footprint)
+    q_max = shape.reach
+    turn_now = q_max * (w_now if w_now >= 0.0 else -w_now)
     scene = _Scene(
         profile, params, v0, w0, v_now, w_now, k_now, k_cmd, shape.x_back, shape.x_front,
-        shape.reach, shape,
+        q_max, shape, k_now * ((0.0 if v_now < 0.0 else v_now) + turn_now),
+        k_now * ((0.0 if -v_now < 0.0 else -v_now) + turn_now),
     )  # fmt: skip
     # Rows are built for the points some command within a "cover" could approach too fast:
     # first the command's own (from a standstill to it: slowing down needs no more points; a
@@ -380,18 +397,22 @@ def cbf_filter(
         max(v0, 0.0),
         min(abs(w0) + _COVER_W * profile.w_max_radps, profile.w_max_radps),
     )
-    reach = scene.points_in_reach(pts, cover[:2], cover[2], quiet=(v0, abs(w0)))
+    reach = scene.points_in_reach(pts, cover, quiet=True)
     if reach is None:
         case = CbfCase.NO_POINTS_FREE if pts.count == 0 else CbfCase.CLEAR
         return CbfResult(
             v0, w0, False, case, params.margin_m, tau, k_now, 0, 0, None, math.inf, ahead
         )
-    rows = scene.rows(*reach)
-    if rows.worst_for_command <= _TOL:  # the command keeps every barrier: unchanged, to the bit
+    first = scene.rows(*reach, clear_test=True)
+    if isinstance(first, _Clear) or first.worst_for_command <= _TOL:
+        # The command keeps every barrier: unchanged, to the bit.
         return CbfResult(
-            v0, w0, False, CbfCase.CLEAR, params.margin_m, tau, k_now, rows.n, 0, None,
-            rows.nearest, ahead,
+            v0, w0, False, CbfCase.CLEAR, params.margin_m, tau, k_now, first.n, 0, None,
+            float(first.nearest), ahead,
         )  # fmt: skip
+    rows = first
+    sv = math.sqrt(params.weight_v) / profile.v_max_mps  # z = (sv v, sw w): Euclidean QP
+    sw = math.sqrt(params.weight_w) / profile.w_max_radps
     rounds_total = 0
     for attempt in range(_MAX_COVERS + 1):
         v_out, w_out, rounds, case, working = _solve(
@@ -409,7 +430,7 @@ def cbf_filter(
                 max(v0, min(profile.v_max_mps, v0 + norm0 / sv)),
                 max(abs(w0), min(profile.w_max_radps, abs(w0) + norm0 / sw)),
             )
-        wider = scene.points_in_reach(pts, cover[:2], cover[2])
+        wider = scene.points_in_reach(pts, cover)
         assert wider is not None  # it holds the command's points
         rows = scene.rows(*wider)
     # A stop computed as the projection onto a line through the origin comes out as 1e-17.
@@ -419,7 +440,7 @@ def cbf_filter(
     modified = bool(v_out != v0 or w_out != w0)
     return CbfResult(
         v_out, w_out, modified, case, params.margin_m, tau, k_now, rows.n, rounds_total, found,
-        rows.nearest, ahead,
+        float(rows.nearest), ahead,
     )  # fmt: skip
 
 
@@ -444,19 +465,28 @@ class _Working(NamedTuple):
         gain = rows.gain[point]
         state = rows.bounds[1][point] / gain != c[point]
         scale = np.where(state, 1.0, gain)
+        x, y = rows.points[point].T.copy()
         return TightRows(
-            rows.x[point], rows.y[point], a[point] * scale, b[point] * scale,
+            x, y, a[point] * scale, b[point] * scale,
             np.where(state, c[point], rows.bounds[1][point]), rows.sd[point],
             rows.margins(point, state), state, point >= rows.n_scan,
         )  # fmt: skip
 
 
+class _Clear(NamedTuple):
+    """``_Scene.rows``' answer when the command provably keeps every row: how many points were
+    in reach and the smallest sd_i, all a CLEAR result reports."""
+
+    n: int
+    nearest: float
+
+
 class _Rows(NamedTuple):
     """Every point's half-plane a v + b w >= c, the tighter of its (S) and (C)."""
 
-    x: FloatArray
-    y: FloatArray
-    n_scan: int  # the first n_scan points are scan points, the rest unseen edges
+    points: FloatArray  # (n, 2): the scan points in reach, then the unseen edges' points
+    n_scan: int
+    n: int
     sd: FloatArray
     abc: FloatArray  # (3, n): a = -n_x, b, c of each point's row
     short: FloatArray  # by how much the command falls short of each row (> 0: violated)
@@ -473,10 +503,6 @@ class _Rows(NamedTuple):
     nearest: float
     v0: float  # the command the rows were checked against
     w0: float
-
-    @property
-    def n(self) -> int:
-        return self.x.size
 
     @property
     def a(self) -> FloatArray:
@@ -521,135 +547,206 @@ class _Scene(NamedTuple):
     x_front: float
     q_max: float
     shape: _Shape
+    # K_now times the current motion's largest approach ahead and behind (m): (S)'s part of
+    # ``_reach_sd``, the same for every cover.
+    now_f: float
+    now_b: float
 
     def points_in_reach(
         self,
         pts: ObstaclePoints,
-        v_range: tuple[float, float],
-        w_bound: float,
-        quiet: tuple[float, float] | None = None,
+        cover: tuple[float, float, float],
+        quiet: bool = False,
     ) -> tuple[FloatArray, int, list[tuple[float, float, float]]] | None:
         """The points (an (m, 2) array of x, y), how many are scan points, and the unseen
-        edges, that a command with v in ``v_range`` and |w| <= ``w_bound`` could approach faster
-        than their barriers allow; None when there is none, or when ``quiet`` = (v, |w|) of the
-        command itself could approach none of them too fast (then nothing changes it).
+        edges, that a command of the ``cover`` (v_min <= v <= v_max, |w| <= w_bound) could
+        approach faster than their barriers allow; None when there is none, or, ``quiet``,
+        when the command itself could approach none of them too fast (then nothing changes it).
 
         A point farther from the footprint than reach_sd has slack in (S) and (C):
         (S) alpha (sd - margin - K u_now) >= u and (C) alpha (sd - margin) >= u (1 + alpha K)
         with u the largest approach.
         """
         x_back, x_front, q_max = self.x_back, self.x_front, self.q_max
-        reach_f, reach_b = self._reach_sd(v_range, w_bound)
-        if quiet is not None:
-            quiet_f, quiet_b = self._reach_sd((quiet[0], quiet[0]), quiet[1])
-            unseen_near = (
-                pts.seen_ahead_m - x_front < quiet_f or pts.seen_behind_m + x_back < quiet_b
-            )
-            if not unseen_near:
+        seen_ahead, seen_behind = pts.seen_ahead_m, pts.seen_behind_m
+        reach_f, reach_b = self._reach_sd(*cover)
+        if quiet:
+            v0, w0 = self.v0, self.w0
+            quiet_f, quiet_b = self._reach_sd(v0, v0, w0 if w0 >= 0.0 else -w0)
+            if not (seen_ahead - x_front < quiet_f or seen_behind + x_back < quiet_b):
                 if pts.count == 0:
                     return None
                 index = pts.prepared_index
-                r2_min = index.r2_sorted[0] if index is not None else _min(pts.r2)
-                if r2_min > (q_max + max(quiet_f, quiet_b)) ** 2:
+                r2 = pts.r2
+                r2_min = index.r2_sorted[0] if index is not None else r2[r2.argmin()]
+                quiet_r = q_max + (quiet_b if quiet_b > quiet_f else quiet_f)
+                if r2_min > quiet_r * quiet_r:
                     return None
         xy = _NO_POINTS
-        if pts.count:
+        n_scan = pts.count
+        if n_scan:
             # One threshold for points ahead and behind: the few more rows a split by side
             # would leave out cost less than its two numpy calls over the whole scan.
-            far = q_max + max(reach_f, reach_b)
-            xy = pts.xy.compress(pts.r2 <= far * far, axis=0)  # cheaper than xy[mask]
-        unseen = [  # (direction, how far it saw, the footprint's extent that way)
-            (sign, seen, extent)
-            for sign, seen, extent, room in (
-                (1.0, pts.seen_ahead_m, x_front, reach_f),
-                (-1.0, pts.seen_behind_m, -x_back, reach_b),
-            )
-            if seen - extent < room
-        ]
-        n_scan = len(xy)
+            far = q_max + (reach_b if reach_b > reach_f else reach_f)
+            xy = pts.xy.compress(pts.r2 <= far * far, 0)  # cheaper than xy[mask]
+            n_scan = len(xy)
+        # (direction, how far it saw, the footprint's extent that way)
+        unseen: list[tuple[float, float, float]] = []
+        if seen_ahead - x_front < reach_f:
+            unseen.append((1.0, seen_ahead, x_front))
+        if seen_behind + x_back < reach_b:
+            unseen.append((-1.0, seen_behind, -x_back))
         if n_scan == 0 and not unseen:
             return None
         return xy, n_scan, unseen
 
-    def _reach_sd(self, v_range: tuple[float, float], w_bound: float) -> tuple[float, float]:
+    def _reach_sd(self, v_min: float, v_max: float, w_bound: float) -> tuple[float, float]:
         """How far from the footprint (m) a point ahead and a point behind can have its barrier
-        violated by a command with v in ``v_range`` and |w| <= ``w_bound``."""
-        p, alpha, q_max = self.params, self.params.alpha_per_s, self.q_max
-        turn = q_max * w_bound
-        w_now, v_now, v_lo, v_hi = self.w_now, self.v_now, -v_range[0], v_range[1]
-        turn_now = q_max * (w_now if w_now >= 0.0 else -w_now)
+        violated by a command with v in [``v_min``, ``v_max``] and |w| <= ``w_bound``."""
+        p, k, f_now, b_now = self.params, self.k_cmd, self.now_f, self.now_b
+        turn, v_lo = self.q_max * w_bound, -v_min
         # max(a, b) written as b if b > a else a (the builtin's result, without its call).
-        u_f = (0.0 if v_hi < 0.0 else v_hi) + turn
+        u_f = (0.0 if v_max < 0.0 else v_max) + turn
         u_b = (0.0 if v_lo < 0.0 else v_lo) + turn
-        s_f = (0.0 if v_now < 0.0 else v_now) + turn_now
-        s_b = (0.0 if -v_now < 0.0 else -v_now) + turn_now
-        f_cmd, f_now = u_f * self.k_cmd, self.k_now * s_f
-        b_cmd, b_now = u_b * self.k_cmd, self.k_now * s_b
+        f_cmd, b_cmd, margin, alpha = u_f * k, u_b * k, p.margin_m, p.alpha_per_s
         return (
-            p.margin_m + u_f / alpha + (f_now if f_now > f_cmd else f_cmd),
-            p.margin_m + u_b / alpha + (b_now if b_now > b_cmd else b_cmd),
+            margin + u_f / alpha + (f_now if f_now > f_cmd else f_cmd),
+            margin + u_b / alpha + (b_now if b_now > b_cmd else b_cmd),
         )
 
-    def rows(self, xy: FloatArray, n_scan: int, unseen: list[tuple[float, float, float]]) -> _Rows:
-        """The half-plane of each point (module docstring): the tighter of its (S) and (C).
+    def _creep_bound(self) -> float:
+        """A distance (m) beyond which no point's creep changes its row (``rows`` skips the
+        creep's calls when every point is farther): the creep is kappa sd^+ <= CREEP_PER_S sd^+,
+        and a point that can creep (U < CREEP_BELOW v_max) is approached by the current motion
+        at u_now <= U max(|v_now| / v_max, |w_now| / w_max) = CREEP_BELOW v_max s_now, so its
+        slack in (S), alpha (sd - margin) - alpha K_now omega u_now^+ (and so in (C)), is
+        above its creep where (alpha - CREEP_PER_S) sd > alpha (margin + K_now CREEP_BELOW
+        v_max s_now): min(bound, -creep) is then min(bound, -0.0) to the bit. Widened far
+        beyond any rounding; inf when alpha <= CREEP_PER_S."""
+        p, profile = self.params, self.profile
+        alpha = p.alpha_per_s
+        if alpha <= CREEP_PER_S:
+            return math.inf
+        v_max = profile.v_max_mps
+        v_now, w_now = abs(self.v_now), abs(self.w_now)
+        s_now = max(v_now / v_max, w_now / profile.w_max_radps)
+        bound = alpha * (p.margin_m + self.k_now * CREEP_BELOW * v_max * s_now)
+        return bound / (alpha - CREEP_PER_S) * (1.0 + 1e-9) + 1e-9
 
-        On the few dozen points in reach numpy's cost per call, not per element, is the time,
-        so each quantity is computed once and written where the solver reads it (``out=``), and
-        the creep's six calls are skipped when no row can creep."""
+    @overload
+    def rows(
+        self,
+        xy: FloatArray,
+        n_scan: int,
+        unseen: list[tuple[float, float, float]],
+        clear_test: Literal[False] = False,
+    ) -> _Rows: ...
+
+    @overload
+    def rows(
+        self,
+        xy: FloatArray,
+        n_scan: int,
+        unseen: list[tuple[float, float, float]],
+        clear_test: Literal[True],
+    ) -> _Rows | _Clear: ...
+
+    def rows(
+        self,
+        xy: FloatArray,
+        n_scan: int,
+        unseen: list[tuple[float, float, float]],
+        clear_test: bool = False,
+    ) -> _Rows | _Clear:
+        """The half-plane of each point (module docstring), the tighter of its (S) and (C).
+
+        On the few dozen points in reach numpy's cost per call, not per element, is the time:
+        each quantity is one call, written where it is read, in one pass:
+
+        1. each point's sd_i, n_i and q_i (``_geometry``; the unseen edges as walls across the
+           axis), its row's normal (a, b) = (-n_x, n_x q_y - n_y q_x), and the approach speeds
+           u_i = n_x v - b_i w = -(a v + b w) under the command and the current motion;
+        2. with ``clear_test``, ``_Clear`` when the command provably keeps every row, a test
+           cheaper than the rows for the common case (careful driving: points in reach, none
+           approached too fast): omega_i <= 1, creep >= 0 and K_now <= K_cmd make
+           u_ref^+ + alpha K_cmd max(u_ref^+, u_now^+) <= alpha (sd_i - margin) sufficient for
+           (S) and (C). Its rounding (~1e-15) is far inside the rows' tolerance ``_TOL``: it
+           never says CLEAR where the rows would not (``test_cbf``: it agrees with them);
+        3. omega_i, the creep (its calls skipped when no row can creep), (S), (C) and c."""
         p, alpha, profile = self.params, self.params.alpha_per_s, self.profile
         v0, w0, v_now, w_now = self.v0, self.w0, self.v_now, self.w_now
-        x, y = xy.T
-        sd, nx, ny, qx, qy, nearest = _geometry(xy, self.shape)
+        box = self.shape.box
+        if box is not None and len(xy):
+            sd, nx, ny, q, nearest = _box_geometry(xy, box)
+        else:
+            sd, nx, ny, q, nearest = _geometry(xy, self.shape)
+        points = xy
         if unseen:
             # A wall across the axis where the laser stopped seeing, met first by the
             # footprint's front (back) extent: n = (+-1, 0), q = (front or back, 0).
-            extra = np.array(
-                [(s * seen, 0.0, seen - ext, s, 0.0, s * ext, 0.0) for s, seen, ext in unseen]
-            ).T
-            x, y = np.concatenate((x, extra[0])), np.concatenate((y, extra[1]))
-            sd, nx, ny, qx, qy = (
-                np.concatenate((g, e)) for g, e in zip((sd, nx, ny, qx, qy), extra[2:], strict=True)
-            )
+            points = np.concatenate((xy, [(s * seen, 0.0) for s, seen, _ in unseen]))
+            sd = np.concatenate((sd, [seen - ext for _, seen, ext in unseen]))
+            nx = np.concatenate((nx, [s for s, _, _ in unseen]))
+            ny = np.concatenate((ny, [0.0] * len(unseen)))
+            q = np.concatenate((q, [complex(s * ext) for s, _, ext in unseen]))
             nearest = _min(sd)
         n = sd.size
-        # One row per point: a = -n_x, b, c (written in place: numpy's cost is per call here).
         abc = np.empty((3, n))
-        a, b, c = abc
-        np.negative(nx, out=a)
-        np.subtract(nx * qy, ny * qx, out=b)
-        # Approach speeds u = nx v - b w under the command and under the current motion, and
-        # how squarely each point lies in that motion's path (omega).
-        u_ref = np.dot((-v0, -w0), abc[:2])  # u = n_x v - b w = -(a v + b w)
-        omega_cmd, up_ref = _omega(u_ref, v0, w0, qx, qy)
-        creep: FloatArray | float
-        if nearest > 0.0 and _min(np.abs(nx)) >= CREEP_BELOW:
-            # No row creeps: |n_x| >= CREEP_BELOW makes U >= CREEP_BELOW v_max, so every kappa
-            # is 0 (to rounding) and, with every sd > 0, every creep +0.0: the general form's
-            # numbers without its six numpy calls.
-            creep = 0.0
-        else:
+        ab = abc[:2]
+        np.negative(nx, out=abc[0])
+        np.subtract(nx * q.imag, ny * q.real, out=abc[1])
+        u_ref = np.array((-v0, -w0)).dot(ab)
+        up_ref = np.maximum(u_ref, _ZERO)
+        up_now: FloatArray | None = None  # None at rest
+        if v_now == v0 and w_now == w0:  # a replay, a steady cycle: the same speeds twice
+            if v_now or w_now:
+                up_now = up_ref
+        elif v_now or w_now:
+            up_now = np.maximum(np.array((-v_now, -w_now)).dot(ab), _ZERO)
+        # bounds[1] = alpha (margin - sd) for now (the clip by -creep comes below).
+        bounds = np.empty((2, n))
+        room = np.multiply(sd, -alpha, out=bounds[1])
+        room += alpha * p.margin_m
+        if clear_test:
+            ak = alpha * self.k_cmd
+            if up_now is None or up_now is up_ref:
+                need = np.multiply(up_ref, 1.0 + ak)
+            else:
+                need = np.maximum(up_ref, up_now)
+                need *= ak
+                need += up_ref
+            need += room
+            if need[need.argmax()] <= 0.0:
+                return _Clear(n, nearest)
+        # How squarely each point lies in the commanded (current) motion's path (omega).
+        omega_cmd = _omega(up_ref, v0, w0, q)
+        neg_creep: FloatArray | None = None  # None: -0.0 for every row
+        no_creep = nearest > self._creep_bound() or (
+            nearest > 0.0 and _min(np.abs(nx)) >= CREEP_BELOW
+        )
+        if not no_creep:
             # kappa = CREEP_PER_S (1 - U / (CREEP_BELOW v_max))^+ as one dot product of the
-            # constants with (|n_x|, |b|): U = |n_x| v_max + |b| w_max.
+            # constants with (|n_x|, |b|): U = |n_x| v_max + |b| w_max. (Else the creep changes
+            # no row: every point beyond ``_creep_bound``, or |n_x| >= CREEP_BELOW for every
+            # row, which makes U >= CREEP_BELOW v_max, so every kappa is 0 (to rounding) and,
+            # with every sd > 0, every creep +0.0: the general form's numbers without its calls.)
             scale = CREEP_PER_S / (CREEP_BELOW * profile.v_max_mps)
-            weights = (scale * profile.v_max_mps, scale * profile.w_max_radps)
-            kappa = np.subtract(CREEP_PER_S, np.dot(weights, np.abs(abc[:2])))
-            creep = np.maximum(kappa, 0.0, out=kappa)
-            creep *= np.maximum(sd, 0.0)
+            weights = np.array((scale * profile.v_max_mps, scale * profile.w_max_radps))
+            kappa = np.subtract(_CREEP_PER_S, weights.dot(np.abs(ab)))
+            creep = np.maximum(kappa, _ZERO, out=kappa)
+            creep *= np.maximum(sd, _ZERO)
+            neg_creep = np.negative(creep, out=creep)
         # bounds[0] = -max(alpha (sd - margin - m_extra), creep), (S)'s c with m_extra =
         # omega K u^+ at the current speed; bounds[1] = -max(alpha (sd - margin), creep), (C)'s
         # c before its division by the gain. Written min(alpha (margin - sd) [+ alpha m_extra],
         # -creep), with alpha m_extra = (alpha K omega) u^+, whose first factor is the gain's.
-        bounds = np.empty((2, n))
-        room = np.multiply(sd, -alpha, out=bounds[1])
-        room += alpha * p.margin_m
         ak_omega: FloatArray | None = None
         alpha_m_extra: FloatArray | None = None
-        if v_now or w_now:
-            if v_now == v0 and w_now == w0:  # a replay, a steady cycle: the same speeds twice
-                omega_now, up_now = omega_cmd, up_ref
+        if up_now is not None:
+            if up_now is up_ref:
+                omega_now = omega_cmd
             else:
-                u_now = np.dot((-v_now, -w_now), abc[:2])
-                omega_now, up_now = _omega(u_now, v_now, w_now, qx, qy)
+                omega_now = _omega(up_now, v_now, w_now, q)
             ak_omega = (alpha * self.k_now) * omega_now
             alpha_m_extra = ak_omega * up_now
             np.add(room, alpha_m_extra, out=bounds[0])
@@ -657,20 +754,88 @@ class _Scene(NamedTuple):
                 ak_omega = None
         else:
             bounds[0] = room
-        np.minimum(bounds, -creep, out=bounds)
+        if neg_creep is None:
+            np.minimum(bounds, _NEG_ZERO, out=bounds)
+        else:  # row by row: broadcasting (n,) against (2, n) costs about twice as much
+            np.minimum(bounds[0], neg_creep, out=bounds[0])
+            np.minimum(bounds[1], neg_creep, out=bounds[1])
         # (C): -gain u >= bounds[1], i.e. -u >= bounds[1] / gain; the point's row is the
         # tighter of (S) and (C): the same normal, the larger c.
         if ak_omega is None:
             ak_omega = (alpha * self.k_cmd) * omega_cmd
-        gain = np.add(ak_omega, 1.0, out=ak_omega)
+        gain = np.add(ak_omega, _ONE, out=ak_omega)
+        c = abc[2]
         np.divide(bounds[1], gain, out=c)
         np.maximum(bounds[0], c, out=c)
         # The command falls short of each row by c + u (if positive).
         short = c + u_ref
         return _Rows(
-            x, y, n_scan, sd, abc, short, bounds, gain, alpha_m_extra, alpha, omega_cmd, u_ref,
-            self.k_cmd, p.margin_m, _max(short), nearest, v0, w0,
+            points, n_scan, n, sd, abc, short, bounds, gain, alpha_m_extra, alpha, omega_cmd,
+            u_ref, self.k_cmd, p.margin_m, short[short.argmax()], nearest, v0, w0,
         )  # fmt: skip
+
+
+class _Edges:
+    """A polygon's edges laid out for ``_polygon_nearest``: starts s and vectors e as x + i y,
+    e's components and squared lengths, each repeated once per point (``tiled``), so that
+    every step is one numpy call on two arrays of the same shape. (Broadcasting m points
+    against N edges costs about three times as much per call on a few dozen points.) The
+    repeats grow as needed; a mutable cache behind the frozen ``_Shape``."""
+
+    def __init__(self, fp: Footprint) -> None:
+        edges = fp._edges
+        if edges is None:
+            raise ValueError("a polygon footprint has edges")
+        start, edge, length2 = edges
+        self.count = len(start)
+        self._base = (
+            np.ascontiguousarray(start).view(np.complex128).ravel(),
+            np.ascontiguousarray(edge).view(np.complex128).ravel(),
+            np.ascontiguousarray(edge[:, 0]),
+            np.ascontiguousarray(edge[:, 1]),
+            np.ascontiguousarray(length2),
+        )
+        self._tiles = self._repeat(64)
+
+    def _repeat(
+        self, m: int
+    ) -> tuple[int, ComplexArray, ComplexArray, FloatArray, FloatArray, FloatArray, IntArray]:
+        start, edge, ex, ey, length2 = self._base
+        s: ComplexArray = np.tile(start, m)
+        e: ComplexArray = np.tile(edge, m)
+        return (
+            m, s, e, np.tile(ex, m), np.tile(ey, m), np.tile(length2, m),
+            np.arange(0, m * self.count, self.count),
+        )  # fmt: skip
+
+    def tiled(
+        self, m: int
+    ) -> tuple[ComplexArray, ComplexArray, FloatArray, FloatArray, FloatArray, IntArray]:
+        """s, e, e_x, e_y, |e|^2 for m points (m x N, point-major) and each point's offset."""
+        tiles = self._tiles
+        if tiles[0] < m:
+            tiles = self._tiles = self._repeat(max(m, 2 * tiles[0]))
+        k = m * self.count
+        return tiles[1][:k], tiles[2][:k], tiles[3][:k], tiles[4][:k], tiles[5][:k], tiles[6][:m]
+
+
+class _Box:
+    """A rectangle centred on {R}: its corners (-half_l, -half_w) and (half_l, half_w), each
+    repeated as an (m, 2) array for ``_box_geometry`` (``_Edges``' reason: same-shape calls)."""
+
+    def __init__(self, half_l: float, half_w: float) -> None:
+        self.half_l, self.half_w = half_l, half_w
+        self._high = np.array([[half_l, half_w]])
+        self.corners: tuple[int, FloatArray, FloatArray] = (0, _NO_POINTS, _NO_POINTS)
+        self.repeat(64)
+
+    def repeat(self, m: int) -> tuple[int, FloatArray, FloatArray]:
+        """(rows, low, high): the corners repeated for at least m points (kept in
+        ``corners``, which grows when a scan needs more)."""
+        size = max(m, 2 * self.corners[0])
+        high: FloatArray = np.tile(self._high, (size, 1))
+        self.corners = (size, -high, high)
+        return self.corners
 
 
 class _Shape(NamedTuple):
@@ -680,48 +845,52 @@ class _Shape(NamedTuple):
     x_front: float
     reach: float
     footprint: Footprint
-    box: tuple[FloatArray, FloatArray] | None  # a centred rectangle's corners, as (2, 1)
-    edges: tuple[FloatArray, FloatArray, FloatArray, ComplexArray] | None  # a polygon's
+    box: _Box | None  # a centred rectangle
+    edges: _Edges | None  # a polygon's
     # A distance from a polygon's edge beyond which no point is inside it: half the shorter
     # side of its bounding box (a point inside is nearer the box's edge than that, and the
     # box holds the polygon), widened far beyond any rounding.
     inside_bound: float
 
 
-@functools.lru_cache(maxsize=32)
+# ``_shape``'s cache, by the footprint's identity (its hash runs over its vertices, microseconds
+# on every call); each entry keeps its footprint alive, so an id is never reused while cached.
+_SHAPES: dict[int, tuple[Footprint, _Shape]] = {}
+
+
 def _shape(fp: Footprint) -> _Shape:
-    """``_Shape`` of a footprint (numpy reductions and a hash: once per call, not per step)."""
+    """``_Shape`` of a footprint (numpy reductions: once per footprint, not per call)."""
+    hit = _SHAPES.get(id(fp))
+    if hit is not None and hit[0] is fp:
+        return hit[1]
     x0, x1, y0, y1 = fp.bounds
-    box = fp.centred_box
-    corners = None
-    if box is not None:
-        high = np.array([[box[0]], [box[1]]])
-        corners = (-high, high)
-    edges = None if fp.is_disc or box is not None else _polygon_edges(fp)
+    half = fp.centred_box
+    box = None if half is None else _Box(*half)
+    edges = None if fp.is_disc or box is not None else _Edges(fp)
     inside = 0.5 * min(x1 - x0, y1 - y0) * (1.0 + 1e-9) + 1e-9
-    return _Shape(x0, x1, fp.reach_m, fp, corners, edges, inside)
+    shape = _Shape(x0, x1, fp.reach_m, fp, box, edges, inside)
+    if len(_SHAPES) >= 32:
+        _SHAPES.clear()
+    _SHAPES[id(fp)] = (fp, shape)
+    return shape
 
 
 def _min(a: FloatArray) -> float:
-    """min of a non-empty array (``ndarray.min`` without its Python wrapper)."""
-    return float(np.minimum.reduce(a))
-
-
-def _max(a: FloatArray) -> float:
-    return float(np.maximum.reduce(a))
+    """min of a non-empty array (the element ``argmin`` finds: a reduction costs ~3x)."""
+    return float(a[a.argmin()])
 
 
 def _geometry(
     xy: FloatArray, shape: _Shape
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float]:
-    """Signed distance sd, unit normal (nx, ny) and the footprint's nearest point (qx, qy) of
-    each point of the (m, 2) ``xy``, and min(sd) (inf for no point). The normal is the
-    gradient of sd: from q towards the point outside, from the point towards q inside (the
+) -> tuple[FloatArray, FloatArray, FloatArray, ComplexArray, float]:
+    """Signed distance sd, unit normal (n_x, n_y) and the footprint's nearest point q (as
+    x + i y) of each point of the (m, 2) ``xy``, and min(sd) (inf for no point). The normal is
+    the gradient of sd: from q towards the point outside, from the point towards q inside (the
     outward normal of the nearest edge)."""
     if len(xy) == 0:
-        return _EMPTY, _EMPTY, _EMPTY, _EMPTY, _EMPTY, math.inf
+        return _EMPTY, _EMPTY, _EMPTY, _EMPTY_C, math.inf
     if shape.box is not None:
-        return _box_geometry(xy.T, *shape.box)
+        return _box_geometry(xy, shape.box)
     x, y = xy.T
     fp = shape.footprint
     if shape.edges is None:  # a disc
@@ -735,11 +904,16 @@ def _geometry(
             centre = r <= 0.0
             safe = np.where(centre, 1.0, r)
             nx, ny = np.where(centre, 1.0, x / safe), np.where(centre, 0.0, y / safe)
-        return sd, nx, ny, radius * nx, radius * ny, nearest
-    qx, qy, dx, dy, dist = _polygon_nearest(xy, *shape.edges)
+        q = np.empty(sd.size, dtype=np.complex128)
+        np.multiply(nx, radius, out=q.real)
+        np.multiply(ny, radius, out=q.imag)
+        return sd, nx, ny, q, nearest
+    p = np.ascontiguousarray(xy).view(np.complex128).ravel()
+    q, pq, dist = _polygon_nearest(p, shape.edges)
+    dx, dy = pq.real, pq.imag
     nearest = _min(dist)
     if nearest > shape.inside_bound:  # every point outside and off the edge: sd = dist, n = d / sd
-        return dist, dx / dist, dy / dist, qx, qy, nearest
+        return dist, dx / dist, dy / dist, q, nearest
     candidates = dist <= shape.inside_bound
     inside = np.zeros(dist.size, dtype=np.bool_)
     inside[candidates] = signed_distance(fp, x[candidates], y[candidates]) < 0.0
@@ -751,60 +925,54 @@ def _geometry(
     if on_edge.any():  # on the edge itself: away from the origin, as outwards as any
         r = np.maximum(np.sqrt(x * x + y * y), _SAME)
         nx, ny = np.where(on_edge, x / r, nx), np.where(on_edge, y / r, ny)
-    return sd, nx, ny, qx, qy, _min(sd)
-
-
-def _polygon_edges(fp: Footprint) -> tuple[FloatArray, FloatArray, FloatArray, ComplexArray]:
-    """A polygon's edges: starts (N, 2), vectors (N, 2), squared lengths (N,) (as
-    ``closest_boundary_xy`` takes them), and the starts and vectors as x + i y (2, N)."""
-    edges = fp._edges
-    if edges is None:
-        raise ValueError("a polygon footprint has edges")
-    start, edge, length2 = edges
-    both = np.ascontiguousarray(np.stack((start, edge))).view(np.complex128)[..., 0]
-    return start, edge, length2, both
+    return sd, nx, ny, q, _min(sd)
 
 
 def _polygon_nearest(
-    xy: FloatArray, start: FloatArray, edge: FloatArray, length2: FloatArray, both: ComplexArray
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """The polygon's nearest boundary point q of each point p of the (m, 2) ``xy``, p - q and
-    |p - q|: ``closest_boundary_xy``'s arithmetic (the projection onto each edge, clamped to
-    it, the nearest of those; a point on an edge keeps its exact zero distance), with x + i y
-    in one complex number where that is exact (sums, products by a real), and |p - q| as
-    ``np.abs`` (hypot: one call, equal to the square root of the sum of squares to rounding)."""
-    d = xy[:, None, :] - start  # (m, N, 2)
-    d *= edge
-    t = d[..., 0] + d[..., 1]
+    p: ComplexArray, edges: _Edges
+) -> tuple[ComplexArray, ComplexArray, FloatArray]:
+    """The polygon's nearest boundary point q of each point p (x + i y), p - q and |p - q|:
+    ``closest_boundary_xy``'s arithmetic (the projection onto each edge, clamped to it, the
+    nearest of those; a point on an edge keeps its exact zero distance), with x + i y in one
+    complex number where that is exact (sums, products by a real), and |p - q| as ``np.abs``
+    (hypot: one call, equal to the square root of the sum of squares to rounding). Each point
+    against each edge as one (m N,) array, point-major (``_Edges.tiled``)."""
+    m = p.size
+    s, e, ex, ey, length2, offsets = edges.tiled(m)
+    pr = p.repeat(edges.count)
+    d = pr - s
+    t = d.real * ex
+    t += d.imag * ey
     t /= length2
-    np.minimum(np.maximum(t, 0.0, out=t), 1.0, out=t)
-    c = t * both[1]
-    c += both[0]  # the nearest point of each edge
-    r = np.ascontiguousarray(xy).view(np.complex128) - c  # p minus it
+    np.minimum(np.maximum(t, _ZERO, out=t), _ONE, out=t)
+    c = t * e
+    c += s  # the nearest point of each edge
+    r = np.subtract(pr, c, out=d)  # p minus it
     dist = np.abs(r)
-    k = dist.argmin(axis=1)
-    row = np.arange(k.size)
-    q, pq = c[row, k], r[row, k]
-    return q.real, q.imag, pq.real, pq.imag, dist[row, k]
+    k = dist.reshape(m, edges.count).argmin(axis=1)
+    k += offsets
+    return c.take(k), r.take(k), dist.take(k)
 
 
 def _box_geometry(
-    p: FloatArray, low: FloatArray, high: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, float]:
-    """``_geometry`` of the rectangle ``low`` <= (x, y) <= ``high`` = (half_l, half_w), in
-    closed form, on the (2, m) points ``p``, the transpose of a C-contiguous (m, 2) array (x
-    and y ride along one axis: one numpy call per step)."""
-    q = np.minimum(np.maximum(p, low), high)
-    d = p - q
-    # |d| as the modulus of x + i y: p is the transpose of a C-contiguous (m, 2) array and the
-    # ufuncs keep that layout, so d.T is one too (no copy); hypot on the real rows costs ~3x.
-    sd = np.abs(d.T.view(np.complex128)).ravel()
-    nearest = _min(sd)
+    xy: FloatArray, box: _Box
+) -> tuple[FloatArray, FloatArray, FloatArray, ComplexArray, float]:
+    """``_geometry`` of the rectangle ``box``, in closed form, on the C-contiguous (m, 2) ``xy``:
+    q is xy clamped to the corners, |p - q| the modulus of x + i y (a view; hypot on the
+    columns costs ~3x), n = (p - q) / |p - q|."""
+    m = len(xy)
+    size, low, high = box.corners
+    if size < m:
+        size, low, high = box.repeat(m)
+    q = np.minimum(np.maximum(xy, low[:m]), high[:m])
+    d = np.subtract(xy, q)
+    sd = np.abs(d.view(np.complex128)).ravel()
+    dx, dy = d[:, 0], d[:, 1]
+    nearest = float(sd[sd.argmin()])
     if nearest > 0.0:  # no point inside
-        n = d / sd
-        return sd, n[0], n[1], q[0], q[1], nearest
-    half_l, half_w = float(high[0, 0]), float(high[1, 0])
-    (x, y), (dx, dy), (qx, qy) = p, d, q
+        return sd, dx / sd, dy / sd, q.view(np.complex128).ravel(), nearest
+    half_l, half_w = box.half_l, box.half_w
+    x, y, qx, qy = xy[:, 0], xy[:, 1], q[:, 0], q[:, 1]
     inside = sd <= 0.0
     xi, yi = x[inside], y[inside]
     to_front, to_back = half_l - xi, xi + half_l
@@ -812,32 +980,33 @@ def _box_geometry(
     depth = np.minimum(np.minimum(to_front, to_back), np.minimum(to_left, to_right))
     ex = np.where(to_front == depth, 1.0, np.where(to_back == depth, -1.0, 0.0))
     ey = np.where(ex != 0.0, 0.0, np.where(to_left == depth, 1.0, -1.0))
-    dx[inside], dy[inside] = ex, ey
+    dx[inside], dy[inside] = ex, ey  # the outward normal of the nearest edge, of length 1
     qx[inside] = np.where(ex != 0.0, ex * half_l, xi)
     qy[inside] = np.where(ey != 0.0, ey * half_w, yi)
     sd[inside] = -depth
     norm = np.where(inside, 1.0, sd)
-    return sd, dx / norm, dy / norm, qx, qy, _min(sd)
+    return sd, dx / norm, dy / norm, q.view(np.complex128).ravel(), _min(sd)
 
 
-def _omega(
-    u: FloatArray, v: float, w: float, qx: FloatArray, qy: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """(cos of the angle between n_i and the velocity of q_i under (v, w))^PATH_POWER, 0 for
-    points the footprint does not approach (u_i <= 0), and max(u_i, 0).
-    cos = u / |velocity|, the velocity (v - w q_y, w q_x)."""
-    up = np.maximum(u, 0.0)
+def _omega(up: FloatArray, v: float, w: float, q: ComplexArray) -> FloatArray:
+    """(cos of the angle between n_i and the velocity of q_i under (v, w))^PATH_POWER from
+    u_i^+ (``up``), 0 for points the footprint does not approach: cos = u / |velocity|, the
+    velocity v + i w q = (v - w q_y, w q_x) (q times i w is (-w q_y, w q_x) to the bit: each
+    part one product and an exact zero), its length the modulus of x + i y (``np.abs``: within
+    an ulp of hypot's, at a tenth of hypot's instructions on the real and imaginary views)."""
     if w == 0.0:
         if v == 0.0:
-            return np.zeros(u.size), up
+            return np.zeros(up.size)
         cos = up / abs(v)  # u = nx v <= |v|, no overflow, even for a subnormal v
     else:
-        speed = np.hypot(v - w * qy, w * qx)
-        cos = np.divide(up, np.maximum(speed, _SAME_SPEED, out=speed), out=speed)
-    np.minimum(cos, 1.0, out=cos)
+        vel = q * complex(0.0, w)
+        vel += v
+        speed = np.abs(vel)
+        cos = np.divide(up, np.maximum(speed, _SAME_SPEED_0D, out=speed), out=speed)
+    np.minimum(cos, _ONE, out=cos)
     np.square(cos, out=cos)
     cos *= cos
-    return cos, up
+    return cos
 
 
 def _solve(
@@ -856,18 +1025,16 @@ def _solve(
     by how much the command falls short of each row (m/s, > 0: violated): the order in which
     rows join, not the answer."""
     working = _most_violated(short, k)
-    isv, isw = 1.0 / sv, 1.0 / sw
     for rounds in range(1, _MAX_ROUNDS + 1):
-        # Only the working rows become Python floats, scaled to the Euclidean problem.
-        ga, gb, e = abc.take(working, axis=1).tolist()
-        found = _project_scaled(
-            [g * isv for g in ga], [g * isw for g in gb], e, v0, w0, sv, sw, profile
-        )
+        # Only the working rows become Python floats.
+        a, b, c = abc.take(working, 1).tolist()
+        found = _project(a, b, c, v0, w0, sv, sw, profile)
         if found is None:
             break
         v, w = found
-        short = np.dot((-v, -w, 1.0), abc)  # c - (a v + b w): every row's shortfall
-        if _max(short) <= _TOL:
+        # c - (a v + b w): every row's shortfall (``np.dot`` of a tuple costs twice as much).
+        short = np.array((-v, -w, 1.0)).dot(abc)
+        if short[short.argmax()] <= _TOL:
             return v, w, rounds, CbfCase.SOLVED, working
         add = _most_violated(short, k)
         working = np.concatenate((working, add))
@@ -877,103 +1044,101 @@ def _solve(
 
 def _most_violated(short: FloatArray, k: int) -> IntArray:
     """Indices of the (at most) ``k`` rows with the largest ``short`` above the tolerance."""
-    bad: IntArray = (short > _TOL).nonzero()[0]
+    bad: IntArray = (short > _TOL_0D).nonzero()[0]
     if bad.size > k:
         if bad.size == short.size:  # every row: the same partition without the indexing
             return (-short).argpartition(k)[:k]
-        bad = bad[(-short[bad]).argpartition(k)[:k]]
+        bad = bad.take((-short.take(bad)).argpartition(k)[:k])
     return bad
 
 
 def _project(
-    a: FloatArray,
-    b: FloatArray,
-    c: FloatArray,
+    a: list[float],
+    b: list[float],
+    c: list[float],
     v0: float,
     w0: float,
     sv: float,
     sw: float,
     profile: RobotProfile,
 ) -> tuple[float, float] | None:
-    """The closest point to (v0, w0) (weighted) in the polygon of the rows and the box, or None
-    when none of the candidates is feasible (empty polygon, through rounding)."""
-    gx, gy = (a * (1.0 / sv)).tolist(), (b * (1.0 / sw)).tolist()
-    return _project_scaled(gx, gy, c.tolist(), v0, w0, sv, sw, profile)
-
-
-def _project_scaled(
-    gx: list[float],
-    gy: list[float],
-    e: list[float],
-    v0: float,
-    w0: float,
-    sv: float,
-    sw: float,
-    profile: RobotProfile,
-) -> tuple[float, float] | None:
-    """``_project`` of rows already scaled (gx = a / sv, gy = b / sw, e = c; the lists are
-    extended). The box's rows join only when the answer without them leaves it."""
-    vm, wm = profile.v_max_mps, profile.w_max_radps
+    """The closest point to (v0, w0) (weighted) in the polygon of the rows a v + b w >= c and
+    the box, or None when none of the candidates is feasible (empty polygon, through rounding).
+    Solved in z = (sv v, sw w), where the distance is Euclidean (rows a / sv, b / sw, c); the
+    box's rows join only when the answer without them leaves it."""
+    isv, isw, tol = 1.0 / sv, 1.0 / sw, -_TOL
     z0x, z0y = sv * v0, sw * w0
-    found = _nearest_in(gx, gy, e, z0x, z0y)
+    checks: list[tuple[float, float, float, float]] = []  # (gx, gy, e, tolerance) of each row
+    bad: list[int] = []  # the rows z0 violates (their places in checks)
+    for ax, ay, ae in zip(a, b, c, strict=True):
+        gx, gy = ax * isv, ay * isw
+        if gx * gx + gy * gy > _SAME:  # a row with no normal cannot bind
+            if gx * z0x + gy * z0y < ae:
+                bad.append(len(checks))
+            checks.append((gx, gy, ae, tol * (1.0 + (ae if ae >= 0.0 else -ae))))
+    vm, wm = profile.v_max_mps, profile.w_max_radps
+    found = _nearest_in(checks, bad, z0x, z0y)
     if found is not None and abs(found[0]) <= sv * vm and abs(found[1]) <= sw * wm:
         return found[0] / sv, found[1] / sw
-    gx += [1.0 / sv, -1.0 / sv, 0.0, 0.0]
-    gy += [0.0, 0.0, 1.0 / sw, -1.0 / sw]
-    e += [-vm, -vm, -wm, -wm]
-    found = _nearest_in(gx, gy, e, z0x, z0y)
+    low_v, low_w = -_TOL * (1.0 + abs(-vm)), -_TOL * (1.0 + abs(-wm))
+    for gx, gy, ae, low in (
+        (isv, 0.0, -vm, low_v), (-isv, 0.0, -vm, low_v),
+        (0.0, isw, -wm, low_w), (0.0, -isw, -wm, low_w),
+    ):  # fmt: skip
+        if gx * z0x + gy * z0y - ae < 0.0:
+            bad.append(len(checks))
+        checks.append((gx, gy, ae, low))
+    found = _nearest_in(checks, bad, z0x, z0y)
     return None if found is None else (found[0] / sv, found[1] / sw)
 
 
 def _nearest_in(
-    gx: list[float], gy: list[float], e: list[float], z0x: float, z0y: float
+    checks: list[tuple[float, float, float, float]], bad: list[int], z0x: float, z0y: float
 ) -> tuple[float, float] | None:
-    """The point of {z : gx zx + gy zy >= e} nearest to z0 (Euclidean), or None when no
-    candidate is feasible. A few rows (the working set): plain Python beats numpy's per-call
-    cost here."""
-    rows: list[int] = []
-    bad: list[int] = []  # the rows z0 violates
-    # (gx, gy, e, tolerance) of each row, for the feasibility tests.
-    checks: list[tuple[float, float, float, float]] = []
-    for i, (ax, ay, ae) in enumerate(zip(gx, gy, e, strict=True)):
-        if ax * ax + ay * ay > _SAME:
-            rows.append(i)
-            checks.append((ax, ay, ae, -_TOL * (1.0 + abs(ae))))
-            if ax * z0x + ay * z0y - ae < 0.0:
-                bad.append(i)
+    """The point of {z : gx zx + gy zy >= e} nearest to z0 (Euclidean; ``checks``: (gx, gy, e,
+    the tolerance of the feasibility test) of each row; ``bad``: those z0 violates, in
+    order), or None when no candidate is feasible. A few rows (the working set): plain Python
+    beats numpy's per-call cost here."""
     if not bad:
         return z0x, z0y
-
-    def feasible(zx: float, zy: float) -> bool:  # a loop: all() over a generator costs more
-        for ax, ay, ae, low in checks:  # noqa: SIM110
-            if not ax * zx + ay * zy - ae >= low:
-                return False
-        return True
-
     # One line: the projection onto a violated row, optimal whenever feasible (KKT).
     for i in bad:
-        ax, ay = gx[i], gy[i]
-        step = (e[i] - ax * z0x - ay * z0y) / (ax * ax + ay * ay)
+        ax, ay, ae, _ = checks[i]
+        step = (ae - ax * z0x - ay * z0y) / (ax * ax + ay * ay)
         zx, zy = z0x + step * ax, z0y + step * ay
-        if feasible(zx, zy):
+        for gx, gy, ge, low in checks:
+            if not gx * zx + gy * zy - ge >= low:
+                break
+        else:  # feasible
             return zx, zy
     # Two lines: a vertex, one of whose rows the command violates (else KKT would put the
     # optimum at the command itself); the feasible one nearest the command.
     best: tuple[float, float] | None = None
     best_d2 = math.inf
+    violated = set(bad)
     for i in bad:
-        for j in rows:
-            if j == i or (j in bad and j < i):
+        gxi, gyi, ei, _ = checks[i]
+        bound_i = _SAME * math.hypot(gxi, gyi)
+        for j, (gxj, gyj, ej, _) in enumerate(checks):
+            if j == i or (j < i and j in violated):
                 continue
-            det = gx[i] * gy[j] - gy[i] * gx[j]
-            if abs(det) <= _SAME * math.hypot(gx[i], gy[i]) * math.hypot(gx[j], gy[j]):
+            det = gxi * gyj - gyi * gxj
+            if abs(det) <= bound_i * math.hypot(gxj, gyj):
                 continue
-            zx = (e[i] * gy[j] - e[j] * gy[i]) / det
-            zy = (gx[i] * e[j] - gx[j] * e[i]) / det
+            zx = (ei * gyj - ej * gyi) / det
+            zy = (gxi * ej - gxj * ei) / det
             d2 = (zx - z0x) ** 2 + (zy - z0y) ** 2
-            if d2 < best_d2 and feasible(zx, zy):
+            if d2 < best_d2 and _feasible(checks, zx, zy):
                 best, best_d2 = (zx, zy), d2
     return best
+
+
+def _feasible(checks: list[tuple[float, float, float, float]], zx: float, zy: float) -> bool:
+    """z meets every row to its tolerance (a loop: all() over a generator costs more)."""
+    for ax, ay, ae, low in checks:  # noqa: SIM110
+        if not ax * zx + ay * zy - ae >= low:
+            return False
+    return True
 
 
 def _stop_and_turn(
