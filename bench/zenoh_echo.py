@@ -17,10 +17,9 @@ SIGTERM or SIGINT.
 from __future__ import annotations
 
 import argparse
-import signal
-import threading
 
 import zenoh
+from egc_common.stop_flag import stop_on_signals
 from egc_common.transport import ZenohOptions, command_publisher, open_session
 
 
@@ -37,9 +36,7 @@ def main() -> int:
         help="cut or zero-pad each reply to N bytes (default: the payload as received)",
     )
     args = ap.parse_args()
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    stop = stop_on_signals()
 
     session = open_session(ZenohOptions(listen=(args.listen,)))
     publisher = command_publisher(session, args.pub)

@@ -33,7 +33,6 @@ import socket
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -42,6 +41,7 @@ from egc_common.child_process import die_with_parent
 from egc_common.cli_args import PROFILE_HELP, check_writable
 from egc_common.errors import UsageError
 from egc_common.profiles import get_profile
+from egc_common.stop_flag import stop_on_signals
 from egc_common.transport import free_port
 from egc_experiments.link_cli import link_schedules
 from egc_experiments.link_model import SpecError
@@ -261,9 +261,7 @@ def run(args: argparse.Namespace) -> int:
     elif args.save is not None:
         operator_cmd += ["--save", str(Path(args.save).resolve())]
 
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = stop_on_signals()  # not threading.Event: its set() can deadlock in a handler
     ros_env: dict[str, str] | None = None
     base: subprocess.Popen[bytes] | None = None
     if args.ros2:

@@ -49,8 +49,6 @@ import importlib.metadata
 import json
 import logging
 import math
-import signal
-import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -64,6 +62,7 @@ from egc_common.joystick import JoystickMapping
 from egc_common.messages import BaseCommand
 from egc_common.profiles import get_profile
 from egc_common.robot_info import RobotInfo
+from egc_common.stop_flag import stop_on_signals
 from egc_common.transport import (
     DEFAULT_ENDPOINT,
     LEASE_MS,
@@ -662,9 +661,7 @@ def run(args: argparse.Namespace) -> int:
             recorder.close()
         raise
     streamer, viewers = (None, None) if opened is None else opened
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = stop_on_signals()  # not threading.Event: its set() can deadlock in a handler
     stats = RunStats()
     node = RobotNode(
         session,

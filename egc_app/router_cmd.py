@@ -22,13 +22,12 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
-import threading
 from typing import Any
 
 import zenoh
 from egc_common.errors import UsageError
+from egc_common.stop_flag import stop_on_signals
 from egc_common.transport import ZenohOptions, build_config, open_config
 
 log = logging.getLogger("egc.router")
@@ -68,9 +67,7 @@ def run(args: argparse.Namespace) -> int:
     except Exception as exc:  # pragma: no cover - the literal is valid
         raise UsageError(f"zenoh config mode=router rejected: {exc}") from None
     session = open_config(config)
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = stop_on_signals()  # not threading.Event: its set() can deadlock in a handler
     listener = None
     if not args.quiet:
         listener = session.info.declare_transport_events_listener(

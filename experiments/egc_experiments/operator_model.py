@@ -35,7 +35,6 @@ import argparse
 import contextlib
 import json
 import logging
-import signal
 import sys
 import threading
 import time
@@ -50,6 +49,7 @@ from egc_common.errors import UsageError
 from egc_common.joystick_file import JoystickSample
 from egc_common.messages import Telemetry
 from egc_common.profiles import get_profile
+from egc_common.stop_flag import stop_on_signals
 from egc_common.transport import ZenohOptions, open_session
 from egc_operator.operator_node import OperatorNode
 from egc_operator.prediction import CommandHistory
@@ -225,9 +225,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"operator-model: error: {exc}", file=sys.stderr)
         return 2
     session = open_session(ZenohOptions(connect=tuple(args.zenoh_connect)))
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = stop_on_signals()  # not threading.Event: its set() can deadlock in a handler
     with contextlib.ExitStack() as stack:
         intent = (
             stack.enter_context(Path(args.intent).open("w", encoding="utf-8"))

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import signal
 import sys
 import threading
 import time
@@ -28,6 +27,7 @@ from typing import IO, Any
 
 from egc_common import keys
 from egc_common.messages import Rejection, Telemetry, decode_telemetry
+from egc_common.stop_flag import stop_on_signals
 from egc_common.transport import ZenohOptions, open_session, payload_bytes
 
 
@@ -82,9 +82,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--connect", required=True, metavar="ENDPOINT")
     parser.add_argument("--out", required=True, metavar="FILE.jsonl")
     args = parser.parse_args(argv)
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = stop_on_signals()  # not threading.Event: its set() can deadlock in a handler
     session = open_session(ZenohOptions(connect=(args.connect,)))
     with Path(args.out).open("w", encoding="utf-8") as out:
         writer = Writer(out)

@@ -37,7 +37,6 @@ import argparse
 import logging
 import os
 import re
-import signal
 import socket
 import sys
 import threading
@@ -50,6 +49,7 @@ from egc_common.clock_id import monotonic_clock_id
 from egc_common.errors import UsageError
 from egc_common.joystick_file import JoystickFileError
 from egc_common.messages import FILTER_NAMES, GOAL_FRAMES
+from egc_common.stop_flag import StopRequest, stop_on_signals
 from egc_common.transport import (
     DEFAULT_ENDPOINT,
     add_zenoh_arguments,
@@ -305,9 +305,7 @@ def run(args: argparse.Namespace) -> int:
             view.close()
         source.close()
         raise
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = stop_on_signals()  # not threading.Event: its set() can deadlock in a handler
     if args.duration is not None:
         timer = threading.Timer(args.duration, stop.set)
         timer.daemon = True
@@ -353,7 +351,7 @@ def _run_fleet(
     session: Any,
     source: CommandSource,
     view: View | None,
-    stop: threading.Event,
+    stop: StopRequest,
     operator_id: str,
     first: str | None,
     rate_hz: float,

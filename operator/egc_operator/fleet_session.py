@@ -52,6 +52,7 @@ from typing import Any, Protocol
 import zenoh
 from egc_common import keys
 from egc_common.messages import decode_clock_reply
+from egc_common.stop_flag import StopRequest
 from egc_common.transport import payload_bytes
 
 from egc_operator.camera_view import RobotClock
@@ -95,7 +96,7 @@ class DrivingNode(Protocol):
 
     published: int
 
-    def run(self, stop: threading.Event) -> None: ...
+    def run(self, stop: StopRequest) -> None: ...
     def close(self) -> None: ...
     def robot_clock(self, local_ns: int) -> RobotClock | None: ...
 
@@ -131,7 +132,7 @@ class _Drive:
     robot: str
     node: DrivingNode
     source: NodeSource
-    stop: threading.Event
+    stop: StopRequest
     thread: threading.Thread
     view: Any  # its view (``FleetView.for_robot``), or None
     press_ns: int | None = None  # the press that switched to it (None: the first robot)
@@ -348,7 +349,7 @@ class FleetSession:
 
     # -- the session ------------------------------------------------------------------------------
 
-    def run(self, stop: threading.Event) -> None:
+    def run(self, stop: StopRequest) -> None:
         probe = threading.Thread(
             target=self._probe_loop, args=(stop,), name="fleet-clocks", daemon=True
         )
@@ -370,7 +371,7 @@ class FleetSession:
             self._stop_all()
             probe.join(timeout=2 * _PROBE_TIMEOUT_S)
 
-    def _wait_first(self, stop: threading.Event) -> str | None:
+    def _wait_first(self, stop: StopRequest) -> str | None:
         """The first robot to drive: ``first`` once it is seen, else the first listed once the
         robots seen have answered their info queries (or after ``_SETTLE_NS``)."""
         started = self._clock()
@@ -431,7 +432,7 @@ class FleetSession:
         if view is not None:  # at that robot's time, in its view
             view.on_text("INFO", f"driving {robot}" + (f" (was {previous})" if previous else ""))
 
-    def _drive_loop(self, robot: str, node: DrivingNode, stop: threading.Event) -> None:
+    def _drive_loop(self, robot: str, node: DrivingNode, stop: StopRequest) -> None:
         try:
             node.run(stop)
         except Exception:  # a bug in one node must not leave the others running blind
@@ -457,7 +458,7 @@ class FleetSession:
             time.sleep(_RELEASE_POLL_S)
         log.info("robot %s did not confirm the release in time: its session ends anyway", robot)
 
-    def _loop(self, stop: threading.Event) -> None:
+    def _loop(self, stop: StopRequest) -> None:
         next_view = self._clock()
         while not stop.is_set():
             self._wake.wait(_POLL_S)
@@ -551,7 +552,7 @@ class FleetSession:
 
     # -- the other robots' clocks: their round trips ----------------------------------------------
 
-    def _probe_loop(self, stop: threading.Event) -> None:
+    def _probe_loop(self, stop: StopRequest) -> None:
         while not stop.wait(_PROBE_PERIOD_S):
             for robot in self.watch.robots():
                 try:

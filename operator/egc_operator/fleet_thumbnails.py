@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import zenoh
 from egc_common import keys
 from egc_common.messages import Telemetry
+from egc_common.stop_flag import StopRequest
 from egc_common.transport import payload_bytes
 from PIL import Image
 
@@ -125,7 +126,7 @@ class FleetThumbnails:
         self.grabs = 0
         self.bytes_received = 0
 
-    def run(self, stop: threading.Event) -> None:
+    def run(self, stop: StopRequest) -> None:
         while not stop.wait(self._period_s):
             try:
                 if not self._allowed():
@@ -142,7 +143,7 @@ class FleetThumbnails:
                     return
                 log.debug("fleet thumbnail: %s", exc)
 
-    def grab(self, robot: str, stop: threading.Event) -> Thumbnail | None:
+    def grab(self, robot: str, stop: StopRequest) -> Thumbnail | None:
         """One picture of ``robot``'s camera, or None within ``grab_s``."""
         queue: deque[bytes] = deque(maxlen=_QUEUE)
         arrived = threading.Event()

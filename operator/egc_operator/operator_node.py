@@ -72,6 +72,7 @@ from egc_common.messages import (
     decode_state,
     decode_telemetry,
 )
+from egc_common.stop_flag import StopRequest
 from egc_common.transport import command_publisher, payload_bytes
 from egc_common.view_budget import RateMeter
 
@@ -389,7 +390,7 @@ class OperatorNode:
 
     # -- clock sync thread --------------------------------------------------------------------
 
-    def _clock_sync(self, stop: threading.Event) -> None:
+    def _clock_sync(self, stop: StopRequest) -> None:
         key = keys.clock(self._robot)
         while not stop.is_set():
             try:
@@ -485,7 +486,7 @@ class OperatorNode:
             using,
         )
 
-    def _map_loop(self, stop: threading.Event) -> None:
+    def _map_loop(self, stop: StopRequest) -> None:
         """The robot's static map (``egc/<robot>/map``) for the view's world frame, once per
         appearance of the robot: again after a restart or a long outage (a liveliness PUT), and
         it replaces the map the view has.
@@ -514,7 +515,7 @@ class OperatorNode:
             else:
                 stop.wait(_MAP_RETRY_S)
 
-    def _fetch_map(self, stop: threading.Event) -> bool:
+    def _fetch_map(self, stop: StopRequest) -> bool:
         """One map query; True once the view has the map."""
         try:
             replies = self._session.get(keys.world_map(self._robot), timeout=_MAP_TIMEOUT_S)
@@ -538,7 +539,7 @@ class OperatorNode:
 
     # -- the publishing loop --------------------------------------------------------------------
 
-    def run(self, stop: threading.Event) -> None:
+    def run(self, stop: StopRequest) -> None:
         """Publish until ``stop`` is set or a finite source ends (then release the deadman)."""
         sync_thread = threading.Thread(
             target=self._clock_sync, args=(stop,), name="clock-sync", daemon=True
@@ -674,7 +675,7 @@ class OperatorNode:
 
     # -- via points thread ------------------------------------------------------------------------
 
-    def _goal_loop(self, stop: threading.Event) -> None:
+    def _goal_loop(self, stop: StopRequest) -> None:
         """Apply next/clear presses and publish the route when due (see the module docstring)."""
         if self._view is not None and self._planner.engaged:
             route = self._planner.route

@@ -52,6 +52,7 @@ from egc_common import keys
 from egc_common.event_log import EventLog
 from egc_common.messages import BaseCommand, StateMessage, encode_clock_reply
 from egc_common.scan import Scan
+from egc_common.stop_flag import StopRequest
 from egc_common.transport import (
     CONTROL_REPLY,
     control_publisher,
@@ -405,7 +406,7 @@ class RobotNode:
 
     # -- the fixed-rate loop ------------------------------------------------------------------
 
-    def run(self, stop: threading.Event) -> None:
+    def run(self, stop: StopRequest) -> None:
         period = self._period_ns
         deadline = self._clock() + period
         while not stop.wait(max(0, deadline - self._clock()) / 1e9):

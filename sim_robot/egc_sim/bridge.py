@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import logging
 import math
-import signal
 import threading
 import time
 from typing import Any
@@ -31,6 +30,7 @@ from egc_common.messages import (
 )
 from egc_common.profiles import RobotProfile, get_profile
 from egc_common.scan import Scan
+from egc_common.stop_flag import stop_on_signals
 from egc_common.transport import (
     DEFAULT_ENDPOINT,
     add_zenoh_arguments,
@@ -217,9 +217,7 @@ def run(args: argparse.Namespace) -> int:
         return run_ros2_base(sim, args)
     sim = open_simulator(args.map, profile, parse_pose(args.start), args.seed, args.beams)
     session: Any = open_session(options_from_args(args))  # zenoh's stubs leave close() untyped
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = stop_on_signals()  # not threading.Event: its set() can deadlock in a handler
 
     lock = threading.Lock()
     last_cmd: list[Any] = [(0.0, 0.0), 0]  # (v, w), arrival time

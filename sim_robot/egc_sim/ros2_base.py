@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import logging
 import math
-import signal
 import threading
 import time
 from typing import Any
@@ -36,6 +35,7 @@ from egc_common.ros2_topics import (
     default_topic,
 )
 from egc_common.scan import Scan
+from egc_common.stop_flag import stop_on_signals
 
 from egc_sim.simulator import Simulator
 
@@ -223,9 +223,7 @@ def run_ros2_base(sim: Simulator, args: argparse.Namespace) -> int:
     from egc_sim.bridge import RealTimeSim  # the same real-time stepping as the Zenoh bridge
 
     resolve_topics(args)
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = stop_on_signals()  # not threading.Event: its set() can deadlock in a handler
     try:
         base = Ros2Base(sim, args)
     except UsageError:
