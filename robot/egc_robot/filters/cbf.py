@@ -378,11 +378,11 @@ def cbf_filter(
     shape = _shape(profile.footprint)
     q_max = shape.reach
     turn_now = q_max * (w_now if w_now >= 0.0 else -w_now)
-    scene = _Scene(
+    scene = _tuple_new(_Scene, (
         profile, params, v0, w0, v_now, w_now, k_now, k_cmd, shape.x_back, shape.x_front,
         q_max, shape, k_now * ((0.0 if v_now < 0.0 else v_now) + turn_now),
         k_now * ((0.0 if -v_now < 0.0 else -v_now) + turn_now),
-    )  # fmt: skip
+    ))  # fmt: skip
     # Rows are built for the points some command within a "cover" could approach too fast:
     # first the command's own (from a standstill to it: slowing down needs no more points; a
     # little reversing and turning added), then, if the answer leaves the cover, one holding
@@ -419,7 +419,7 @@ def cbf_filter(
             rows.abc, rows.short, v0, w0, sv, sw, profile, params.points_considered
         )
         rounds_total += rounds
-        if case is not CbfCase.SOLVED or (cover[0] <= v_out <= cover[1] and abs(w_out) <= cover[2]):
+        if case is not _SOLVED or (cover[0] <= v_out <= cover[1] and abs(w_out) <= cover[2]):
             break
         if attempt + 1 < _MAX_COVERS:
             cover = (min(cover[0], v_out), max(cover[1], v_out), max(cover[2], abs(w_out)))
@@ -436,12 +436,18 @@ def cbf_filter(
     # A stop computed as the projection onto a line through the origin comes out as 1e-17.
     v_out = 0.0 if abs(v_out) <= _SAME else v_out
     w_out = 0.0 if abs(w_out) <= _SAME else w_out
-    found = _Working(rows, working, v_out, w_out)
+    found = _tuple_new(_Working, (rows, working, v_out, w_out))
     modified = bool(v_out != v0 or w_out != w0)
-    return CbfResult(
+    return _tuple_new(CbfResult, (
         v_out, w_out, modified, case, params.margin_m, tau, k_now, rows.n, rounds_total, found,
         float(rows.nearest), ahead,
-    )  # fmt: skip
+    ))  # fmt: skip
+
+
+# The per-call named tuples are built with tuple.__new__: a named tuple's own __new__ is a
+# Python function that binds every field by name (~2k instructions a call, of ~400k).
+_tuple_new = tuple.__new__
+_SOLVED = CbfCase.SOLVED  # a module name: an enum member looked up on its class costs ~1k
 
 
 class _Working(NamedTuple):
@@ -769,10 +775,10 @@ class _Scene(NamedTuple):
         np.maximum(bounds[0], c, out=c)
         # The command falls short of each row by c + u (if positive).
         short = c + u_ref
-        return _Rows(
+        return _tuple_new(_Rows, (
             points, n_scan, n, sd, abc, short, bounds, gain, alpha_m_extra, alpha, omega_cmd,
             u_ref, self.k_cmd, p.margin_m, short[short.argmax()], nearest, v0, w0,
-        )  # fmt: skip
+        ))  # fmt: skip
 
 
 class _Edges:
@@ -1035,7 +1041,7 @@ def _solve(
         # c - (a v + b w): every row's shortfall (``np.dot`` of a tuple costs twice as much).
         short = np.array((-v, -w, 1.0)).dot(abc)
         if short[short.argmax()] <= _TOL:
-            return v, w, rounds, CbfCase.SOLVED, working
+            return v, w, rounds, _SOLVED, working
         add = _most_violated(short, k)
         working = np.concatenate((working, add))
     v, w = _stop_and_turn(abc[1], abc[2], w0, profile)
