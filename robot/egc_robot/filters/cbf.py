@@ -77,11 +77,18 @@ are sufficient, so the projection onto a single violated line, when feasible, is
 otherwise the answer is a vertex of two lines, one of which the command violates (else KKT puts
 the optimum at the command), the feasible one nearest the command. The rows are built for all
 points at once (numpy); the few the solver works on are projected in plain Python, cheaper than
-numpy's per-call cost at that size. That cost, not the arithmetic, is the filter's time on the
-few dozen points in reach (``bench/bench_filter.py``), so each quantity is one numpy call written
-where the solver reads it (lengths as the modulus of x + i y, products of several rows as one
-dot product), the creep's calls are skipped when no row can creep, and a polygon's inside test
-runs only for points near its edge: the numbers are the formulas', to rounding.
+numpy's per-call cost at that size. That cost, and Python's own, not the arithmetic, is the
+filter's time on the few dozen points in reach (``bench/bench_filter.py``), so:
+
+- each quantity is one numpy call written where the solver reads it (lengths as the modulus of
+  x + i y, products of several rows as one dot product, a polygon's edges repeated per point so
+  that no call broadcasts), and a polygon's inside test runs only for points near its edge: the
+  numbers are the formulas', to rounding;
+- work that provably changes nothing is skipped, each shortcut giving the general form's answer
+  to the bit (``test_cbf`` checks each against it): a CLEAR test from bounds (omega <= 1,
+  creep >= 0) before omega and the creep are computed (``_Scene.rows``); the creep's calls
+  when no row can creep or every point is beyond ``_Scene._creep_bound``; and the small QP's
+  rows when the projection onto the first violated one is the answer (``_first_projection``).
 
 Which points enter: a point whose barrier no command of a "cover" (a range of v and |w|) can
 violate is left out, by its distance from the footprint alone. The first cover runs from a
