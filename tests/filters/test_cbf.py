@@ -10,18 +10,23 @@ from __future__ import annotations
 
 import itertools
 import math
+from unittest import mock
 
 import numpy as np
 import pytest
 from egc_common.footprint import Footprint, signed_distance
 from egc_common.profiles import JACKAL, PIONEER3DX, TURTLEBOT4, RobotProfile
 from egc_common.scan import obstacle_points
+from egc_robot.filters import cbf as cbf_module
 from egc_robot.filters.cbf import (
     CREEP_BELOW,
     CREEP_PER_S,
     PATH_POWER,
     CbfCase,
     CbfParams,
+    _checks,
+    _first_projection,
+    _nearest_in,
     _project,
     _stop_and_turn,
     cbf_filter,
@@ -477,3 +482,75 @@ def test_a_disc_robot_turns_in_place_next_to_a_wall():
     assert (res.v_mps, res.w_radps, res.case) == (0.0, 1.5, CbfCase.CLEAR)
     ahead = cbf_filter(0.3, 0.0, wall, 0.3, 0.0, None, TURTLEBOT4, p)
     assert ahead.v_mps <= 0.0
+
+
+# -- the shortcuts equal the general path ------------------------------------------------------
+
+
+@settings(max_examples=300)
+@given(
+    rows=st.lists(
+        st.tuples(
+            st.one_of(st.just(0.0), st.floats(-2, 2)),
+            st.one_of(st.just(0.0), st.floats(-2, 2)),
+            st.floats(-1, 0),
+        ),
+        min_size=1,
+        max_size=8,
+    ),
+    cmd=st.tuples(st.floats(-2, 2), st.floats(-2, 2)),
+)
+def test_the_first_projection_is_the_small_qps_answer_when_it_gives_one(rows, cmd):
+    """``_first_projection`` (the solver's common case, without building the rows) against
+    ``_nearest_in`` on the rows ``_checks`` builds: the same point, to the bit."""
+    a, b, c = (list(col) for col in zip(*rows, strict=True))
+    sv, sw = 1.0 / JACKAL.v_max_mps, 1.0 / JACKAL.w_max_radps
+    isv, isw, z0x, z0y = 1.0 / sv, 1.0 / sw, sv * cmd[0], sw * cmd[1]
+    fast = _first_projection(a, b, c, isv, isw, z0x, z0y)
+    if fast is not None:
+        assert fast == _nearest_in(*_checks(a, b, c, isv, isw, z0x, z0y), z0x, z0y)
+
+
+def scene_st(profile: RobotProfile):
+    """Points near the footprint, a command, a current velocity (often the command) and tau."""
+    return st.tuples(near_st, command_st(profile), command_st(profile), st.booleans(),
+                     st.floats(0.0, 1.0))  # fmt: skip
+
+
+def results_equal(a, b) -> bool:
+    if (a.v_mps, a.w_radps, a.case, a.considered, a.rounds) != (
+        b.v_mps,
+        b.w_radps,
+        b.case,
+        b.considered,
+        b.rounds,
+    ):
+        return False
+    ta, tb = a.tight, b.tight
+    if (ta is None) != (tb is None):
+        return False
+    return ta is None or all(
+        np.array_equal(getattr(ta, f), getattr(tb, f)) for f in ("x_m", "y_m", "a", "b", "c")
+    )
+
+
+@pytest.mark.parametrize("profile", PROFILES + _shapes(), ids=lambda p: p.name)
+@settings(max_examples=150)
+@given(data=st.data())
+def test_the_clear_test_and_the_creep_bound_change_no_answer(profile, data):
+    """The CLEAR test before the rows (``_Scene.rows``' clear_test) and the distance beyond
+    which the creep is skipped (``_Scene._creep_bound``): every answer equals the one computed
+    without them, to the bit."""
+    pts, cmd, now, steady, tau = data.draw(scene_st(profile))
+    v_now, w_now = cmd if steady else now
+    params = CbfParams.from_profile(profile)
+    fast = cbf_filter(*cmd, pts, v_now, w_now, tau, profile, params)
+    rows = cbf_module._Scene.rows
+    with (
+        mock.patch.object(cbf_module._Scene, "rows", lambda s, *a, clear_test=False: rows(s, *a)),
+        mock.patch.object(cbf_module._Scene, "_creep_bound", lambda s: math.inf),
+    ):
+        plain = cbf_filter(*cmd, pts, v_now, w_now, tau, profile, params)
+    assert results_equal(fast, plain)
+    if fast.case is CbfCase.CLEAR:
+        assert fast.v_mps is cmd[0] and fast.w_radps is cmd[1]

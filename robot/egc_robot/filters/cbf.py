@@ -77,11 +77,18 @@ are sufficient, so the projection onto a single violated line, when feasible, is
 otherwise the answer is a vertex of two lines, one of which the command violates (else KKT puts
 the optimum at the command), the feasible one nearest the command. The rows are built for all
 points at once (numpy); the few the solver works on are projected in plain Python, cheaper than
-numpy's per-call cost at that size. That cost, not the arithmetic, is the filter's time on the
-few dozen points in reach (``bench/bench_filter.py``), so each quantity is one numpy call written
-where the solver reads it (lengths as the modulus of x + i y, products of several rows as one
-dot product), the creep's calls are skipped when no row can creep, and a polygon's inside test
-runs only for points near its edge: the numbers are the formulas', to rounding.
+numpy's per-call cost at that size. That cost, and Python's own, not the arithmetic, is the
+filter's time on the few dozen points in reach (``bench/bench_filter.py``), so:
+
+- each quantity is one numpy call written where the solver reads it (lengths as the modulus of
+  x + i y, products of several rows as one dot product, a polygon's edges repeated per point so
+  that no call broadcasts), and a polygon's inside test runs only for points near its edge: the
+  numbers are the formulas', to rounding;
+- work that provably changes nothing is skipped, each shortcut giving the general form's answer
+  to the bit (``test_cbf`` checks each against it): a CLEAR test from bounds (omega <= 1,
+  creep >= 0) before omega and the creep are computed (``_Scene.rows``); the creep's calls
+  when no row can creep or every point is beyond ``_Scene._creep_bound``; and the small QP's
+  rows when the projection onto the first violated one is the answer (``_first_projection``).
 
 Which points enter: a point whose barrier no command of a "cover" (a range of v and |w|) can
 violate is left out, by its distance from the footprint alone. The first cover runs from a
@@ -378,11 +385,11 @@ def cbf_filter(
     shape = _shape(profile.footprint)
     q_max = shape.reach
     turn_now = q_max * (w_now if w_now >= 0.0 else -w_now)
-    scene = _Scene(
+    scene = _tuple_new(_Scene, (
         profile, params, v0, w0, v_now, w_now, k_now, k_cmd, shape.x_back, shape.x_front,
         q_max, shape, k_now * ((0.0 if v_now < 0.0 else v_now) + turn_now),
         k_now * ((0.0 if -v_now < 0.0 else -v_now) + turn_now),
-    )  # fmt: skip
+    ))  # fmt: skip
     # Rows are built for the points some command within a "cover" could approach too fast:
     # first the command's own (from a standstill to it: slowing down needs no more points; a
     # little reversing and turning added), then, if the answer leaves the cover, one holding
@@ -404,7 +411,7 @@ def cbf_filter(
             v0, w0, False, case, params.margin_m, tau, k_now, 0, 0, None, math.inf, ahead
         )
     first = scene.rows(*reach, clear_test=True)
-    if isinstance(first, _Clear) or first.worst_for_command <= _TOL:
+    if isinstance(first, _Clear) or not first.violated.size:
         # The command keeps every barrier: unchanged, to the bit.
         return CbfResult(
             v0, w0, False, CbfCase.CLEAR, params.margin_m, tau, k_now, first.n, 0, None,
@@ -416,10 +423,10 @@ def cbf_filter(
     rounds_total = 0
     for attempt in range(_MAX_COVERS + 1):
         v_out, w_out, rounds, case, working = _solve(
-            rows.abc, rows.short, v0, w0, sv, sw, profile, params.points_considered
+            rows.abc, rows.short, rows.violated, v0, w0, sv, sw, profile, params.points_considered
         )
         rounds_total += rounds
-        if case is not CbfCase.SOLVED or (cover[0] <= v_out <= cover[1] and abs(w_out) <= cover[2]):
+        if case is not _SOLVED or (cover[0] <= v_out <= cover[1] and abs(w_out) <= cover[2]):
             break
         if attempt + 1 < _MAX_COVERS:
             cover = (min(cover[0], v_out), max(cover[1], v_out), max(cover[2], abs(w_out)))
@@ -436,12 +443,18 @@ def cbf_filter(
     # A stop computed as the projection onto a line through the origin comes out as 1e-17.
     v_out = 0.0 if abs(v_out) <= _SAME else v_out
     w_out = 0.0 if abs(w_out) <= _SAME else w_out
-    found = _Working(rows, working, v_out, w_out)
+    found = _tuple_new(_Working, (rows, working, v_out, w_out))
     modified = bool(v_out != v0 or w_out != w0)
-    return CbfResult(
+    return _tuple_new(CbfResult, (
         v_out, w_out, modified, case, params.margin_m, tau, k_now, rows.n, rounds_total, found,
         float(rows.nearest), ahead,
-    )  # fmt: skip
+    ))  # fmt: skip
+
+
+# The per-call named tuples are built with tuple.__new__: a named tuple's own __new__ is a
+# Python function that binds every field by name (~2k instructions a call, of ~400k).
+_tuple_new = tuple.__new__
+_SOLVED = CbfCase.SOLVED  # a module name: an enum member looked up on its class costs ~1k
 
 
 class _Working(NamedTuple):
@@ -499,7 +512,7 @@ class _Rows(NamedTuple):
     u_ref: FloatArray
     k_cmd: float
     margin_m: float
-    worst_for_command: float  # the command's largest shortfall over every row
+    violated: IntArray  # the rows the command falls short of by more than _TOL, in order
     nearest: float
     v0: float  # the command the rows were checked against
     w0: float
@@ -703,9 +716,11 @@ class _Scene(NamedTuple):
                 up_now = up_ref
         elif v_now or w_now:
             up_now = np.maximum(np.array((-v_now, -w_now)).dot(ab), _ZERO)
-        # bounds[1] = alpha (margin - sd) for now (the clip by -creep comes below).
+        # bounds: (S)'s c and (C)'s before its gain; (C)'s = alpha (margin - sd) for now (the
+        # clip by -creep comes below).
         bounds = np.empty((2, n))
-        room = np.multiply(sd, -alpha, out=bounds[1])
+        bound_s, room = bounds[0], bounds[1]
+        np.multiply(sd, -alpha, out=room)
         room += alpha * p.margin_m
         if clear_test:
             ak = alpha * self.k_cmd
@@ -749,30 +764,31 @@ class _Scene(NamedTuple):
                 omega_now = _omega(up_now, v_now, w_now, q)
             ak_omega = (alpha * self.k_now) * omega_now
             alpha_m_extra = ak_omega * up_now
-            np.add(room, alpha_m_extra, out=bounds[0])
+            np.add(room, alpha_m_extra, out=bound_s)
             if omega_now is not omega_cmd or self.k_now != self.k_cmd:
                 ak_omega = None
         else:
-            bounds[0] = room
+            bound_s[:] = room
         if neg_creep is None:
             np.minimum(bounds, _NEG_ZERO, out=bounds)
         else:  # row by row: broadcasting (n,) against (2, n) costs about twice as much
-            np.minimum(bounds[0], neg_creep, out=bounds[0])
-            np.minimum(bounds[1], neg_creep, out=bounds[1])
+            np.minimum(bound_s, neg_creep, out=bound_s)
+            np.minimum(room, neg_creep, out=room)
         # (C): -gain u >= bounds[1], i.e. -u >= bounds[1] / gain; the point's row is the
         # tighter of (S) and (C): the same normal, the larger c.
         if ak_omega is None:
             ak_omega = (alpha * self.k_cmd) * omega_cmd
         gain = np.add(ak_omega, _ONE, out=ak_omega)
         c = abc[2]
-        np.divide(bounds[1], gain, out=c)
-        np.maximum(bounds[0], c, out=c)
-        # The command falls short of each row by c + u (if positive).
+        np.divide(room, gain, out=c)  # room: (C)'s c before its gain, clipped
+        np.maximum(bound_s, c, out=c)
+        # The command falls short of each row by c + u (if positive). (Finite, as every
+        # input is: none violated is max(short) <= _TOL.)
         short = c + u_ref
-        return _Rows(
+        return _tuple_new(_Rows, (
             points, n_scan, n, sd, abc, short, bounds, gain, alpha_m_extra, alpha, omega_cmd,
-            u_ref, self.k_cmd, p.margin_m, short[short.argmax()], nearest, v0, w0,
-        )  # fmt: skip
+            u_ref, self.k_cmd, p.margin_m, (short > _TOL_0D).nonzero()[0], nearest, v0, w0,
+        ))  # fmt: skip
 
 
 class _Edges:
@@ -1012,6 +1028,7 @@ def _omega(up: FloatArray, v: float, w: float, q: ComplexArray) -> FloatArray:
 def _solve(
     abc: FloatArray,
     short: FloatArray,
+    violated: IntArray,
     v0: float,
     w0: float,
     sv: float,
@@ -1022,9 +1039,9 @@ def _solve(
     """Cutting planes over the rows a v + b w >= c (module docstring; ``abc``: the (3, N) rows
     a, b, c): the ``k`` most violated rows first, then each round the ``k`` most violated by
     the last answer. Returns the answer, the rounds, the case and the working set. ``short``:
-    by how much the command falls short of each row (m/s, > 0: violated): the order in which
-    rows join, not the answer."""
-    working = _most_violated(short, k)
+    by how much the command falls short of each row (m/s, > 0: violated; ``violated``: the
+    rows above the tolerance): the order in which rows join, not the answer."""
+    working = _most_violated(short, k, violated)
     for rounds in range(1, _MAX_ROUNDS + 1):
         # Only the working rows become Python floats.
         a, b, c = abc.take(working, 1).tolist()
@@ -1035,16 +1052,16 @@ def _solve(
         # c - (a v + b w): every row's shortfall (``np.dot`` of a tuple costs twice as much).
         short = np.array((-v, -w, 1.0)).dot(abc)
         if short[short.argmax()] <= _TOL:
-            return v, w, rounds, CbfCase.SOLVED, working
-        add = _most_violated(short, k)
+            return v, w, rounds, _SOLVED, working
+        add = _most_violated(short, k, (short > _TOL_0D).nonzero()[0])
         working = np.concatenate((working, add))
     v, w = _stop_and_turn(abc[1], abc[2], w0, profile)
     return v, w, _MAX_ROUNDS, CbfCase.STOP_TURN, working
 
 
-def _most_violated(short: FloatArray, k: int) -> IntArray:
-    """Indices of the (at most) ``k`` rows with the largest ``short`` above the tolerance."""
-    bad: IntArray = (short > _TOL_0D).nonzero()[0]
+def _most_violated(short: FloatArray, k: int, bad: IntArray) -> IntArray:
+    """Indices of the (at most) ``k`` rows with the largest ``short`` above the tolerance
+    (``bad``: every such row, in order)."""
     if bad.size > k:
         if bad.size == short.size:  # every row: the same partition without the indexing
             return (-short).argpartition(k)[:k]
@@ -1066,20 +1083,18 @@ def _project(
     the box, or None when none of the candidates is feasible (empty polygon, through rounding).
     Solved in z = (sv v, sw w), where the distance is Euclidean (rows a / sv, b / sw, c); the
     box's rows join only when the answer without them leaves it."""
-    isv, isw, tol = 1.0 / sv, 1.0 / sw, -_TOL
+    isv, isw = 1.0 / sv, 1.0 / sw
     z0x, z0y = sv * v0, sw * w0
-    checks: list[tuple[float, float, float, float]] = []  # (gx, gy, e, tolerance) of each row
-    bad: list[int] = []  # the rows z0 violates (their places in checks)
-    for ax, ay, ae in zip(a, b, c, strict=True):
-        gx, gy = ax * isv, ay * isw
-        if gx * gx + gy * gy > _SAME:  # a row with no normal cannot bind
-            if gx * z0x + gy * z0y < ae:
-                bad.append(len(checks))
-            checks.append((gx, gy, ae, tol * (1.0 + (ae if ae >= 0.0 else -ae))))
     vm, wm = profile.v_max_mps, profile.w_max_radps
-    found = _nearest_in(checks, bad, z0x, z0y)
+    checks: list[tuple[float, float, float, float]] | None = None
+    found = _first_projection(a, b, c, isv, isw, z0x, z0y)
+    if found is None:
+        checks, bad = _checks(a, b, c, isv, isw, z0x, z0y)
+        found = _nearest_in(checks, bad, z0x, z0y)
     if found is not None and abs(found[0]) <= sv * vm and abs(found[1]) <= sw * wm:
         return found[0] / sv, found[1] / sw
+    if checks is None:
+        checks, bad = _checks(a, b, c, isv, isw, z0x, z0y)
     low_v, low_w = -_TOL * (1.0 + abs(-vm)), -_TOL * (1.0 + abs(-wm))
     for gx, gy, ae, low in (
         (isv, 0.0, -vm, low_v), (-isv, 0.0, -vm, low_v),
@@ -1090,6 +1105,67 @@ def _project(
         checks.append((gx, gy, ae, low))
     found = _nearest_in(checks, bad, z0x, z0y)
     return None if found is None else (found[0] / sv, found[1] / sw)
+
+
+def _checks(
+    a: list[float],
+    b: list[float],
+    c: list[float],
+    isv: float,
+    isw: float,
+    z0x: float,
+    z0y: float,
+) -> tuple[list[tuple[float, float, float, float]], list[int]]:
+    """The rows scaled to z, as (gx, gy, e, the tolerance of the feasibility test), those with a
+    normal (one without cannot bind), and the places of the ones z0 violates, in order."""
+    tol, same = -_TOL, _SAME
+    checks: list[tuple[float, float, float, float]] = []
+    bad: list[int] = []
+    add_check, add_bad = checks.append, bad.append
+    for ax, ay, ae in zip(a, b, c, strict=True):
+        gx = ax * isv
+        gy = ay * isw
+        if gx * gx + gy * gy > same:
+            if gx * z0x + gy * z0y < ae:
+                add_bad(len(checks))
+            add_check((gx, gy, ae, tol * (1.0 + (ae if ae >= 0.0 else -ae))))
+    return checks, bad
+
+
+def _first_projection(
+    a: list[float],
+    b: list[float],
+    c: list[float],
+    isv: float,
+    isw: float,
+    z0x: float,
+    z0y: float,
+) -> tuple[float, float] | None:
+    """``_nearest_in``'s answer on the rows ``_checks`` makes of a, b, c, in its commonest case,
+    without making them: when the first row with a normal is violated by z0 (every working
+    row is, in the solver's first round), its projection is ``_nearest_in``'s first
+    candidate, and the answer when it meets every row to the same tolerance. That candidate,
+    or None when the case does not hold (``test_cbf``: the two agree)."""
+    tol, same = -_TOL, _SAME
+    for ax, ay, ae in zip(a, b, c, strict=True):
+        gx = ax * isv
+        gy = ay * isw
+        if gx * gx + gy * gy > same:
+            if not gx * z0x + gy * z0y < ae:
+                return None
+            step = (ae - gx * z0x - gy * z0y) / (gx * gx + gy * gy)
+            zx, zy = z0x + step * gx, z0y + step * gy
+            break
+    else:
+        return None
+    for ax, ay, ae in zip(a, b, c, strict=True):
+        gx = ax * isv
+        gy = ay * isw
+        if gx * gx + gy * gy > same and not (
+            gx * zx + gy * zy - ae >= tol * (1.0 + (ae if ae >= 0.0 else -ae))
+        ):
+            return None
+    return zx, zy
 
 
 def _nearest_in(
