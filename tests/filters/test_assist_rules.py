@@ -789,6 +789,27 @@ def test_own_way_is_kept_while_the_stick_swings_past_the_via_point():
     assert r.rule == "plan"
 
 
+def test_no_own_way_over_a_slow_link():
+    """Above ``own_delay_max_s`` of loop delay the stick was given on a picture too old to be a
+    clear intent for the robot's present: the planner decides as before (a sighted operator
+    over 500 ms links swung the robot round the via point with the rule)."""
+    obs = obstacle_points(BLOCK)
+    limit = J_ON.own_delay_max_s
+    for tau, rule in (
+        (None, "own-way"),
+        (0.3, "own-way"),
+        (limit, "own-way"),
+        (limit + 0.3, "plan"),
+    ):
+        mem = AssistMemory.initial()
+        for k in range(3):
+            r = assist_step(
+                mem, 0.4, -0.25, obs, BLOCK_GOAL, k * DT_MS * MS, J_ON, JACKAL, None, tau
+            )
+            mem = r.memory
+        assert r.rule == rule, tau
+
+
 def _route_stick(route: list[tuple[float, float]], speed_mps: float, profile: RobotProfile):
     """An operator who drives their own route (pure pursuit of its corners at ``speed_mps``,
     turning in place when a corner is more than 1 rad off), as a stick (v / v_max, w / w_max)."""

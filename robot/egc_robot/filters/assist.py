@@ -150,11 +150,19 @@ How each part maps to the paper
   stick keeps it while it disagrees with the plan and stays clear, also where it swings
   past the via point's direction on its route (a careful driver's turn towards the goal is
   not the blind operator's stick); a centred stick, a stick that comes back to the plan or
-  a way that is no longer clear ends it. The planner still helps whenever the stick points
-  at the via point, agrees with the plan, or its own way is not clear (the plan, the blend
-  and the obstacle rules as before), and the pipeline's sweep still has the last word.
-  Without a plan (the planner off, or nothing to plan from) the paper's rules decide as
-  before. ``own_horizon_s`` = 0 turns it off.
+  a way that is no longer clear ends it. Over a slow link (loop delay tau of DESIGN 9 above
+  ``own_delay_max_s``, 1 s: the filtered mode's blind time there) the stick was given on a
+  picture too old to be a clear intent for the robot's present and never goes its own way:
+  a sighted operator over 500 ms links (tau 1.3 s) swung the robot round the via point with
+  it (7 of 10 arrived, 9 without the rule); over 200 ms links (tau 0.7 s) 9 of 10 either
+  way. The planner still helps whenever the stick points at the via point, agrees with the
+  plan, or its own way is not clear (the plan, the blend and the obstacle rules as before),
+  and the pipeline's sweep still has the last word. Without a plan (the planner off, or
+  nothing to plan from) the paper's rules decide as before. ``own_horizon_s`` = 0 turns it
+  off. Tuned on the careful operator's ``random:6000-6009`` and ``15000-15029`` (40 of 40
+  arrived; with ``own_agree_rad`` 15 deg 39, 20 deg 36, 30 deg 34: every hand-over to the
+  plan moves the robot off the operator's route; without the keeping past the via point,
+  36 at 10 deg); numbers in ``docs/assist.md``.
 - **Wall following** (sec. V: "an obstacle in front while moving toward a target destination ...
   rotate to align with and then move parallel to the wall"). Entered when heading for the via
   point (rule ``goal``) with FRONT active at CLOSE or INTERMEDIATE, the corridor towards the via
@@ -386,9 +394,13 @@ class AssistParams:
     # direction whose own command sweeps the footprint at least ``own_clearance_m`` clear for
     # ``own_horizon_s`` goes out as it is (0 s: never; the plan and the blend decide).
     own_goal_rad: float = math.radians(20.0)
-    own_agree_rad: float = math.radians(30.0)
+    own_agree_rad: float = math.radians(10.0)
     own_horizon_s: float = 0.8
     own_clearance_m: float = 0.05
+    # Above this loop delay (s; DESIGN 9's tau) the stick was given on a picture too old to
+    # be a clear intent for the robot's present: the plan and the blend decide (the filtered
+    # mode's blind_time of DESIGN 9).
+    own_delay_max_s: float = 1.0
     # A via point closer than this (m) gives no direction: joystick plus avoidance.
     goal_min_m: float = 0.05
     # dt larger than this (s) counts as this (a resumed link does not jump the confidence).
@@ -852,10 +864,10 @@ def _own_way(
     going: bool = False,
 ) -> bool:
     """The stick steers a way of its own (module docstring, "Operator's own way"): its angle
-    more than ``own_goal_rad`` off the via point's and more than ``own_agree_rad`` off the
-    planned direction (both clipped to +-90 deg, as for ``align_tolerance_rad``), and its own
-    command (v, w) sweeps the footprint at least ``own_clearance_m`` clear of every point for
-    ``own_horizon_s``."""
+    more than ``own_goal_rad`` off the via point's (unless ``going``: it went its own way last
+    cycle) and more than ``own_agree_rad`` off the planned direction (all clipped to +-90 deg,
+    as for ``align_tolerance_rad``), and its own command (v, w) sweeps the footprint at least
+    ``own_clearance_m`` clear of every point for ``own_horizon_s``."""
     if params.own_horizon_s <= 0.0:
         return False
     planned = math.atan2(plan.target_xy_m[1], plan.target_xy_m[0])
@@ -977,10 +989,13 @@ def assist_step(
     params: AssistParams,
     profile: RobotProfile,
     sent: tuple[float, float] | None = None,
+    loop_delay_s: float | None = None,
 ) -> AssistResult:
     """One cycle of the assistant (module docstring). ``sent`` is the (v, w) the base was sent
     last cycle: its speed shrinks the bands (``at_speed``), and a motion asked for but not sent
-    is what ``unblock`` answers (None: the profile's bands, no unblocking)."""
+    is what ``unblock`` answers (None: the profile's bands, no unblocking). ``loop_delay_s``
+    is the loop delay tau of DESIGN 9 (None: not known, taken as none): above
+    ``own_delay_max_s`` the stick never goes its own way (``own-way``)."""
     if sent is not None:
         params = at_speed(params, profile, sent[0])
     obs = obstacle_points(obstacles)
@@ -1113,6 +1128,7 @@ def assist_step(
     own = (
         plan is not None
         and bearing is not None
+        and not (loop_delay_s is not None and loop_delay_s > params.own_delay_max_s)
         and _own_way(phi, bearing, plan, v_ref, w_ref, obs, params, profile, memory.own_way)
     )
     if own:
