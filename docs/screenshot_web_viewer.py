@@ -9,10 +9,12 @@
                                                          #   192 kbit/s downlink
                                                          #   -> docs/web_viewer_camera.png
 
-Steps: serve the .rrd through the web viewer bundled with rerun-sdk (``python -m rerun
---serve-web``), start ``chromium --headless`` with a DevTools port, open the viewer URL over the
-DevTools protocol, give the wasm viewer time to load (25 s by default, then until two captures
-3 s apart agree) and save ``Page.captureScreenshot`` as a PNG.
+Steps: host the web viewer bundled with rerun-sdk (``rerun --serve-web``) and serve the .rrd
+over HTTP beside it, start ``chromium --headless`` with a DevTools port, open the viewer over the
+DevTools protocol, wait for the wasm viewer to start (its ``window._handle``), hand it the
+recording on a channel (the viewer follows it to its end), let it take the recording in on a
+small page (cheap frames) until two captures a second apart agree, then set the page to
+1600 x 1000 and save ``Page.captureScreenshot`` as a PNG once two captures 2 s apart agree.
 
 ``--demo S`` records ``egc-teleop demo --duration S --save FILE.rrd`` first (the simulated robot
 and a scripted operator as separate processes over Zenoh). ``--camera S`` does the same through
@@ -44,7 +46,8 @@ from __future__ import annotations
 import argparse
 import base64
 import contextlib
-import io
+import functools
+import http.server
 import itertools
 import json
 import math
@@ -55,6 +58,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 import urllib.parse
 import urllib.request
@@ -67,7 +71,6 @@ import numpy as np
 import websocket  # websocket-client (test extra): the DevTools protocol runs over a websocket
 from egc_common.child_process import die_with_parent
 from egc_common.messages import Telemetry
-from PIL import Image, ImageChops
 
 if TYPE_CHECKING:
     from egc_operator.view import OperatorView
@@ -432,27 +435,54 @@ def _process(cmd: list[str], log: Path) -> Iterator[subprocess.Popen[bytes]]:
                 proc.wait()
 
 
+class _RecordingHandler(http.server.SimpleHTTPRequestHandler):
+    """Serves one directory's files to the viewer's page (another port: CORS), quietly."""
+
+    def end_headers(self) -> None:
+        self.send_header("Access-Control-Allow-Origin", "*")
+        super().end_headers()
+
+    def log_message(self, format: str, *args: object) -> None:
+        pass
+
+
+@dataclass(frozen=True)
+class Served:
+    """Where the web viewer's page and the recording to show are served."""
+
+    viewer_url: str
+    rrd_url: str
+    rrd_bytes: int
+
+
 @contextlib.contextmanager
-def serve_recording(rrd: Path, workdir: Path) -> Iterator[str]:
-    """Serve ``rrd`` through the bundled web viewer; yields the URL that opens it."""
-    web_port, grpc_port = free_port(), free_port()
-    cmd = [rerun_binary(), "--serve-web", "--bind", "127.0.0.1"]
-    cmd += ["--web-viewer-port", str(web_port), "--port", str(grpc_port), str(rrd)]
-    with _process(cmd, workdir / "rerun.log"):
-        _wait_http(f"http://127.0.0.1:{web_port}/", 30)
-        proxy = f"rerun+http://127.0.0.1:{grpc_port}/proxy"
-        yield f"http://127.0.0.1:{web_port}/?url={urllib.parse.quote(proxy, safe='')}"
+def serve_recording(rrd: Path, workdir: Path) -> Iterator[Served]:
+    """Host the web viewer bundled with rerun-sdk and serve ``rrd`` over HTTP beside it.
 
-
-SETTLED_PIXELS = 100  # a blinking cursor or a ticking number, not the recording still loading
-
-
-def changed_pixels(png_a_b64: str, png_b_b64: str) -> int:
-    """How many pixels differ between two base64 PNG screenshots of the same size."""
-    a, b = (
-        Image.open(io.BytesIO(base64.b64decode(x))).convert("RGB") for x in (png_a_b64, png_b_b64)
-    )
-    return int(np.count_nonzero(np.asarray(ImageChops.difference(a, b)).max(axis=2)))
+    The recording is handed to the page by ``screenshot`` (``WebHandle.send_rrd_to_channel``),
+    not through ``rerun --serve-web FILE``'s gRPC proxy: that server keeps polling the file it
+    has read to its end (a fifth of a core for as long as it runs, taken from the browser that
+    renders the page), and a recording opened from an HTTP URL would play from its start
+    instead of showing its end. Given an HTTP URL, ``--serve-web`` hosts only the viewer.
+    """
+    handler = functools.partial(_RecordingHandler, directory=str(rrd.resolve().parent))
+    files = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    thread = threading.Thread(target=files.serve_forever, name="rrd-http", daemon=True)
+    thread.start()
+    try:
+        rrd_url = f"http://127.0.0.1:{files.server_address[1]}/{urllib.parse.quote(rrd.name)}"
+        web_port = free_port()
+        cmd = [rerun_binary(), "--serve-web", "--bind", "127.0.0.1"]
+        cmd += ["--web-viewer-port", str(web_port), rrd_url]
+        with _process(cmd, workdir / "rerun.log"):
+            _wait_http(f"http://127.0.0.1:{web_port}/", 30)
+            # No ``url`` parameter: the page starts empty and waits for the recording.
+            viewer_url = f"http://127.0.0.1:{web_port}/?hide_welcome_screen"
+            yield Served(viewer_url, rrd_url, rrd.stat().st_size)
+    finally:
+        files.shutdown()
+        files.server_close()
+        thread.join()
 
 
 class DevTools:
@@ -473,24 +503,70 @@ class DevTools:
                 result: dict[str, object] = reply.get("result", {})
                 return result
 
+    def evaluate(self, expression: str, await_promise: bool = False) -> object:
+        """The value of a JavaScript expression in the page (``Runtime.evaluate``)."""
+        reply = self.call(
+            "Runtime.evaluate",
+            expression=expression,
+            awaitPromise=await_promise,
+            returnByValue=True,
+        )
+        result = reply["result"]
+        assert isinstance(result, dict)
+        if "exceptionDetails" in reply:
+            raise RuntimeError(f"{expression[:60]}...: {reply['exceptionDetails']}")
+        return result.get("value")
+
     def close(self) -> None:
         self._ws.close()
 
 
+# The page's ``window._handle`` (the viewer's ``WebHandle``) once the wasm viewer has started.
+_STARTED_JS = "typeof window._handle === 'object' && !window._handle.has_panicked()"
+# Fetch the recording and hand it to the viewer on a channel (a stream: the viewer follows it
+# to its end, where a live operator view would be); resolves to the number of bytes handed over.
+_SEND_JS = """(async () => {
+  const reply = await fetch(%s);
+  const data = new Uint8Array(await reply.arrayBuffer());
+  window._handle.open_channel("screenshot", "screenshot");
+  window._handle.send_rrd_to_channel("screenshot", data);
+  return data.length;
+})()"""
+# While the viewer ingests the recording it draws a frame per slice of it; a small page makes
+# those frames cheap (the software rasteriser's cost is per pixel), the full size is set after.
+INGEST_SIZE = (320, 200)
+
+
+def _capture(tools: DevTools) -> str:
+    return str(tools.call("Page.captureScreenshot", format="png")["data"])
+
+
+def _settle(tools: DevTools, period_s: float, deadline: float) -> tuple[str, bool]:
+    """Capture every ``period_s`` until two captures agree or ``deadline``; (last, agreed)."""
+    shot = _capture(tools)
+    while time.monotonic() < deadline:
+        time.sleep(period_s)
+        previous, shot = shot, _capture(tools)
+        if shot == previous:
+            return shot, True
+    return shot, False
+
+
 def screenshot(
     chromium: str,
-    url: str,
+    served: Served,
     png: Path,
     workdir: Path,
-    wait_s: float,
-    settle_max_s: float = 90.0,
+    start_max_s: float = 180.0,
+    settle_max_s: float = 180.0,
     size: tuple[int, int] = (1600, 1000),
 ) -> bool:
-    """Open ``url`` in headless Chromium and save a PNG of the page; True if the page settled.
+    """Open the viewer in headless Chromium, give it the recording, save a PNG of the page;
+    True if the page settled.
 
-    After ``wait_s`` the page is captured every 3 s until two captures agree (the viewer has
-    ingested the whole recording; on a loaded machine this takes longer), for at most
-    ``settle_max_s`` more seconds.
+    Waits (at most ``start_max_s``) for the viewer's ``WebHandle`` on the page, hands it the
+    recording, captures a small page every second until two captures agree (the recording is
+    in), then the page at ``size`` every 2 s until two agree (at most ``settle_max_s``).
     """
     port = free_port()
     cmd = [chromium, *CHROMIUM_FLAGS, f"--user-data-dir={workdir / 'profile'}"]
@@ -500,27 +576,32 @@ def screenshot(
         targets = json.loads(_wait_http(f"http://127.0.0.1:{port}/json/list", 10))
         page = next(t for t in targets if t.get("type") == "page")
         tools = DevTools(page["webSocketDebuggerUrl"])
-        try:
+
+        def page_size(width: int, height: int) -> None:
             tools.call(
                 "Emulation.setDeviceMetricsOverride",
-                width=size[0],
-                height=size[1],
+                width=width,
+                height=height,
                 deviceScaleFactor=1,
                 mobile=False,
             )
+
+        try:
+            page_size(*INGEST_SIZE)
             tools.call("Page.enable")
-            tools.call("Page.navigate", url=url)
-            time.sleep(wait_s)
-            shot = str(tools.call("Page.captureScreenshot", format="png")["data"])
+            tools.call("Page.navigate", url=served.viewer_url)
+            deadline = time.monotonic() + start_max_s
+            while not tools.evaluate(_STARTED_JS):
+                if time.monotonic() > deadline:
+                    raise TimeoutError(f"the web viewer did not start within {start_max_s:.0f} s")
+                time.sleep(0.5)
+            sent = tools.evaluate(_SEND_JS % json.dumps(served.rrd_url), await_promise=True)
+            if sent != served.rrd_bytes:
+                raise RuntimeError(f"the viewer got {sent} of {served.rrd_bytes} bytes")
             deadline = time.monotonic() + settle_max_s
-            settled = False
-            while not settled and time.monotonic() < deadline:
-                time.sleep(3.0)
-                previous, shot = (
-                    shot,
-                    str(tools.call("Page.captureScreenshot", format="png")["data"]),
-                )
-                settled = shot == previous
+            _settle(tools, 1.0, deadline)
+            page_size(*size)
+            shot, settled = _settle(tools, 2.0, deadline)
         finally:
             tools.close()
     png.write_bytes(base64.b64decode(shot))
@@ -570,7 +651,9 @@ def main(argv: list[str] | None = None) -> int:
         "--delay-ms", type=float, default=300.0, help="one-way delay (--predictive)"
     )
     parser.add_argument("--out", type=Path, default=None, help="PNG to write")
-    parser.add_argument("--wait", type=float, default=25.0, help="seconds for the viewer to load")
+    parser.add_argument(
+        "--wait", type=float, default=180.0, help="most seconds for the web viewer to start"
+    )
     parser.add_argument("--seconds", type=float, default=14.0, help="length of the synthetic run")
     args = parser.parse_args(argv)
     if args.out is None:
@@ -606,8 +689,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"operator status line at the end: {run.status}")
         else:
             rrd = record_corridor_run(workdir / "corridor.rrd", args.seconds)
-        with serve_recording(rrd, workdir) as url:
-            settled = screenshot(chromium, url, args.out, workdir, args.wait)
+        with serve_recording(rrd, workdir) as served:
+            settled = screenshot(chromium, served, args.out, workdir, args.wait)
     what = args.rrd or (f"{args.demo:g} s of egc-teleop demo" if args.demo else "a synthetic run")
     if args.predictive:
         what = f"the predictive display, {args.delay_ms:g} ms each way (simulated closed loop)"
