@@ -283,23 +283,48 @@ def test_contact_angle_matches_a_fine_brute_force_orbit(radius, x, y):
     got = contact_angles(
         np.array([[radius]]), np.array([[x]]), np.array([[y]]), np.array([[hl]]), np.array([[hw]])
     )[0]
-    t = np.linspace(0.0, 2.0 * math.pi, 200_001)
-    px = np.cos(t) * x + np.sin(t) * (y - radius)  # clockwise about (0, R)
-    py = -np.sin(t) * x + np.cos(t) * (y - radius) + radius
-    inside = signed_distance_to_rectangle(px, py, hl, hw) <= 0.0
-    if not inside.any():
+    want = _orbit_first_inside(
+        radius, x, y, lambda px, py: signed_distance_to_rectangle(px, py, hl, hw)
+    )
+    if want == math.inf:
         assert got == math.inf or got > 2.0 * math.pi - 1e-3
     else:
-        assert got == pytest.approx(t[np.argmax(inside)], abs=1e-4)
+        assert got == pytest.approx(want, abs=1e-4)
 
 
-def _orbit_first_inside(radius: float, x: float, y: float, inside_fn) -> float:
-    """The first clockwise angle about (0, R) at which the point is inside (brute force)."""
-    t = np.linspace(0.0, 2.0 * math.pi, 200_001)
-    px = np.cos(t) * x + np.sin(t) * (y - radius)
-    py = -np.sin(t) * x + np.cos(t) * (y - radius) + radius
-    inside = inside_fn(px, py)
-    return float(t[np.argmax(inside)]) if inside.any() else math.inf
+def _first_inside(samples: np.ndarray, step_m: float, at, sd_fn) -> float:
+    """The first of ``samples`` (a fine grid of a path) at which the point is inside the shape
+    (``sd_fn`` <= 0), as if every sample were tested, with ``sd_fn`` (a signed distance: it
+    changes by no more than the point moves) evaluated on every 64th sample and then only in
+    the blocks that start close enough to hold an inside sample: a block whose first sample is
+    farther than the path's length over the block (``step_m`` per sample) has none. ``at``
+    maps samples to the point's (x, y)."""
+    block = 64
+    heads = samples[::block]
+    sd = sd_fn(*at(heads))
+    near = np.flatnonzero(sd <= block * step_m * (1.0 + 1e-6) + 1e-9)
+    if not len(near):
+        return math.inf
+    index = (near[:, None] * block + np.arange(block)).ravel()
+    index = index[index < len(samples)]
+    inside = sd_fn(*at(samples[index])) <= 0.0
+    return float(samples[index[np.argmax(inside)]]) if inside.any() else math.inf
+
+
+_ORBIT = np.linspace(0.0, 2.0 * math.pi, 200_001)
+
+
+def _orbit_first_inside(radius: float, x: float, y: float, sd_fn) -> float:
+    """The first clockwise angle about (0, R) at which the point is inside (brute force over
+    200,000 steps of the turn, ``_first_inside``'s screening)."""
+
+    def at(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        px = np.cos(t) * x + np.sin(t) * (y - radius)
+        py = -np.sin(t) * x + np.cos(t) * (y - radius) + radius
+        return px, py
+
+    step_m = math.hypot(x, y - radius) * (_ORBIT[1] - _ORBIT[0])  # the arc over one step
+    return _first_inside(_ORBIT, step_m, at, sd_fn)
 
 
 _OUTLINES = {
@@ -322,7 +347,7 @@ def test_polygon_contact_angle_matches_a_fine_brute_force_orbit(shape, radius, x
     if signed_distance(fp, x, y) <= 1e-3:
         return
     got = polygon_contact_angles(np.array([[radius]]), np.array([[x]]), np.array([[y]]), outline)[0]
-    want = _orbit_first_inside(radius, x, y, lambda px, py: signed_distance(fp, px, py) <= 0.0)
+    want = _orbit_first_inside(radius, x, y, lambda px, py: signed_distance(fp, px, py))
     if got < want - 1e-4:  # only a graze of a corner, which sampling steps over, comes first
         px = math.cos(got) * x + math.sin(got) * (y - radius)
         py = -math.sin(got) * x + math.cos(got) * (y - radius) + radius
@@ -340,7 +365,7 @@ def test_disc_contact_angle_matches_a_fine_brute_force_orbit(radius, x, y):
     if math.hypot(x, y) - r <= 1e-3:
         return
     got = disc_contact_angles(np.array([[radius]]), np.array([[x]]), np.array([[y]]), r)[0]
-    want = _orbit_first_inside(radius, x, y, lambda px, py: np.hypot(px, py) <= r)
+    want = _orbit_first_inside(radius, x, y, lambda px, py: np.hypot(px, py) - r)
     if want == math.inf:
         assert got == math.inf or got > 2.0 * math.pi - 1e-3
     else:
@@ -369,8 +394,12 @@ def test_polygon_straight_free_is_the_distance_to_the_first_touch(x, y):
         return  # touching now, or grazing a corner at the height of a vertex
     got = polygon_straight_free(np.array([x]), np.array([y]), outline)
     s = np.linspace(0.0, 7.0, 70_001)  # the robot moves +x: the point moves -x
-    inside = signed_distance(fp, x - s, np.full_like(s, y)) <= 0.0
-    want = float(s[np.argmax(inside)]) if inside.any() else math.inf
+    want = _first_inside(
+        s,
+        s[1] - s[0],
+        lambda d: (x - d, np.full_like(d, y)),
+        lambda px, py: signed_distance(fp, px, py),
+    )
     assert got == pytest.approx(want, abs=2e-4) or (got == math.inf and want == math.inf)
 
 
