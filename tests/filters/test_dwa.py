@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 import pytest
-from egc_common.footprint import Footprint, mitred_outline, signed_distance
+from egc_common.footprint import Footprint, mitre_factor, mitred_outline, signed_distance
 from egc_common.kinematics import signed_distance_to_rectangle
 from egc_common.profiles import HUSKY, JACKAL, PIONEER3DX, RobotProfile
 from egc_robot.filters.dwa import (
@@ -232,7 +232,9 @@ def test_window_respects_acceleration_and_profile_limits(prof, fv, fw, fvn, fwn)
     dt = p.period_s
     up, down = prof.accel_max_mps2 * dt, prof.decel_max_mps2 * dt
     dv = res.v_mps - v_now
-    speeding_up = abs(res.v_mps) > abs(v_now) and res.v_mps * v_now >= 0.0
+    # Through zero the window brakes at the deceleration limit. Signs, not the product: a
+    # product underflows to -0.0 (v_now -5e-324 times 0.375 passed as the same sign).
+    speeding_up = abs(res.v_mps) > abs(v_now) and (res.v_mps >= 0.0) == (v_now >= 0.0)
     assert abs(dv) <= (up if speeding_up else down) + 1e-12
     assert abs(res.w_radps - w_now) <= prof.angular_accel_max_radps2 * dt + 1e-12
     assert abs(res.v_mps) <= prof.v_max_mps and abs(res.w_radps) <= prof.w_max_radps
@@ -243,7 +245,9 @@ def test_window_respects_acceleration_and_profile_limits(prof, fv, fw, fvn, fwn)
 @given(profiles, fractions, fractions, fractions, fractions, clouds, st.booleans())
 def test_chosen_velocity_is_never_admissible_violating(prof, fv, fw, fvn, fwn, cloud, goal):
     """Whatever is chosen, the footprint's sampled sweep over the stop keeps the margin (or, if
-    closer already, does not get closer)."""
+    closer already, does not get closer): g = min(margin, clearance now), a polygon other than
+    the centred rectangle g / mitre_factor along its edges (module docstring: its mitred outline
+    reaches g at the corners; the pentagon's right-angled rear, g / sqrt 2)."""
     p = DwaParams.from_profile(prof)
     pts = np.array(cloud, dtype=float)
     v_now, w_now = fvn * prof.v_max_mps, fwn * prof.w_max_radps
@@ -256,7 +260,11 @@ def test_chosen_velocity_is_never_admissible_violating(prof, fv, fw, fvn, fwn, c
         return
     now = footprint_clearance(pts, prof)
     assert now > 0.0
-    required = min(p.margin_m, now) - 1e-6
+    grow = min(p.margin_m, now)
+    fp = prof.footprint
+    if fp.centred_box is None and not fp.is_disc:
+        grow /= mitre_factor(fp)
+    required = grow - 1e-6
     assert swept_clearance(res.v_mps, res.w_radps, pts, prof, p) >= required
 
 

@@ -32,8 +32,9 @@ profile and ``DwaParams`` in; a frozen ``DwaResult`` out. One call:
    by g = min(``margin_m``, the footprint's clearance now) (a disc by g; the centred rectangle
    by g on each side; another polygon by its mitred outline, whose sharp corners reach at most
    g beyond it, so its edges move out by g / ``mitre_factor``), so far from obstacles the margin
-   is kept, and closer than the margin motion may keep the clearance (drive along a wall, back
-   away) but not lower it. A point inside the footprint (contact now) leaves nothing but
+   is kept (along such a polygon's edges g / ``mitre_factor`` of it; the pipeline's sweep, which
+   has the last word, keeps all of it), and closer than the margin motion may keep the clearance
+   (drive along a wall, back away) but not lower it. A point inside the footprint (contact now) leaves nothing but
    stopping.
 3. **Score** of each admissible candidate, every term normalised to [0, 1]:
    ``alpha * heading + beta * clearance + gamma * speed``.
