@@ -129,7 +129,7 @@ PENDING_CLASSES: dict[str, set[str]] = {"robot_cmd.py": {"SimDriver"}}
 
 # egc_app modules that are not subcommands: the package, ``python -m egc_app``, the console
 # script's entry point, and the parsers as a checking tool (``python -m egc_app.parse_check``).
-ENTRY_MODULES = {"__init__", "__main__", "cli", "parse_check"}
+ENTRY_MODULES = {"__init__", "__main__", "cli", "parse_check", "cli_worker"}
 # What an engine is made of and a wiring module has no use for: numerical and data libraries,
 # log and file formats, recordings, progress bars, worker pools and event loops. (Zenoh is
 # wiring: ``egc-teleop router`` configures and runs a router.)

@@ -36,7 +36,9 @@ stale), with one line on stderr. Pose-derived velocities keep their own 1 s limi
 
 from __future__ import annotations
 
+import collections
 import contextlib
+import functools
 import math
 import struct
 import sys
@@ -204,10 +206,36 @@ def _only(
 
 def _reader(path: Path) -> Any:
     from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
 
     # Logs without embedded definitions (older .db3) are read with ROS 2 Jazzy's types.
-    return AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY))
+    return AnyReader([path], default_typestore=_jazzy_typestore())
+
+
+@functools.cache
+def _jazzy_typestore() -> Any:
+    """ROS 2 Jazzy's types, built once: building them takes longer than opening a short log,
+    and AnyReader only reads them (it copies their definitions into a typestore of its own)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+_TYPESTORES: collections.OrderedDict[str, Any] = collections.OrderedDict()
+
+
+def _shared_typestore(typestore: Any) -> Any:
+    """A typestore with the very same message definitions from an earlier log, if there was
+    one (the last few are kept), else ``typestore``. rosbags generates and compiles a
+    deserializer per message type and typestore, and each reader builds a typestore of its
+    own: replaying several logs in one process (a batch, a test run) compiles them once."""
+    key = repr(sorted(typestore.fielddefs.items()))
+    if key in _TYPESTORES:
+        _TYPESTORES.move_to_end(key)
+        return _TYPESTORES[key]
+    _TYPESTORES[key] = typestore
+    while len(_TYPESTORES) > 8:
+        _TYPESTORES.popitem(last=False)
+    return typestore
 
 
 def _why(exc: BaseException) -> str:
@@ -354,6 +382,7 @@ def _open(path: Path) -> tuple[Any, dict[str, str], dict[str, int]]:
     try:
         reader = _reader(path)
         reader.open()
+        reader.typestore = _shared_typestore(reader.typestore)
         types: dict[str, str] = {}
         declared: dict[str, int] = {}
         for c in reader.connections:

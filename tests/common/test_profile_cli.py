@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.cli_process import main
+from tests.cli_worker import CliWorker
 from tests.replay.logs import corridor_log
 from tests.shapes import L_SHAPE_FILE, PENTAGON_FILE
 
@@ -30,6 +30,18 @@ a_dec = 1.0
 alpha_max = 2.0
 r_max = 1.2
 """
+
+# ``filter``, ``replay`` and ``episode`` command lines run in one long-lived CLI process
+# (``tests.cli_worker``): what they print and return is the point. A bad file is checked in
+# real processes: nothing may start before it is refused.
+CLI = CliWorker()
+main = CLI.main
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _cli_worker():
+    yield
+    CLI.close()
 
 
 @pytest.mark.parametrize(
@@ -66,18 +78,13 @@ def test_a_bad_file_is_one_line_naming_the_key(argv, tmp_path):
 
 
 @pytest.mark.parametrize("profile", ["turtlebot4", "husky", str(PENTAGON_FILE), str(L_SHAPE_FILE)])
-def test_filter_takes_names_and_files(profile):
+def test_filter_takes_names_and_files(profile, capsys):
     # A wall 1 m ahead: the command is cut by each robot's own radii and limits.
     line = {"v": 0.3, "w": 0.0, "points": [[1.0, y / 10] for y in range(-10, 11)]}
-    proc = subprocess.run(
-        [sys.executable, "-m", "egc_app.cli", "filter", "--profile", profile],
-        input=json.dumps(line) + "\n",
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert proc.returncode == 0, proc.stderr
-    out = json.loads(proc.stdout)
+    code = main(["filter", "--profile", profile], stdin=json.dumps(line) + "\n")
+    stdout, stderr = capsys.readouterr()
+    assert code == 0, stderr
+    out = json.loads(stdout)
     assert "error" not in out and out["final"]["v"] <= 0.3
 
 

@@ -329,6 +329,15 @@ def _ranges_to_post(
     return ranges
 
 
+def _settled(before: tuple, after: tuple) -> bool:
+    """The closed loop reached a fixed point: the pose and the command came out bit for bit as
+    they went in. The next cycle's ranges depend on the pose alone and ``step_command`` (no
+    memory, no clock) on its inputs alone, so every later cycle would repeat this one exactly:
+    the loop may end here without leaving a state unchecked."""
+    flat = lambda t: tuple(float(v).hex() for part in t for v in part)  # noqa: E731
+    return flat(before) == flat(after)
+
+
 def _gap_to_footprint(pose, post, half) -> float:
     x, y, th = pose
     cx, cy, r = post
@@ -365,6 +374,7 @@ def test_a_stick_held_forward_never_drives_into_a_post_seen_as_minus_inf(
     pose, cmd, dt = (0.0, 0.0, 0.0), (0.0, 0.0), 0.05
     laser = LaserPose(*mount)
     for _ in range(160):
+        before = (pose, cmd)
         ranges = _ranges_to_post(pose, mount, angles, post, 1.0)
         scan = scan_from_laser(ranges, -math.pi, 2 * math.pi / 720, 1.0, 10.0, laser, 0, half)
         assert isinstance(scan, Scan)
@@ -373,6 +383,8 @@ def test_a_stick_held_forward_never_drives_into_a_post_seen_as_minus_inf(
         x, y, th = pose
         pose = (x + cmd[0] * dt * math.cos(th), y + cmd[0] * dt * math.sin(th), th + cmd[1] * dt)
         assert _gap_to_footprint(pose, post, half) > 0.0, (pose, cmd)
+        if _settled(before, (pose, cmd)):
+            break
 
 
 def test_the_command_topic_warning_names_the_type_the_base_wants():
@@ -503,6 +515,7 @@ def test_the_robot_does_not_drive_into_what_its_laser_does_not_look_at(
     post = (sign * 0.9, 0.0, 0.2)
     pose, cmd, dt = (0.0, 0.0, 0.0), (0.0, 0.0), 0.05
     for _ in range(100):
+        before = (pose, cmd)
         ranges = _ranges_to_post(pose, mount[:2], mount[2] + beam, post, 0.05)
         scan = scan_from_laser(ranges, beam[0], inc, 0.05, 10.0, laser, 0, half)
         assert isinstance(scan, Scan)
@@ -512,6 +525,8 @@ def test_the_robot_does_not_drive_into_what_its_laser_does_not_look_at(
         x, y, th = pose
         pose = (x + cmd[0] * dt * math.cos(th), y + cmd[0] * dt * math.sin(th), th + cmd[1] * dt)
         assert _gap_to_footprint(pose, post, half) > 0.0, (pose, cmd)
+        if _settled(before, (pose, cmd)):
+            break
     ranges = np.full(beams, INF)
     ranges[0] = 5.0
     scan = scan_from_laser(ranges, beam[0], inc, 0.05, 10.0, laser, 0, half)
