@@ -40,11 +40,11 @@ import multiprocessing
 import signal
 import sys
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from egc_common.errors import UsageError
 from egc_common.profiles import get_profile
@@ -55,6 +55,9 @@ from egc_sim.mrpb_tests import TESTS_FILE, parse_tests
 
 from egc_experiments.episode import EpisodeSettings, run_settings
 from egc_experiments.log_replay import replay
+
+T = TypeVar("T")
+R = TypeVar("R")
 
 MRPB_DIR = Path(__file__).resolve().parents[2].parent / "shared" / "worlds" / "mrpb"
 DEFAULT_FILTERS = tuple(
@@ -194,9 +197,9 @@ def _drive_all(todo: Sequence[Drive], logs: Path, drives_file: Path, jobs: int) 
     clearance_m = CarefulParams().clearance_m  # what the drives are kept to
     t0 = time.perf_counter()
     kept: list[str] = []
-    with _pool(jobs) as pool, drives_file.open("w", encoding="utf-8") as f:
-        work = [(d, str(logs / f"{d.name}.mcap"), clearance_m) for d in todo]
-        for record in pool.map(drive, work):
+    work = [(d, str(logs / f"{d.name}.mcap"), clearance_m) for d in todo]
+    with drives_file.open("w", encoding="utf-8") as f:
+        for record in _map(drive, work, jobs):
             f.write(json.dumps(record, allow_nan=False) + "\n")
             f.flush()
             if record["log"] is not None:
@@ -246,6 +249,17 @@ def _worker_init() -> None:
 def _pool(jobs: int) -> ProcessPoolExecutor:
     ctx = multiprocessing.get_context("forkserver" if sys.platform == "linux" else "spawn")
     return ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_worker_init)
+
+
+def _map(fn: Callable[[T], R], items: Sequence[T], jobs: int) -> Iterator[R]:
+    """``fn`` over ``items``, results in order: in this process at ``--jobs 1`` or for a single
+    item (a worker would only add its start-up: a fresh interpreter importing numpy, scipy and
+    the filters), else in ``jobs`` worker processes."""
+    if jobs <= 1 or len(items) <= 1:
+        yield from map(fn, items)
+        return
+    with _pool(min(jobs, len(items))) as pool:
+        yield from pool.map(fn, items)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -316,13 +330,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     replay_file = out / "replay.jsonl"
     rows = _done_replays(replay_file) if args.resume else []
     done = {(r["log"], r["filter"]) for r in rows}
-    with _pool(args.jobs) as pool, replay_file.open("w", encoding="utf-8") as f:
+    with replay_file.open("w", encoding="utf-8") as f:
         for row in rows:  # a resumed run's, written again whole (its last line may be cut)
             f.write(json.dumps(row, allow_nan=False) + "\n")
         jobs = [
             (log, name, args.profile) for name in filters for log in kept if (log, name) not in done
         ]
-        for row in pool.map(replay_one, jobs):
+        for row in _map(replay_one, jobs, args.jobs):
             rows.append(row)
             f.write(json.dumps(row, allow_nan=False) + "\n")
             f.flush()

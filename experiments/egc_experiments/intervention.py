@@ -123,7 +123,7 @@ class Scale:
 # 20 worlds per cell (dwa 10) had made 222 of its 440 episodes after 30 min at --jobs 1 on the 2
 # shared cores at load 10-12, with more than 45 min to go: 10 (dwa 5) is the default.
 FULL = Scale(20, 10, 5, 6000, (0.0, 500.0), 150.0, 30.0, 2000)
-QUICK = Scale(1, 1, 1, 6000, (0.0, 500.0), 20.0, 8.0, 20)
+QUICK = Scale(1, 1, 1, 6000, (0.0, 500.0), 10.0, 4.0, 20)  # for the test: minutes, not more
 
 
 def columns(delays_ms: Sequence[float]) -> list[tuple[str, float]]:

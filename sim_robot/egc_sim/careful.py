@@ -64,7 +64,6 @@ import numpy as np
 from egc_common.joystick import clamp_unit
 from egc_common.kinematics import integrate_arc, wrap_angle
 from egc_common.profiles import RobotProfile
-from scipy import ndimage
 
 from egc_sim.collision import FootprintChecker
 from egc_sim.grid_world import BoolGrid, Pose, World
@@ -175,6 +174,8 @@ class CarefulPath:
 def wall_distance_m(occupancy: BoolGrid, resolution_m: float) -> FloatArray:
     """Distance (m) from each cell centre to the nearest blocked cell's square (the square of
     the blocked cell whose centre is nearest); everything outside the grid blocks."""
+    from scipy import ndimage
+
     blocked = np.pad(np.asarray(occupancy, dtype=bool), 1, constant_values=True)
     _, (near_r, near_c) = ndimage.distance_transform_edt(~blocked, return_indices=True)
     rows, cols = np.indices(blocked.shape)
@@ -358,6 +359,8 @@ def plan_careful_path(
     one where the footprint, pointing along it, cannot keep ``clearance_m`` (a turn in a
     corridor too narrow for it).
     """
+    from scipy import ndimage
+
     occupancy, resolution_m, origin = world.occupancy, world.resolution_m, world.origin
     if checker is None:
         checker = FootprintChecker(world, profile.footprint)

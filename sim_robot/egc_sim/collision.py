@@ -20,6 +20,9 @@ Disc of radius r about the origin: clearance = dist(centre, U) - r, exact (negat
 A Euclidean distance transform of the grid bounds the distance from the robot's centre to the
 nearest blocked cell, so only the cells that can be nearest are examined (none at all in open
 space). Clearances beyond ``clearance_cap_m`` are reported as the cap.
+
+scipy (the transform) is imported when the first checker is built, not with this module: it is
+a third of the start-up of a process that imports the simulator and then stops at a bad argument.
 """
 
 from __future__ import annotations
@@ -29,7 +32,6 @@ import math
 import numpy as np
 import numpy.typing as npt
 from egc_common.footprint import Footprint, contains, segments_cross_boxes, signed_distance
-from scipy import ndimage
 
 from egc_sim.grid_world import World
 
@@ -57,6 +59,8 @@ class FootprintChecker:
         blocked = np.pad(world.occupancy, self._pad, constant_values=True)
         self._blocked = blocked
         # Distance between cell centres and the nearest blocked cell centre (m).
+        from scipy import ndimage
+
         self._edt = ndimage.distance_transform_edt(~blocked) * res
         # Grid vertices that are a corner of at least one blocked cell: (rows + 1, cols + 1).
         corner = np.zeros((blocked.shape[0] + 1, blocked.shape[1] + 1), dtype=bool)

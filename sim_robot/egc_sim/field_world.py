@@ -1,19 +1,20 @@
 """What the seeded worlds share (``random_field``, ``clutter_field``): the solvability check on
 the grid's distance transform, and the ``World`` of a walled field with a start on the left
-facing the goal on the right."""
+facing the goal on the right. scipy is imported when first used (``egc_sim.collision``)."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
-from scipy import ndimage
 
 from egc_sim.grid_world import World
 
 
 def clearance_m(occupancy: np.ndarray, resolution_m: float) -> np.ndarray:
     """Each cell's distance to the nearest occupied cell (m)."""
+    from scipy import ndimage
+
     return np.asarray(ndimage.distance_transform_edt(~occupancy)) * resolution_m
 
 
@@ -30,6 +31,8 @@ def linked(
     resolution_m: float,
 ) -> bool:
     """Whether a disc of ``radius_m`` can travel from start to goal on the clearance grid."""
+    from scipy import ndimage
+
     labels, _ = ndimage.label(clearance >= radius_m)
     a, b = labels[cell(start, resolution_m)], labels[cell(goal, resolution_m)]
     return bool(a != 0 and a == b)

@@ -20,6 +20,9 @@ cells a value 1-99; the simulator, which needs a yes/no answer, treats them as u
 
 A ``tests.txt`` beside the YAML (MRPB's start/goal tests, ``egc_sim.mrpb_tests``) gives the
 world its suggested start and goal: those of the first complete test.
+
+PyYAML and Pillow are imported when a map is loaded: a process that loads none (a built-in or
+TOML world, a bad argument) does not pay for them at start-up.
 """
 
 from __future__ import annotations
@@ -30,8 +33,6 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import yaml
-from PIL import Image, UnidentifiedImageError
 
 from egc_sim.grid_world import BoolGrid, World, WorldError, read_world_text
 from egc_sim.mrpb_tests import read_tests_beside
@@ -71,6 +72,8 @@ def classify_pixels(
 
 def read_image(path: Path) -> npt.NDArray[np.uint8]:
     """An 8-bit image as (rows, cols) or (rows, cols, channels); alpha kept as the last channel."""
+    from PIL import Image, UnidentifiedImageError
+
     try:
         with Image.open(path) as opened:
             opened.load()
@@ -97,6 +100,8 @@ def _number(meta: dict[str, Any], key: str, where: Path) -> float:
 
 def load_map_yaml(path: str | Path) -> World:
     """Load a map_server map; raises WorldError naming the file and the problem."""
+    import yaml
+
     p = Path(path)
     text = read_world_text(p, "map file")
     try:

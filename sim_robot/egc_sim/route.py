@@ -38,9 +38,6 @@ import numpy as np
 import numpy.typing as npt
 from egc_common.joystick import clamp_unit
 from egc_common.kinematics import wrap_angle
-from scipy import ndimage
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import dijkstra
 
 from egc_sim.grid_world import BoolGrid, Pose, World
 from egc_sim.observation import FloatArray, Observation, ViewBuffer
@@ -77,6 +74,8 @@ class RouteParams:
 
 def building_map(occupancy: BoolGrid, resolution_m: float, max_extent_m: float = 1.5) -> BoolGrid:
     """``occupancy`` without blocked blobs smaller than ``max_extent_m`` both ways (furniture)."""
+    from scipy import ndimage
+
     occ = np.asarray(occupancy, dtype=bool)
     labels, _ = ndimage.label(occ, structure=np.ones((3, 3), dtype=bool))
     out = occ.copy()
@@ -165,6 +164,8 @@ def _plan_cells(
     wall_m: float,
     wall_weight: float,
 ) -> npt.NDArray[np.int64]:
+    from scipy import ndimage
+
     occ = _GRIDS[key]
     # Distance (m) from each cell centre to the nearest blocked cell; outside the grid blocks.
     padded = np.pad(~occ, 1, constant_values=False)
@@ -197,6 +198,9 @@ def grid_path(
 
     A step costs its length (in cells) times the mean of ``penalty`` at its two ends (Dijkstra).
     """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
     rows, cols = free.shape
     index = np.full(free.shape, -1, dtype=np.int64)
     fr, fc = np.nonzero(free)

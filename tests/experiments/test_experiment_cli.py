@@ -1,4 +1,8 @@
-"""``egc-teleop experiment`` (DESIGN 10): outputs, resume, and exit 2 on bad input."""
+"""``egc-teleop experiment`` (DESIGN 10): outputs, resume, and exit 2 on bad input.
+
+The end-to-end run and two bad command lines go through the console script in its own process;
+the rest through the subcommand's parser and ``run`` in this one (``experiment_here``).
+"""
 
 from __future__ import annotations
 
@@ -14,6 +18,7 @@ from egc_experiments.grid import load_grid
 from egc_experiments.run_point import RESULT_KEYS
 
 from tests.cli_process import main
+from tests.experiments.subcommand import run_subcommand
 
 TINY = """
 description = "tiny"
@@ -33,7 +38,14 @@ def write_grid(tmp_path, text=TINY):
 
 
 def experiment(grid, out, *extra):
+    """``egc-teleop experiment`` as a real process (the console script)."""
     return main(["experiment", "--grid", str(grid), "--out", str(out), *extra])
+
+
+def experiment_here(grid, out, *extra):
+    """The same command line through the subcommand's parser and ``run`` in this process."""
+    argv = ["--grid", str(grid), "--out", str(out), *extra]
+    return run_subcommand(experiment_cli, "experiment", argv)
 
 
 def lines(path):
@@ -64,7 +76,7 @@ def test_a_grid_jittered_at_every_delay_still_gets_its_delay_plots(tmp_path):
         tmp_path, TINY.replace("delay_ms = [0, 200]", "delay_ms = [50, 200]\njitter_ms = 20")
     )
     out = tmp_path / "out"
-    assert experiment(grid, out) == 0
+    assert experiment_here(grid, out) == 0
     report = (out / "report.md").read_text()
     for name in ("outcome_vs_delay.png", "time_vs_delay.png", "hold_vs_delay.png"):
         assert (out / name).read_bytes().startswith(b"\x89PNG")
@@ -76,10 +88,10 @@ def test_a_rerun_with_another_grid_leaves_no_plot_of_the_earlier_one(tmp_path):
     out dir (report.md did not link it, but a user saw it); files not ours are left alone."""
     out = tmp_path / "out"
     lossy = TINY.replace("[[sweep]]", 'transport = "udp"\n[[sweep]]\nloss = [0, 5]')
-    assert experiment(write_grid(tmp_path, lossy), out) == 0
+    assert experiment_here(write_grid(tmp_path, lossy), out) == 0
     assert (out / "outcome_vs_loss.png").exists()
     (out / "mine.png").write_bytes(b"the user's")
-    assert experiment(write_grid(tmp_path), out) == 0
+    assert experiment_here(write_grid(tmp_path), out) == 0
     report = (out / "report.md").read_text()
     pngs = sorted(p.name for p in out.glob("*.png"))
     assert pngs == ["hold_vs_delay.png", "mine.png", "outcome_vs_delay.png", "time_vs_delay.png"]
@@ -121,13 +133,13 @@ def test_a_rerun_skips_what_is_done_and_redoes_a_cut_line(tmp_path, capsys):
     }
     cut = json.dumps({"key": run_key("simulated", points[1]), "outcome": "reached"})[:30]
     (out / "runs.jsonl").write_text(json.dumps(fake) + "\n" + cut)
-    assert experiment(grid, out) == 0
+    assert experiment_here(grid, out) == 0
     rows = lines(out / "runs.jsonl")
     assert rows[0]["outcome"] == "fake"  # kept, not run again
     assert len(rows) == 2 and rows[1]["delay_ms"] == 200.0
     err = capsys.readouterr().err
     assert "dropped 1 unreadable line" in err and "1 new" in err
-    assert experiment(grid, out) == 0
+    assert experiment_here(grid, out) == 0
     assert len(lines(out / "runs.jsonl")) == 2
     assert "0 new" in capsys.readouterr().err
 
@@ -156,7 +168,7 @@ def test_a_rerun_skips_what_is_done_and_redoes_a_cut_line(tmp_path, capsys):
 )
 def test_bad_grids_exit_2_with_one_line_and_write_nothing(tmp_path, capsys, grid_text, message):
     grid, out = write_grid(tmp_path, grid_text), tmp_path / "out"
-    assert experiment(grid, out) == 2
+    assert experiment_here(grid, out) == 2
     err = capsys.readouterr().err.strip()
     assert message in err and "\n" not in err and err.startswith("egc-teleop experiment: error")
     assert not out.exists()
@@ -166,9 +178,9 @@ def test_an_unwritable_out_dir_exits_2_before_running(tmp_path, capsys):
     grid = write_grid(tmp_path)
     blocker = tmp_path / "file"
     blocker.write_text("")
-    assert experiment(grid, blocker) == 2
+    assert experiment_here(grid, blocker) == 2
     assert "not a directory" in capsys.readouterr().err
-    assert experiment(grid, blocker / "sub") == 2
+    assert experiment_here(grid, blocker / "sub") == 2
     assert "cannot write to --out" in capsys.readouterr().err
 
 
@@ -176,7 +188,7 @@ def test_an_unwritable_out_dir_exits_2_before_running(tmp_path, capsys):
 def test_an_output_file_that_is_a_directory_exits_2_before_running(tmp_path, capsys, name):
     grid, out = write_grid(tmp_path), tmp_path / "out"
     (out / name).mkdir(parents=True)
-    assert experiment(grid, out) == 2
+    assert experiment_here(grid, out) == 2
     err = capsys.readouterr().err.strip()
     assert f"{name}: it is a directory" in err and "\n" not in err
     assert sorted(p.name for p in out.iterdir()) == [name]  # nothing run, nothing written
@@ -185,16 +197,20 @@ def test_an_output_file_that_is_a_directory_exits_2_before_running(tmp_path, cap
 def test_an_empty_out_exits_2(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     grid = write_grid(tmp_path)
-    assert experiment(grid, "") == 2
+    assert experiment_here(grid, "") == 2
     assert "--out needs a directory name" in capsys.readouterr().err
     assert not (tmp_path / "runs.jsonl").exists()
 
 
 def test_bad_arguments_exit_2(tmp_path, capsys):
+    """Two of them through the console script: its UsageError line and its parser's error are
+    what ``experiment_here`` restates for the other tests of this file."""
     grid = write_grid(tmp_path)
     assert experiment(tmp_path / "none.toml", tmp_path / "o") == 2
-    assert "does not exist" in capsys.readouterr().err
-    assert experiment(grid, tmp_path / "o", "--jobs", "0") == 2
+    err = capsys.readouterr().err.strip()
+    assert "does not exist" in err and "\n" not in err
+    assert err.startswith("egc-teleop experiment: error: ")
+    assert experiment_here(grid, tmp_path / "o", "--jobs", "0") == 2
     assert "--jobs" in capsys.readouterr().err
     assert experiment(grid, tmp_path / "o", "--mode", "real") == 2
     assert "invalid choice: 'real'" in capsys.readouterr().err

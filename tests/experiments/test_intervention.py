@@ -8,9 +8,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from egc_experiments.intervention import FAMILY, main
+from egc_experiments.intervention import FAMILY, MAPPING1, main
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]  # ~2 min of episodes on a busy machine
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]  # minutes of episodes on a busy machine
 
 HEAD = [
     "filter",
@@ -92,10 +92,38 @@ def _expected(out: Path, f: str) -> dict[str, str]:
     return cells
 
 
+def _first_seconds(bag: Path, seconds: float, to: Path) -> Path:
+    """The first ``seconds`` of a ROS 1 bag, every topic, its records copied as they are."""
+    from rosbags.rosbag1 import Reader, Writer
+
+    with Reader(bag) as reader, Writer(to) as writer:
+        conns = {
+            c.id: writer.add_connection(
+                c.topic,
+                c.msgtype,
+                msgdef=c.msgdef.data,
+                md5sum=c.digest,
+                callerid=c.ext.callerid,
+                latching=c.ext.latching,
+            )
+            for c in reader.connections
+        }
+        end_ns = reader.start_time + int(seconds * 1e9)
+        for conn, t_ns, raw in reader.messages():
+            if t_ns >= end_ns:
+                break
+            writer.write(conns[conn.id], t_ns, raw)
+    return to
+
+
 @pytest.mark.slow
 def test_one_command_makes_the_table_from_its_parts(tmp_path: Path) -> None:
     out, cache = tmp_path / "intervention", tmp_path / "cache"
+    # Mapping1's first 20 s (200 of its 1727 scans; each filter changes some of them): the
+    # part is its replay per filter into mapping1.jsonl, whatever the bag's length.
+    bag = _first_seconds(MAPPING1, 20.0, tmp_path / "Mapping1-20s.bag")
     argv = ["--out", str(out), "--quick", "--cache", str(cache), "--jobs", "1"]
+    argv += ["--mapping1", str(bag)]
     assert main(argv) == 0
     page = tmp_path / "intervention.md"
     table = _table(page)
@@ -106,6 +134,7 @@ def test_one_command_makes_the_table_from_its_parts(tmp_path: Path) -> None:
     assert "python -m egc_experiments.intervention --out" in text and "random:6000" in text
     made = json.loads((out / "made.json").read_text())
     assert made["run"]["commit"] in text and made["code"] in text
+    assert {r["log"] for r in _jsonl(out / "mapping1.jsonl")} == {bag.name}
     # The drives really are careful, and the logs stay in the cache, out of the results.
     (drive,) = _jsonl(out / "careful-drives.jsonl")
     assert drive["log"] == "random-6000.mcap" and drive["min_clearance_m"] >= 0.2

@@ -18,6 +18,9 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
+from egc_experiments import link_cli
+
+from tests.experiments.subcommand import run_subcommand
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(30)]
 
@@ -380,8 +383,18 @@ def one_line_exit_2(*args: str) -> str:
     return lines[0]
 
 
-@pytest.mark.timeout(180)  # some twenty processes one after the other: slow on a busy machine
-def test_bad_inputs_exit_2_with_one_line(tmp_path: Path) -> None:
+def one_line_exit_2_here(capsys: pytest.CaptureFixture[str], *args: str) -> str:
+    """``one_line_exit_2`` in this process (``tests.experiments.subcommand``)."""
+    assert run_subcommand(link_cli, "link", [*args, "--duration", "1"]) == 2
+    out, err = capsys.readouterr()
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and out == "", err
+    return lines[0]
+
+
+def test_bad_inputs_exit_2_with_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     bad_toml = tmp_path / "bad.toml"
     bad_toml.write_text("[[phase]\n")
     with tcp_echo() as port:
@@ -424,16 +437,24 @@ def test_bad_inputs_exit_2_with_one_line(tmp_path: Path) -> None:
             "jitter=1e308 ms is more than 600000 ms": [*ok, "--up", "jitter=1e308"],
             "rate=1e-300 kbit/s is below 1 kbit/s": [*ok, "--up", "rate=1e-300"],
         }
+        # One through the console script; the rest through the subcommand's parser and run in
+        # this process (--duration: a bad input let through ends in a second, exit 0).
+        message, args = next(iter(cases.items()))
+        assert re.search(message, one_line_exit_2(*args)), (message, args)
         for message, args in cases.items():
-            assert re.search(message, one_line_exit_2(*args)), (message, args)
+            assert re.search(message, one_line_exit_2_here(capsys, *args)), (message, args)
         with socket.create_server(("127.0.0.1", 0)) as taken:
             busy = taken.getsockname()[1]
-            line = one_line_exit_2("--listen", f"tcp/127.0.0.1:{busy}", "--connect", target)
+            line = one_line_exit_2_here(
+                capsys, "--listen", f"tcp/127.0.0.1:{busy}", "--connect", target
+            )
             assert re.search(r"cannot listen on tcp/127.0.0.1:\d+: .*in use", line), line
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
         taken.bind(("127.0.0.1", 0))
         busy = taken.getsockname()[1]
-        line = one_line_exit_2("--listen", f"udp/127.0.0.1:{busy}", "--connect", "udp/127.0.0.1:9")
+        line = one_line_exit_2_here(
+            capsys, "--listen", f"udp/127.0.0.1:{busy}", "--connect", "udp/127.0.0.1:9"
+        )
         assert "in use" in line, line
 
 
