@@ -14,6 +14,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.cli_process import child_env
+
 
 def egc(*argv: str, timeout_s: float = 120.0) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
@@ -22,6 +24,7 @@ def egc(*argv: str, timeout_s: float = 120.0) -> subprocess.CompletedProcess[str
         text=True,
         timeout=timeout_s,
         stdin=subprocess.DEVNULL,
+        env=child_env(),
     )
 
 

@@ -29,6 +29,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.cli_process import child_env
+
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 INDEX = DOCS / "README.md"
@@ -328,6 +330,7 @@ def parse_check(argvs: list[list[str]]) -> list[dict]:
         text=True,
         timeout=600,
         cwd=ROOT,
+        env=child_env(),
     )
     assert proc.returncode == 0, proc.stderr
     results = [json.loads(line) for line in proc.stdout.splitlines() if line.strip()]
@@ -407,7 +410,7 @@ def flags_of(name: str) -> set[str]:
         text=True,
         timeout=300,
         cwd=ROOT,
-        env={**__import__("os").environ, "COLUMNS": "200"},
+        env=child_env(COLUMNS="200"),
     )
     assert proc.returncode == 0, proc.stderr
     return set(re.findall(r"(?<![\w-])(--[a-z0-9][a-z0-9-]*)", proc.stdout)) - {"--help"}

@@ -44,6 +44,8 @@ from egc_operator.via_route import (
     parse_route_text,
 )
 
+from tests.cli_process import child_env
+
 BOM = "\ufeff"
 
 
@@ -57,7 +59,13 @@ def operator(
     if "--zenoh-connect" not in argv:
         base += ["--zenoh-connect", loopback_endpoint(free_tcp_port())]
     return subprocess.run(
-        [*base, *argv], capture_output=True, text=True, cwd=cwd, timeout=timeout, **kwargs
+        [*base, *argv],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=timeout,
+        env=child_env(),
+        **kwargs,
     )
 
 
