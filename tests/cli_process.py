@@ -92,11 +92,14 @@ class Ran:
         return self.stderr.strip().splitlines()
 
 
-def run_many(cases: Sequence[tuple[Sequence[str], Path]], timeout_s: float = 300.0) -> list[Ran]:
+def run_many(
+    cases: Sequence[tuple[Sequence[str], Path]], timeout_s: float = 300.0, **env: str
+) -> list[Ran]:
     """Each ``(argv, cwd)``: ``egc-teleop ARGV`` run in ``cwd`` (``python -m egc_app.run_check``,
-    one process for all, stdin empty). A command that runs on instead of refusing is stopped at
-    ``timeout_s``: it, and each command after it (not run), gets exit code -1 and a line saying
-    so, so every test that reads them fails at once, naming it."""
+    one process for all, stdin empty, ``env`` added to the environment). A command that runs on
+    instead of refusing is stopped at ``timeout_s``: it, and each command after it (not run),
+    gets exit code -1 and a line saying so, so every test that reads them fails at once, naming
+    it."""
     lines = "".join(json.dumps({"argv": list(a), "cwd": str(c)}) + "\n" for a, c in cases)
     try:
         proc = subprocess.run(
@@ -105,7 +108,7 @@ def run_many(cases: Sequence[tuple[Sequence[str], Path]], timeout_s: float = 300
             capture_output=True,
             text=True,
             timeout=timeout_s,
-            env=child_env(),
+            env=child_env(**env),
         )
     except subprocess.TimeoutExpired as exc:
         out = exc.stdout.decode() if isinstance(exc.stdout, bytes) else exc.stdout or ""

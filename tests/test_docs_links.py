@@ -23,12 +23,12 @@ import subprocess
 import sys
 import urllib.parse
 from collections.abc import Iterator
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
+from tests import cli_process
 from tests.cli_process import child_env
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -403,17 +403,16 @@ def subcommands() -> list[str]:
     raise AssertionError("egc_app/cli.py has no SUBCOMMANDS")
 
 
-def flags_of(name: str) -> set[str]:
-    proc = subprocess.run(
-        [sys.executable, "-m", "egc_app.cli", name, "--help"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        cwd=ROOT,
-        env=child_env(COLUMNS="200"),
-    )
-    assert proc.returncode == 0, proc.stderr
-    return set(re.findall(r"(?<![\w-])(--[a-z0-9][a-z0-9-]*)", proc.stdout)) - {"--help"}
+def flags_of(names: list[str]) -> dict[str, set[str]]:
+    """Each subcommand's flags as its ``--help`` shows them (``egc-teleop NAME --help`` as the
+    console script runs it, all in one process: ``tests.cli_process.run_many``)."""
+    helps = cli_process.run_many([((name, "--help"), ROOT) for name in names], COLUMNS="200")
+    flags = {}
+    for name, shown in zip(names, helps, strict=True):
+        assert shown.code == 0, shown.stderr
+        found = set(re.findall(r"(?<![\w-])(--[a-z0-9][a-z0-9-]*)", shown.stdout))
+        flags[name] = found - {"--help"}
+    return flags
 
 
 def sections(page: Path) -> dict[str, str]:
@@ -432,8 +431,7 @@ def sections(page: Path) -> dict[str, str]:
 def test_the_cli_reference_names_every_subcommand_and_flag():
     names = subcommands()
     assert {"robot", "operator", "demo", "bench", "replay"} <= set(names)
-    with ThreadPoolExecutor(max_workers=4) as pool:
-        flags = dict(zip(names, pool.map(flags_of, names), strict=True))
+    flags = flags_of(names)
     assert "--driver" in flags["robot"] and "--joystick" in flags["operator"]
     by_anchor = sections(CLI_PAGE)
     missing = []
