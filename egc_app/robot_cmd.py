@@ -44,14 +44,14 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import gc
-import importlib.metadata
 import json
 import logging
 import math
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from egc_common import config as config_mod
 from egc_common import keys
@@ -73,7 +73,6 @@ from egc_common.transport import (
 )
 from egc_common.view_budget import BudgetConfig
 from egc_robot.camera_config import CAMERA_KEYS, CameraConfig, camera_config
-from egc_robot.camera_stream import CameraStreamer
 from egc_robot.controller import ControllerConfig, RobotController
 from egc_robot.drivers import Driver, SensorUpdate
 from egc_robot.filters.assist import AssistParams
@@ -87,6 +86,9 @@ from egc_robot.safety import MAX_CONTROL_PERIOD_S, SweepParams
 from egc_robot.source_config import mux_config, operator_priorities
 from egc_robot.source_mux import MuxConfig
 from egc_robot.zenoh_node import Recorder, RobotNode
+
+if TYPE_CHECKING:  # imported where a camera opens: a robot without one never loads PIL
+    from egc_robot.camera_stream import CameraStreamer
 
 log = logging.getLogger("egc.robot")
 
@@ -278,10 +280,14 @@ def _open_camera(
 ) -> tuple[CameraStreamer, Any] | None:
     """The camera stream on ``egc/<robot>/camera`` (DESIGN 12), started, and the liveliness
     subscriber that gives each new operator a keyframe at once; None for ``none``."""
-    from egc_robot.camera_stream import camera_publisher, keyframe_for_new_operators
-
     if not config.enabled:
         return None
+    from egc_robot.camera_stream import (
+        CameraStreamer,
+        camera_publisher,
+        keyframe_for_new_operators,
+    )
+
     if isinstance(driver, SimDriver):
         source = driver.camera_source(config.width_px, config.height_px)
     else:
@@ -587,6 +593,18 @@ def resume_window_caveat(config: ControllerConfig, lease_ms: int | None) -> str 
     )
 
 
+@functools.cache
+def _version() -> str:
+    """The installed egc-teleop's version, looked up at the first info query, not at start-up
+    (importing importlib.metadata was about a tenth of the robot's import time)."""
+    import importlib.metadata
+
+    try:
+        return importlib.metadata.version("egc-teleop")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
+
+
 def _describer(
     args: argparse.Namespace, controller: RobotController, map_id: str | None = None
 ) -> Any:
@@ -596,10 +614,6 @@ def _describer(
     the driver's map poses are in, when it gives them (the simulator: its world's id)."""
     profile = get_profile(args.profile)
     footprint = tuple(profile.footprint.outline()[:-1])  # as given (DESIGN 14), open
-    try:
-        version = importlib.metadata.version("egc-teleop")
-    except importlib.metadata.PackageNotFoundError:
-        version = "unknown"
     camera = str(getattr(args, "camera", None) or "none")
 
     def describe() -> RobotInfo:
@@ -610,7 +624,7 @@ def _describer(
             profile=profile.name,
             filter=args.filter,
             camera=camera,
-            version=version,
+            version=_version(),
             footprint_m=footprint,
             operator=controller.operator,
             map=map_id,

@@ -16,6 +16,8 @@ import subprocess
 import sys
 from collections.abc import Sequence
 
+from tests.cli_process import child_env
+
 WORKER = [sys.executable, "-m", "egc_app.cli_worker"]
 
 
@@ -31,7 +33,12 @@ class CliWorker:
         proc = self._proc
         if proc is None or proc.poll() is not None:
             proc = self._proc = subprocess.Popen(
-                WORKER, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, bufsize=1
+                WORKER,
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                text=True,
+                bufsize=1,
+                env=child_env(),
             )
         assert proc.stdin is not None and proc.stdout is not None
         proc.stdin.write(

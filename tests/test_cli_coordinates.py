@@ -9,8 +9,7 @@ errors.
 from __future__ import annotations
 
 import functools
-import subprocess
-import sys
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -76,17 +75,18 @@ def test_a_mistyped_coordinate_reaches_its_own_check(command, option, value, des
     assert parsed_value(command, option, value, dest) == value
 
 
-@pytest.mark.parametrize(
-    ("argv", "message"),
-    [
-        (["episode", "--map", "hallway", "--goal", "-3,abc"], "--goal X,Y must be 2"),
-        (["episode", "--map", "hallway", "--goal", "-nan,4"], "finite numbers, got '-nan,4'"),
-        (["robot", "--laser-pose", "-1,2,nan"], "laser pose must be X,Y,YAW"),
-    ],
-)
-def test_and_its_message_names_the_problem(capsys, argv, message):
-    assert cli_process.main(argv) == 2
-    err = capsys.readouterr().err.strip().splitlines()
+NAMED = [
+    (("episode", "--map", "hallway", "--goal", "-3,abc"), "--goal X,Y must be 2"),
+    (("episode", "--map", "hallway", "--goal", "-nan,4"), "finite numbers, got '-nan,4'"),
+    (("robot", "--laser-pose", "-1,2,nan"), "laser pose must be X,Y,YAW"),
+]
+
+
+@pytest.mark.parametrize(("argv", "message"), NAMED)
+def test_and_its_message_names_the_problem(argv, message):
+    result = refused()[argv]
+    assert result.code == 2
+    err = result.err_lines
     assert len(err) == 1 and message in err[0]
 
 
@@ -94,39 +94,42 @@ def test_and_its_message_names_the_problem(capsys, argv, message):
 # alone also takes 1_000 and full-width digits, which nobody types on purpose. An outside check
 # found the operator's --goal/--route strict but these options still on float().
 NOT_PLAIN = ["1_000", "\uff11", "1\uff10"]  # underscore; full-width 1; 1 then full-width 0
+NOT_PLAIN_CASES = [
+    (("episode", "--map", "hallway", "--start", "{},0,0"), "--start X,Y,YAW must be 3"),
+    (("episode", "--map", "hallway", "--goal", "-2,{}"), "--goal X,Y must be 2"),
+    (("sim", "--start", "-1,{},0"), "--start must be X,Y,YAW"),
+    (("robot", "--laser-pose", "-0.1,0,{}"), "laser pose must be X,Y,YAW"),
+    # The robot reads --start once its session is open: a free port, not the default 7447.
+    (("robot", "--start", "-1,{},0", "--listen", "PORT"), "--start must be X,Y,YAW"),
+]
 
 
-def run_cli(*argv: str) -> tuple[int, list[str]]:
-    """A real ``egc-teleop`` process (a value taken for a number would start a robot or a
-    simulator that runs on: the timeout makes that a failure, not a hang)."""
-    try:
-        proc = subprocess.run(
-            [sys.executable, "-m", "egc_app.cli", *argv],
-            capture_output=True,
-            text=True,
-            timeout=120,  # a deadline: an interpreter start-up took 15-19 s at load average 16
-        )
-    except subprocess.TimeoutExpired:
-        pytest.fail(f"{argv} ran on instead of refusing its arguments")
-    return proc.returncode, proc.stderr.strip().splitlines()
+def with_bad(argv: tuple[str, ...], bad: str) -> tuple[str, ...]:
+    return tuple(a.format(bad) for a in argv)
+
+
+def listen_port(word: str) -> str:
+    return f"tcp/127.0.0.1:{free_port('tcp')}" if word == "PORT" else word
+
+
+@functools.cache
+def refused() -> dict[tuple[str, ...], cli_process.Ran]:
+    """Every command line of this module that must be refused, run at once, each as the console
+    script runs it (``tests.cli_process.run_many``: a value taken for a number would start a
+    robot or a simulator that runs on: its deadline makes that a failure, not a hang)."""
+    argvs = [argv for argv, _ in NAMED]
+    argvs += [with_bad(argv, bad) for argv, _ in NOT_PLAIN_CASES for bad in NOT_PLAIN]
+    cases = [(tuple(map(listen_port, argv)), Path.cwd()) for argv in argvs]
+    results = cli_process.run_many(cases)
+    return dict(zip(argvs, results, strict=True))
 
 
 @pytest.mark.parametrize("bad", NOT_PLAIN)
-@pytest.mark.parametrize(
-    ("argv", "message"),
-    [
-        (["episode", "--map", "hallway", "--start", "{},0,0"], "--start X,Y,YAW must be 3"),
-        (["episode", "--map", "hallway", "--goal", "-2,{}"], "--goal X,Y must be 2"),
-        (["sim", "--start", "-1,{},0"], "--start must be X,Y,YAW"),
-        (["robot", "--laser-pose", "-0.1,0,{}"], "laser pose must be X,Y,YAW"),
-        (["robot", "--start", "-1,{},0", "--listen", "PORT"], "--start must be X,Y,YAW"),
-    ],
-)
+@pytest.mark.parametrize(("argv", "message"), NOT_PLAIN_CASES)
 def test_coordinates_are_plain_decimals(argv, message, bad):
-    # The robot reads --start once its session is open: a free port, not the default 7447.
-    port = f"tcp/127.0.0.1:{free_port('tcp')}"
-    code, err = run_cli(*(port if a == "PORT" else a.format(bad) for a in argv))
-    assert code == 2
+    result = refused()[with_bad(argv, bad)]
+    assert result.code == 2
+    err = result.err_lines
     assert len(err) == 1 and message in err[0] and bad in err[0], err
 
 

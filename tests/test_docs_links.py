@@ -23,11 +23,13 @@ import subprocess
 import sys
 import urllib.parse
 from collections.abc import Iterator
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+
+from tests import cli_process
+from tests.cli_process import child_env
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -328,6 +330,7 @@ def parse_check(argvs: list[list[str]]) -> list[dict]:
         text=True,
         timeout=600,
         cwd=ROOT,
+        env=child_env(),
     )
     assert proc.returncode == 0, proc.stderr
     results = [json.loads(line) for line in proc.stdout.splitlines() if line.strip()]
@@ -400,17 +403,16 @@ def subcommands() -> list[str]:
     raise AssertionError("egc_app/cli.py has no SUBCOMMANDS")
 
 
-def flags_of(name: str) -> set[str]:
-    proc = subprocess.run(
-        [sys.executable, "-m", "egc_app.cli", name, "--help"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        cwd=ROOT,
-        env={**__import__("os").environ, "COLUMNS": "200"},
-    )
-    assert proc.returncode == 0, proc.stderr
-    return set(re.findall(r"(?<![\w-])(--[a-z0-9][a-z0-9-]*)", proc.stdout)) - {"--help"}
+def flags_of(names: list[str]) -> dict[str, set[str]]:
+    """Each subcommand's flags as its ``--help`` shows them (``egc-teleop NAME --help`` as the
+    console script runs it, all in one process: ``tests.cli_process.run_many``)."""
+    helps = cli_process.run_many([((name, "--help"), ROOT) for name in names], COLUMNS="200")
+    flags = {}
+    for name, shown in zip(names, helps, strict=True):
+        assert shown.code == 0, shown.stderr
+        found = set(re.findall(r"(?<![\w-])(--[a-z0-9][a-z0-9-]*)", shown.stdout))
+        flags[name] = found - {"--help"}
+    return flags
 
 
 def sections(page: Path) -> dict[str, str]:
@@ -429,8 +431,7 @@ def sections(page: Path) -> dict[str, str]:
 def test_the_cli_reference_names_every_subcommand_and_flag():
     names = subcommands()
     assert {"robot", "operator", "demo", "bench", "replay"} <= set(names)
-    with ThreadPoolExecutor(max_workers=4) as pool:
-        flags = dict(zip(names, pool.map(flags_of, names), strict=True))
+    flags = flags_of(names)
     assert "--driver" in flags["robot"] and "--joystick" in flags["operator"]
     by_anchor = sections(CLI_PAGE)
     missing = []

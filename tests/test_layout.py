@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.cli_process import child_env
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = {
     "egc_common": ROOT / "common" / "egc_common",
@@ -70,7 +72,12 @@ def test_stdlib_operator_is_not_shadowed_from_the_repo_root():
         "print(operator.__file__)"
     )
     out = subprocess.run(
-        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
+        [sys.executable, "-c", code],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=True,
+        env=child_env(),
     )
     assert "egc" not in out.stdout
 
@@ -128,7 +135,8 @@ PENDING_IMPORTS: dict[str, set[str]] = {
 PENDING_CLASSES: dict[str, set[str]] = {"robot_cmd.py": {"SimDriver"}}
 
 # egc_app modules that are not subcommands: the package, ``python -m egc_app``, the console
-# script's entry point, and the parsers as a checking tool (``python -m egc_app.parse_check``).
+# script's entry point, and tools for tests: the parsers (``python -m egc_app.parse_check``) and
+# many command lines in one process (``python -m egc_app.cli_worker``).
 ENTRY_MODULES = {"__init__", "__main__", "cli", "parse_check", "cli_worker"}
 # What an engine is made of and a wiring module has no use for: numerical and data libraries,
 # log and file formats, recordings, progress bars, worker pools and event loops. (Zenoh is

@@ -14,6 +14,10 @@ is one ``NEGATIVE_NUMBERS`` lets through as a value, so ``-2,3`` keeps working.
 Input files (joystick CSVs, route files) are read with ``read_input_file``: at most a bound of
 bytes, so a device, a pipe or a huge file given by mistake costs bounded memory and gets one
 line, and a UTF-8 byte-order mark (what some editors write first) is accepted.
+
+Every ``egc-teleop`` process imports this module first, so it imports the robot profiles (and
+with them numpy) only when ``PROFILE_HELP`` or ``profile_arg`` is used: ``egc-teleop link``,
+``router``, ``bench`` and ``--help`` never load them.
 """
 
 from __future__ import annotations
@@ -23,10 +27,9 @@ import errno
 import os
 import re
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from egc_common.errors import UsageError
-from egc_common.profiles import PROFILES, ProfileError, load_profile
 
 # A minus then a digit, a point and a digit, or nan/inf, or a single minus and a comma later:
 # a value (so "-3,abc" reaches the option's own check and its message), never an option name.
@@ -138,16 +141,32 @@ def check_writable(path: str | Path, option: str) -> None:
         target.unlink(missing_ok=True)
 
 
-PROFILE_HELP = (
-    f"robot profile: a built-in name ({', '.join(sorted(PROFILES))}) or a profile FILE.toml "
-    "with a [profile] table (DESIGN 14)"
-)
+def _profile_help() -> str:
+    from egc_common.profiles import PROFILES
+
+    return (
+        f"robot profile: a built-in name ({', '.join(sorted(PROFILES))}) or a profile FILE.toml "
+        "with a [profile] table (DESIGN 14)"
+    )
+
+
+if TYPE_CHECKING:
+    PROFILE_HELP: str  # the --profile option's help, made on first use (module docstring)
+else:
+
+    def __getattr__(name: str) -> str:
+        if name == "PROFILE_HELP":
+            globals()[name] = help_text = _profile_help()
+            return help_text
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def profile_arg(text: str) -> str:
     """argparse ``type=`` of every ``--profile NAME|FILE.toml``: the profile is loaded now, so
     an unknown name or a bad file is the parser's one line and exit 2 (naming the key and the
     problem), before anything starts. The text is kept (it is handed on to child processes)."""
+    from egc_common.profiles import ProfileError, load_profile
+
     try:
         load_profile(text)
     except ProfileError as exc:

@@ -13,8 +13,8 @@ the machine, so the test's times are comparable with the robot's stamps.
 
 from __future__ import annotations
 
+import json
 import math
-import os
 import re
 import signal
 import subprocess
@@ -41,11 +41,14 @@ from egc_common.messages import (
     decode_state,
     decode_telemetry,
 )
-from egc_common.transport import ZenohOptions, loopback_endpoint, open_session
+from egc_common.transport import ZenohOptions, build_config, loopback_endpoint, open_config
 from egc_operator.clock_sync import ClockSync
+
+from tests.cli_process import child_env
 
 ROBOT = "itest"
 MS = 1_000_000
+OBSERVER_RETRY = {"period_init_ms": 20, "period_max_ms": 50, "period_increase_factor": 1.5}
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -56,7 +59,7 @@ class Processes:
 
     def start(self, name: str, *args: str) -> subprocess.Popen[bytes]:
         out = (self.workdir / f"{name}.log").open("wb")
-        env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONFAULTHANDLER="1")
+        env = child_env(PYTHONUNBUFFERED="1", PYTHONFAULTHANDLER="1")
         proc = subprocess.Popen(
             [sys.executable, "-m", "egc_app.cli", *args],
             stdout=out,
@@ -166,8 +169,12 @@ class Observer:
     """The test's own Zenoh peer (see the module docstring)."""
 
     def __init__(self, port: int, mode: str = "peer") -> None:
-        options = ZenohOptions(mode=mode, connect=(loopback_endpoint(port),))
-        self.session = open_session(options)
+        config = build_config(ZenohOptions(mode=mode, connect=(loopback_endpoint(port),)))
+        # The observer usually opens before the robot listens. The product's retry (250 ms,
+        # doubling to 1 s) then connected it up to a second after the robot was ready, and every
+        # test waited that second for its first telemetry; the test's own peer retries quickly.
+        config.insert_json5("connect/retry", json.dumps(OBSERVER_RETRY))
+        self.session = open_config(config)
         self.rec = Record()
         self._lock = threading.Lock()
         self._stop = threading.Event()

@@ -38,6 +38,7 @@ from egc_common import keys
 from egc_common.messages import Rejection, decode_state, decode_telemetry
 from egc_common.transport import ZenohOptions, open_session
 
+from tests.cli_process import child_env
 from tests.integration.test_router import start_router
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
@@ -158,7 +159,7 @@ def test_an_operator_switches_between_three_robots(port, procs, tmp_path: Path):
         [sys.executable, "-m", "egc_app.cli", "operator", "--joystick-file", str(script),
          "--operator-id", OP, "--no-view", "--no-status", *client],
         stdin=slave, stdout=out, stderr=err, cwd=tmp_path,
-        env=dict(os.environ, PYTHONUNBUFFERED="1"),
+        env=child_env(PYTHONUNBUFFERED="1"),
     )  # fmt: skip
     os.close(slave)
     out.close()

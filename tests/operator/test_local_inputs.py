@@ -44,6 +44,8 @@ from egc_operator.via_route import (
     parse_route_text,
 )
 
+from tests.cli_process import Ran, child_env, run_many
+
 BOM = "\ufeff"
 
 
@@ -57,7 +59,13 @@ def operator(
     if "--zenoh-connect" not in argv:
         base += ["--zenoh-connect", loopback_endpoint(free_tcp_port())]
     return subprocess.run(
-        [*base, *argv], capture_output=True, text=True, cwd=cwd, timeout=timeout, **kwargs
+        [*base, *argv],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=timeout,
+        env=child_env(),
+        **kwargs,
     )
 
 
@@ -95,12 +103,10 @@ def test_an_empty_header_field_is_an_unknown_column():
         parse_joystick_csv("t_s,x,y,\n0,0,0,\n")
 
 
-def test_the_cli_refuses_the_misspelled_deadman_before_driving(tmp_path: Path):
-    (tmp_path / "typo.csv").write_text("t_s,x,y,dead_man\n0,0,0,0\n0.5,0.8,0,0\n")
-    line = one_error_line(operator(tmp_path, "--joystick-file", "typo.csv"))
+def test_the_cli_refuses_the_misspelled_deadman_before_driving(refused):
+    line = refused_line(refused[("--joystick-file", "typo.csv")])
     assert "unknown column 'dead_man'" in line and "accepted: t_s, x, y, deadman" in line
-    (tmp_path / "dup.csv").write_text("t_s,x,y,x\n0,0,0,0.9\n")
-    line = one_error_line(operator(tmp_path, "--joystick-file", "dup.csv"))
+    line = refused_line(refused[("--joystick-file", "dup.csv")])
     assert "column 'x' appears twice" in line and "accepted:" in line
 
 
@@ -143,6 +149,7 @@ def test_a_pipe_that_never_ends_is_read_only_up_to_the_limit(tmp_path: Path, opt
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         cwd=tmp_path,
+        env=child_env(),
     )
     assert proc.stdin is not None and proc.stderr is not None
     stdin = proc.stdin
@@ -308,24 +315,51 @@ def test_route_and_joystick_files_take_plain_decimals_only():
         parse_joystick_csv("t_s,x,y\n1_0,0,0\n")
 
 
-@pytest.mark.parametrize(
-    ("argv", "message"),
-    [
-        (["--goal", "1_000,2"], "--goal: expected two plain decimal numbers, got '1_000,2'"),
-        (["--goal", "１,２"], "--goal: expected two plain decimal numbers, got '１,２'"),
-        (["--goal", "-1_0,2"], "--goal: expected two plain decimal numbers"),
-        (["--clock-offset-s", "nan"], "--clock-offset-s must be a number of seconds"),
-        (["--clock-offset-s", "-inf"], "--clock-offset-s must be a number of seconds"),
-        (["--duration", "inf"], "--duration must be positive, at most"),
-        (["--duration", "nan"], "--duration must be positive, at most"),
-    ],
-)
+BAD_NUMBERS = [
+    (["--goal", "1_000,2"], "--goal: expected two plain decimal numbers, got '1_000,2'"),
+    (["--goal", "１,２"], "--goal: expected two plain decimal numbers, got '１,２'"),
+    (["--goal", "-1_0,2"], "--goal: expected two plain decimal numbers"),
+    (["--clock-offset-s", "nan"], "--clock-offset-s must be a number of seconds"),
+    (["--clock-offset-s", "-inf"], "--clock-offset-s must be a number of seconds"),
+    (["--duration", "inf"], "--duration must be positive, at most"),
+    (["--duration", "nan"], "--duration must be positive, at most"),
+]
+
+
+@pytest.mark.parametrize(("argv", "message"), BAD_NUMBERS)
 def test_bad_numbers_on_the_command_line_exit_2_with_one_line(
-    tmp_path: Path, argv: list[str], message: str
+    refused, argv: list[str], message: str
 ):
-    line = one_error_line(operator(tmp_path, "--script", "demo", *argv))
+    line = refused_line(refused[("--script", "demo", *argv)])
     assert message in line
     assert "Traceback" not in line
+
+
+@pytest.fixture(scope="module")
+def refused(tmp_path_factory) -> dict[tuple[str, ...], Ran]:
+    """The command lines above that the operator must refuse, as ``operator`` runs them, all at
+    once (``tests.cli_process.run_many``: one start-up for all), in a directory with the two
+    bad joystick files."""
+    cwd = tmp_path_factory.mktemp("refused")
+    (cwd / "typo.csv").write_text("t_s,x,y,dead_man\n0,0,0,0\n0.5,0.8,0,0\n")
+    (cwd / "dup.csv").write_text("t_s,x,y,x\n0,0,0,0.9\n")
+    argvs = [("--joystick-file", "typo.csv"), ("--joystick-file", "dup.csv")]
+    argvs += [("--script", "demo", *argv) for argv, _ in BAD_NUMBERS]
+    cases = [
+        (("operator", "--no-status", "--no-view", "--zenoh-connect", nowhere(), *a), cwd)
+        for a in argvs
+    ]
+    return dict(zip(argvs, run_many(cases), strict=True))
+
+
+def nowhere() -> str:
+    return loopback_endpoint(free_tcp_port())
+
+
+def refused_line(result: Ran) -> str:
+    assert result.code == 2, result.stderr
+    assert len(result.err_lines) == 1, result.stderr
+    return result.err_lines[0]
 
 
 # -- 7: a --save recording cut short -----------------------------------------------------------
