@@ -9,7 +9,7 @@ from dataclasses import fields, replace
 
 import numpy as np
 import pytest
-from egc_common.profiles import JACKAL, PIONEER3DX, RobotProfile
+from egc_common.profiles import JACKAL, PIONEER3DX
 from egc_common.scan import obstacle_points
 from egc_robot.filters.assist import (
     CLOSE,
@@ -62,15 +62,13 @@ def run(
     t0_ms: int = 0,
     dt_ms: int = DT_MS,
     params: AssistParams = PARAMS,
-    profile: RobotProfile = P,
 ) -> AssistResult:
     """``cycles`` steps with the same inputs; the last result."""
     mem = memory or AssistMemory.initial()
     obstacles = obstacle_points(points)
     result = None
     for k in range(cycles):
-        t_ns = (t0_ms + k * dt_ms) * MS
-        result = assist_step(mem, x_o, y_o, obstacles, goal, t_ns, params, profile)
+        result = assist_step(mem, x_o, y_o, obstacles, goal, (t0_ms + k * dt_ms) * MS, params, P)
         mem = result.memory
     assert result is not None
     return result
@@ -691,192 +689,6 @@ def test_rule_plan():
     assert blend.rule != "plan"
     # Without a via point there is nothing to plan to.
     assert run(1.0, 0.0, wall, params=PLANNED).rule != "plan"
-
-
-# -- the operator's own way (rule own-way) ----------------------------------------------------------
-
-J_ON = AssistParams.from_profile(JACKAL)
-J_OFF = replace(J_ON, own_horizon_s=0.0)  # the plan and the paper's blend alone, as before
-
-
-def square(x0: float, y0: float, x1: float, y1: float, n: int = 40) -> np.ndarray:
-    return np.vstack(
-        (
-            line(x0, y0, x1, y0, n),
-            line(x1, y0, x1, y1, n),
-            line(x1, y1, x0, y1, n),
-            line(x0, y1, x0, y0, n),
-        )
-    )
-
-
-# A 1 m block ahead, a little right of the way to the via point (5, 0): the plan passes left.
-BLOCK = square(1.0, -0.7, 2.0, 0.3)
-BLOCK_GOAL = (5.0, 0.0)
-
-
-def test_rule_own_way():
-    """The stick steers right of the block, the plan left of it: the stick's own command goes
-    out unchanged; without the rule the planner turned the robot in place the other way."""
-    r = run(0.4, -0.25, BLOCK, BLOCK_GOAL, params=J_ON, profile=JACKAL)
-    assert r.rule == "own-way" and not r.modified
-    assert (r.v_mps, r.w_radps) == (0.4 * JACKAL.v_max_mps, -0.25 * JACKAL.w_max_radps)
-    before = run(0.4, -0.25, BLOCK, BLOCK_GOAL, params=J_OFF, profile=JACKAL)
-    assert before.rule == "plan" and before.heading_rad is not None
-    assert before.heading_rad > math.radians(30.0)  # the plan: left of the block
-    assert before.v_mps == 0.0 and before.w_radps > 0.0  # turning left, against the stick
-
-
-def test_own_way_instead_of_a_blend_into_the_obstacle():
-    """Stick hard right, more than 45 deg off the via point: the paper's blend averaged it with
-    the plan's left into the block, and the obstacle rules then turned the robot left in place
-    (it stalled between the two). Now the stick's way, clear, is driven."""
-    r = run(0.25, -0.45, BLOCK, BLOCK_GOAL, params=J_ON, profile=JACKAL)
-    assert r.rule == "own-way"
-    assert (r.v_mps, r.w_radps) == (0.25 * JACKAL.v_max_mps, -0.45 * JACKAL.w_max_radps)
-    before = run(0.25, -0.45, BLOCK, BLOCK_GOAL, params=J_OFF, profile=JACKAL)
-    assert before.v_mps == 0.0 and before.w_radps > 0.0
-
-
-def _same(a: AssistResult, b: AssistResult) -> None:
-    assert (a.rule, a.v_mps, a.w_radps, a.heading_rad) == (
-        b.rule,
-        b.v_mps,
-        b.w_radps,
-        b.heading_rad,
-    )
-
-
-@pytest.mark.parametrize(
-    "stick",
-    [(1.0, 0.0), (0.4, 0.0), (0.4, 0.33), (0.8, 0.5)],
-    ids=["at-the-via-point", "at-it-slowly", "along-the-plan", "along-the-plan-fast"],
-)
-def test_a_stick_at_the_via_point_or_along_the_plan_is_planned_as_before(stick):
-    """Pointing at the via point (the blind operator) or within ``own_agree_rad`` of the
-    planned direction (+40 deg here): exactly what the planner did without the rule."""
-    on = run(*stick, BLOCK, BLOCK_GOAL, params=J_ON, profile=JACKAL)
-    off = run(*stick, BLOCK, BLOCK_GOAL, params=J_OFF, profile=JACKAL)
-    _same(on, off)
-    assert on.rule == "plan"
-
-
-def test_a_stick_whose_own_way_is_blocked_gets_the_assistance_as_before():
-    """Stick right, but a wall close on the right: its own command would sweep the footprint
-    into it, so the plan and the rules decide, as without the rule."""
-    wall = line(0.0, -0.45, 2.0, -0.45)
-    pts = np.vstack((BLOCK, wall))
-    on = run(0.4, -0.4, pts, BLOCK_GOAL, params=J_ON, profile=JACKAL)
-    off = run(0.4, -0.4, pts, BLOCK_GOAL, params=J_OFF, profile=JACKAL)
-    assert on.rule != "own-way"
-    _same(on, off)
-
-
-def test_own_way_is_kept_while_the_stick_swings_past_the_via_point():
-    """Once the stick has gone its own way it keeps it while its way stays clear, also while it
-    swings past the via point's direction on its route (a careful driver's turn); centred, the
-    next stick at the via point is the planner's again."""
-    mem = AssistMemory.initial()
-    obs = obstacle_points(BLOCK)
-    t = 0
-    for x_o, y_o in [(0.4, -0.3)] * 3 + [(0.4, -0.1), (0.4, 0.0), (0.4, 0.05)]:
-        r = assist_step(mem, x_o, y_o, obs, BLOCK_GOAL, t * MS, J_ON, JACKAL)
-        mem, t = r.memory, t + DT_MS
-        assert r.rule == "own-way" and not r.modified
-    r = assist_step(mem, 0.0, 0.0, obs, BLOCK_GOAL, t * MS, J_ON, JACKAL)
-    assert r.rule == "idle"
-    r = assist_step(r.memory, 0.4, 0.0, obs, BLOCK_GOAL, (t + DT_MS) * MS, J_ON, JACKAL)
-    assert r.rule == "plan"
-
-
-def test_no_own_way_over_a_slow_link():
-    """Above ``own_delay_max_s`` of loop delay the stick was given on a picture too old to be a
-    clear intent for the robot's present: the planner decides as before (a sighted operator
-    over 500 ms links swung the robot round the via point with the rule)."""
-    obs = obstacle_points(BLOCK)
-    limit = J_ON.own_delay_max_s
-    for tau, rule in (
-        (None, "own-way"),
-        (0.3, "own-way"),
-        (limit, "own-way"),
-        (limit + 0.3, "plan"),
-    ):
-        mem = AssistMemory.initial()
-        for k in range(3):
-            r = assist_step(
-                mem, 0.4, -0.25, obs, BLOCK_GOAL, k * DT_MS * MS, J_ON, JACKAL, None, tau
-            )
-            mem = r.memory
-        assert r.rule == rule, tau
-
-
-def _route_stick(route: list[tuple[float, float]], speed_mps: float, profile: RobotProfile):
-    """An operator who drives their own route (pure pursuit of its corners at ``speed_mps``,
-    turning in place when a corner is more than 1 rad off), as a stick (v / v_max, w / w_max)."""
-    state = {"k": 0}
-
-    def stick(pose: tuple[float, float, float]) -> tuple[float, float]:
-        x, y, yaw = pose
-        while state["k"] < len(route) - 1 and math.dist((x, y), route[state["k"]]) < 0.6:
-            state["k"] += 1
-        tx, ty = route[state["k"]]
-        a = math.atan2(
-            math.sin(math.atan2(ty - y, tx - x) - yaw), math.cos(math.atan2(ty - y, tx - x) - yaw)
-        )
-        if abs(a) > 1.0:
-            return 0.0, math.copysign(0.5, a)
-        w = 2.0 * speed_mps * math.sin(a) / max(math.dist((x, y), (tx, ty)), 1e-6)
-        w = max(-profile.w_max_radps, min(profile.w_max_radps, w))
-        return speed_mps / profile.v_max_mps, w / profile.w_max_radps
-
-    return stick
-
-
-def _drive_route(params: AssistParams, max_time_s: float):
-    """The route operator through assist -> limits -> footprint sweep -> simulator (Jackal,
-    20 Hz): a block whose shorter way round (the plan's) is left, the operator's route right.
-    Returns (reached, y of the robot while beside the block, simulator)."""
-    occ = boxed_room(8.0, 4.0)
-    occ[28:48, 70:90] = True  # the block: x 3.5-4.5, y 1.4-2.4 (the straight line is y = 2.0)
-    sim = Simulator(grid_world(occ), JACKAL, (1.0, 2.0, 0.0))
-    goal_world = (7.0, 2.0)
-    stick = _route_stick([(2.5, 2.0), (3.3, 0.8), (4.7, 0.8), (5.5, 2.0), goal_world], 0.8, JACKAL)
-    mem, previous, sweep, dt = AssistMemory.initial(), (0.0, 0.0), SweepParams(), 0.05
-    beside: list[float] = []
-    for _ in range(round(max_time_s / dt)):
-        if math.dist(sim.pose[:2], goal_world) <= 0.3:
-            return True, beside, sim
-        x_o, y_o = stick(sim.pose)
-        scan = sim.scan()
-        x, y, yaw = sim.odometry
-        dx, dy = goal_world[0] - x, goal_world[1] - y
-        goal = (math.cos(yaw) * dx + math.sin(yaw) * dy, -math.sin(yaw) * dx + math.cos(yaw) * dy)
-        p = replace(params, no_return_is_free=scan.no_return_is_free)
-        r = assist_step(
-            mem, x_o, y_o, scan.obstacles(), goal, round(sim.time_s * 1e9), p, JACKAL, previous
-        )
-        mem = r.memory
-        v, w = limit_velocity(r.v_mps, r.w_radps, JACKAL)
-        v, w = limit_acceleration(v, w, previous, dt, JACKAL)
-        s = sweep_scale(v, w, scan.obstacles(), JACKAL, sweep)
-        previous = (s * v, s * w)
-        sim.step(*previous, dt)
-        assert not sim.collided, f"contact at {sim.pose}"
-        if 3.5 <= sim.pose[0] <= 4.5:
-            beside.append(sim.pose[1])
-    return False, beside, sim
-
-
-def test_closed_loop_an_operator_on_the_other_side_of_an_obstacle_than_the_plan_gets_there():
-    """The careful operator's failure (issue 28 follow-up), in small: the operator's route and
-    the plan pass the block on different sides. With the rule the robot passes on the
-    operator's side, below the block, and arrives; without it, the planner took it round the
-    other side against the stick and it never arrived."""
-    reached, beside, sim = _drive_route(J_ON, 30.0)
-    assert reached and sim.min_clearance_m > 0.0
-    assert beside and max(beside) < 1.4  # below the block (y 1.4-2.4): the operator's side
-    reached_before, beside_before, _ = _drive_route(J_OFF, 30.0)
-    assert not reached_before and beside_before and min(beside_before) > 2.4
 
 
 @pytest.mark.parametrize("params", [PARAMS, PLANNED], ids=["rules", "planned"])

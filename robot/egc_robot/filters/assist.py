@@ -121,50 +121,16 @@ How each part maps to the paper
   there is room (a slow arc when not), and drives no faster than ``plan_slow_per_s`` x the
   path's clearance beyond half the width (at least ``plan_speed_min_mps``), never faster than
   the stick asks; with the stick elsewhere the paper's blend averages the stick with the
-  planned direction (rule ``blend`` and the obstacle rules as before) unless the operator
-  steers their own way (next item), and the override is untouched. The plan replaces
-  ``goal``, ``detour`` and wall following while it finds a way; when the robot's own cell is
-  not traversable (nothing to plan from) those rules decide as before. The memory keeps the
-  last path (``plan_path``, every second cell), moved into this cycle's {R} by the velocity
-  last sent, and cells along it cost ``keep_cost`` (0.7) times as
+  planned direction (rule ``blend`` and the obstacle rules as before), and the override is
+  untouched. The plan replaces ``goal``, ``detour`` and wall following while it finds a way;
+  when the robot's own cell is not traversable (nothing to plan from) those rules decide as
+  before. The memory keeps the last path (``plan_path``, every second cell), moved into this
+  cycle's {R} by the velocity last sent, and cells along it cost ``keep_cost`` (0.7) times as
   much: without it the robot rocked between two gaps of about the same cost. The pipeline's
   footprint sweep still has the last word. Measured (``docs/assist.md``): Jackal, ``goal``
   operator, via point at the goal, ``clutter:0-29`` 5/30 -> 27/30, held-out
   ``clutter:13000-13039`` 39/40, ``random:1000-1029`` 27/30 -> 29/30, 0 collisions; about
   3 ms a step (``bench/bench_assist_plan.py``). ``plan_cell_m`` = 0 turns the planner off.
-- **Operator's own way** (deviation, issue 28 follow-up; rule ``own-way``): the planner made
-  careful operators stall. Such an operator (``egc_sim.careful``) drives a route of their own;
-  where it passes an obstacle on the other side than the plan, a stick within 45 deg of the via
-  point went to ``plan`` (the robot turned to the plan's side against the stick) and one farther
-  off to the blend, whose average of the two directions points into the obstacle
-  (``avoid-front`` then turned the robot the other way). The robot left the operator's route,
-  the operator found no careful way on and stopped (Jackal, ``random:6000-6009``: 9 of 10
-  arrived before the planner, 5 with it; direct mode 10). Shared autonomy gives the clear and
-  safe intent to the operator: with a plan, a stick more than ``own_goal_rad`` (20 deg) off the
-  via point (so not the blind operator's stick, which points at it: 99.9 % of its cycles within
-  15 deg on six clutter worlds in closed loop) and more than ``own_agree_rad`` (10 deg) off the
-  planned direction (both clipped to +-90 deg, as for ``align_tolerance_rad``) is the operator's
-  own way, and when its own eq. 4 command sweeps the footprint (the profile's shape,
-  ``egc_common.footprint.swept_min_distance``) at least ``own_clearance_m`` (5 cm) clear of
-  every scan point for ``own_horizon_s`` (0.8 s, twice the pipeline sweep's stopping time of a
-  Jackal at full speed) that command goes out unchanged. Once going its own way, the stick keeps
-  it while it disagrees with the plan and stays clear, also where it swings past the via point's
-  direction on its route (a careful driver's turn towards the goal is not the blind operator's
-  stick); a centred stick, a stick that comes back to the plan or a way that is no longer clear
-  ends it. Over a slow link (loop delay tau of DESIGN 9 above ``own_delay_max_s``, 1 s: the
-  filtered mode's blind time there) the stick was given on a picture too old to be a clear
-  intent for the robot's present and never goes its own way: a sighted operator over 500 ms
-  links (tau 1.3 s) swung the robot round the via point with it (7 of 10 arrived, 9 without the
-  rule); over 200 ms links (tau 0.7 s) 9 of 10 either way. The planner still helps whenever the
-  stick points at the via point, agrees with the plan, or its own way is not clear (the plan,
-  the blend and the obstacle rules as before), and the pipeline's sweep still has the last word.
-  Without a plan (the planner off, or nothing to plan from) the paper's rules decide as before.
-  ``own_horizon_s`` = 0 turns it off. Tuned on the careful operator's ``random:6000-6009`` and
-  ``15000-15029`` (40 of 40 arrived; with ``own_agree_rad`` 15 deg 39, 20 deg 36, 30 deg 34:
-  every hand-over to the plan moves the robot off the operator's route; without the keeping past
-  the via point, 36 at 10 deg). Measured (``docs/assist.md``): careful operator, held-out
-  ``random:23000-23029`` 20/30 -> 30/30 (direct mode 30/30), 0 collisions; the goal operator's
-  clutter and random worlds unchanged.
 - **Wall following** (sec. V: "an obstacle in front while moving toward a target destination ...
   rotate to align with and then move parallel to the wall"). Entered when heading for the via
   point (rule ``goal``) with FRONT active at CLOSE or INTERMEDIATE, the corridor towards the via
@@ -224,8 +190,7 @@ Rules (names reported in ``AssistResult.rule``), in the order they are tried
 ``invalid`` (NaN / infinite stick or via point: stop), ``unknown`` (no scan point and the sensor
 does not declare no-return as free, DESIGN 5.9 NO_POINTS_UNKNOWN: nothing seen is not free: stop),
 ``idle`` (stick centred: stop), ``reverse`` (x_o < 0: the stick's eq. 4 command; the rules look
-ahead only, the sweep guards the reverse), ``override``, ``own-way`` (the stick's eq. 4
-command), ``plan``, ``wall-follow-left`` /
+ahead only, the sweep guards the reverse), ``override``, ``plan``, ``wall-follow-left`` /
 ``wall-follow-right``, ``detour``, ``avoid-front``, ``gap``, ``avoid-left`` / ``avoid-right``,
 and with nothing active ``goal``, ``blend`` or ``free``; then ``unblock`` in place of any of
 them that the base was refused.
@@ -240,7 +205,6 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from egc_common.footprint import swept_min_distance
 from egc_common.profiles import RobotProfile
 from egc_common.scan import ObstaclePoints, obstacle_points
 
@@ -269,7 +233,6 @@ RULES = (
     "avoid-right",
     "unblock",
     "plan",
-    "own-way",
     "goal",
     "blend",
     "free",
@@ -278,8 +241,6 @@ RULES = (
 _SAME = 1e-9
 _KEEP_EVERY = 2  # the memory keeps every second cell of the path (``plan_keep_cost``)
 _SWEEP_MARGIN_M = 0.03  # the footprint sweep's margin (safety.SweepParams.margin_m)
-# Sampling of the stick's own sweep (``own-way``): as the pipeline's (safety.SweepParams).
-_OWN_STEP_M, _OWN_STEP_RAD = 0.02, 0.05
 _PIONEER_REACH_M = math.hypot(0.2275, 0.1905)  # the Pioneer's half diagonal (DESIGN 3)
 _HALF_PI = 0.5 * math.pi
 Grid = tuple[tuple[int, int, int], tuple[int, int, int], tuple[int, int, int]]
@@ -391,18 +352,6 @@ class AssistParams:
     plan_align_rad: float = math.radians(10.0)  # the same along a gap's axis, with room
     plan_slow_per_s: float = 3.0
     plan_speed_min_mps: float = 0.15
-    # The operator's own way (rule ``own-way``, module docstring): a stick more than
-    # ``own_goal_rad`` off the via point and more than ``own_agree_rad`` off the planned
-    # direction whose own command sweeps the footprint at least ``own_clearance_m`` clear for
-    # ``own_horizon_s`` goes out as it is (0 s: never; the plan and the blend decide).
-    own_goal_rad: float = math.radians(20.0)
-    own_agree_rad: float = math.radians(10.0)
-    own_horizon_s: float = 0.8
-    own_clearance_m: float = 0.05
-    # Above this loop delay (s; DESIGN 9's tau) the stick was given on a picture too old to
-    # be a clear intent for the robot's present: the plan and the blend decide (the filtered
-    # mode's blind_time of DESIGN 9).
-    own_delay_max_s: float = 1.0
     # A via point closer than this (m) gives no direction: joystick plus avoidance.
     goal_min_m: float = 0.05
     # dt larger than this (s) counts as this (a resumed link does not jump the confidence).
@@ -478,8 +427,6 @@ class AssistParams:
             "squeeze_centre_max_rad",
             "plan_turn_rad",
             "plan_align_rad",
-            "own_goal_rad",
-            "own_agree_rad",
         ):
             if getattr(self, name) > math.pi:
                 raise ValueError(f"assist.{name} must be in [0, pi]")
@@ -574,8 +521,7 @@ class AssistMemory:
     / ``freed_ns``: the try that last freed the robot, and when; ``override_held_s``: how long
     the sweep has held the override still; ``override_spent``: it yielded, for this stick cell;
     ``plan_path``: the local planner's last path in {R} then (every second cell; empty: none),
-    ``plan_phase``: its last phase ("" none, "path", "approach", "thread"); ``own_way``: the
-    stick went its own way last cycle (rule ``own-way``).
+    ``plan_phase``: its last phase ("" none, "path", "approach", "thread").
     """
 
     counts: Grid = _ZERO_GRID
@@ -602,7 +548,6 @@ class AssistMemory:
     override_spent: bool = False
     plan_path: tuple[tuple[float, float], ...] = ()
     plan_phase: str = ""
-    own_way: bool = False
 
     @staticmethod
     def initial() -> AssistMemory:
@@ -854,43 +799,6 @@ def _narrow_heading(
     return _wrap(bearing + best[2])
 
 
-def _own_way(
-    phi: float,
-    bearing: float,
-    plan: LocalPlan,
-    v_mps: float,
-    w_radps: float,
-    obstacles: ObstaclePoints,
-    params: AssistParams,
-    profile: RobotProfile,
-    going: bool = False,
-) -> bool:
-    """The stick steers a way of its own (module docstring, "Operator's own way"): its angle
-    more than ``own_goal_rad`` off the via point's (unless ``going``: it went its own way last
-    cycle) and more than ``own_agree_rad`` off the planned direction (all clipped to +-90 deg,
-    as for ``align_tolerance_rad``), and its own command (v, w) sweeps the footprint at least
-    ``own_clearance_m`` clear of every point for ``own_horizon_s``."""
-    if params.own_horizon_s <= 0.0:
-        return False
-    planned = math.atan2(plan.target_xy_m[1], plan.target_xy_m[0])
-    stick = _clip(phi, -_HALF_PI, _HALF_PI)
-    if not going and abs(stick - _clip(bearing, -_HALF_PI, _HALF_PI)) <= params.own_goal_rad:
-        return False
-    if abs(stick - _clip(planned, -_HALF_PI, _HALF_PI)) <= params.own_agree_rad:
-        return False
-    if len(obstacles) == 0:
-        return True
-    # Only points the footprint can reach on the arc matter.
-    reach = profile.footprint.reach_m + abs(v_mps) * params.own_horizon_s + params.own_clearance_m
-    near = obstacles.xy[obstacles.r2 <= reach * reach]
-    if len(near) == 0:
-        return True
-    sweep = swept_min_distance(
-        profile.footprint, near, v_mps, w_radps, params.own_horizon_s, _OWN_STEP_M, _OWN_STEP_RAD
-    )
-    return sweep >= params.own_clearance_m
-
-
 def _avoid(
     theta: float,
     levels: tuple[int | None, int | None, int | None],
@@ -991,13 +899,10 @@ def assist_step(
     params: AssistParams,
     profile: RobotProfile,
     sent: tuple[float, float] | None = None,
-    loop_delay_s: float | None = None,
 ) -> AssistResult:
     """One cycle of the assistant (module docstring). ``sent`` is the (v, w) the base was sent
     last cycle: its speed shrinks the bands (``at_speed``), and a motion asked for but not sent
-    is what ``unblock`` answers (None: the profile's bands, no unblocking). ``loop_delay_s``
-    is the loop delay tau of DESIGN 9 (None: not known, taken as none): above
-    ``own_delay_max_s`` the stick never goes its own way (``own-way``)."""
+    is what ``unblock`` answers (None: the profile's bands, no unblocking)."""
     if sent is not None:
         params = at_speed(params, profile, sent[0])
     obs = obstacle_points(obstacles)
@@ -1071,7 +976,6 @@ def assist_step(
             spent,
             kept_path,
             plan_phase,
-            rule == "own-way",
         )
         modified = abs(v - v_ref) > _SAME or abs(w - w_ref) > _SAME
         return AssistResult(
@@ -1127,21 +1031,10 @@ def assist_step(
     if plan is not None:
         plan_phase = plan.phase
         kept_path = tuple((float(x), float(y)) for x, y in plan.path_xy_m[::_KEEP_EVERY].tolist())
-    own = (
-        plan is not None
-        and bearing is not None
-        and not (loop_delay_s is not None and loop_delay_s > params.own_delay_max_s)
-        and _own_way(phi, bearing, plan, v_ref, w_ref, obs, params, profile, memory.own_way)
-    )
-    if own:
-        # The operator steers a way of their own, clear of everything: theirs to drive.
-        theta_d, source, drive = w_ref / gain, "own-way", xs
     if plan is not None and source == "blend":
         # The planner replaces the target's direction; the stick still pulls (sec. V).
         theta_d = _circular_mean(phi, math.atan2(plan.target_xy_m[1], plan.target_xy_m[0]))
-    if source == "own-way":
-        theta, rule = theta_d, source
-    elif plan is not None and source == "goal":
+    if plan is not None and source == "goal":
         theta, rule = math.atan2(plan.target_xy_m[1], plan.target_xy_m[0]), "plan"
         cap = max(
             params.plan_speed_min_mps,
@@ -1221,7 +1114,7 @@ def assist_step(
         theta, speed_scale, avoided = _avoid(theta_d, levels, params, memory.front_turn)
         rule = avoided or source
 
-    if rule in ("free", "own-way"):
+    if rule == "free":
         v, w = v_ref, w_ref
     else:
         w = _clip(gain * theta, -profile.w_max_radps, profile.w_max_radps)

@@ -214,7 +214,6 @@ def _run_assist(inp: FilterInput, settings: FilterSettings, memory: object | Non
         settings.assist,
         p,
         (inp.state.v_mps, inp.state.w_radps),
-        inp.loop_delay_s,
     )
     stopped = abs(res.v_mps) <= _SAME and abs(res.w_radps) <= _SAME
     moving = abs(inp.v_ref_mps) > _SAME or abs(inp.w_ref_radps) > _SAME
