@@ -41,7 +41,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Final, Protocol, runtime_checkable
 
-import av
 import numpy as np
 import numpy.typing as npt
 from egc_common import keys
@@ -49,7 +48,9 @@ from egc_common.camera_msg import CameraFrame, decode_camera
 from egc_common.event_log import EventLog
 from egc_common.messages import Rejection, RejectReason
 from egc_common.transport import payload_bytes
-from PIL import Image
+
+# PyAV and Pillow load with the first frame (``_codecs``): an operator without a camera, or
+# without a view, does not pay for them at start-up.
 
 log = logging.getLogger("egc.operator.camera")
 
@@ -90,6 +91,7 @@ class ShownFrame:
         if self._jpeg is None:
             assert self.rgb is not None
             buffer = io.BytesIO()
+            _, Image = _codecs()
             Image.fromarray(self.rgb, "RGB").save(buffer, format="JPEG", quality=quality)
             self._jpeg = buffer.getvalue()
         return self._jpeg
@@ -114,6 +116,7 @@ class FrameDecoder:
             return None
         if self._h264 is None or (frame.key and self.waiting_for_key):
             self._h264 = _h264_decoder()
+        av, _ = _codecs()
         try:
             pictures = self._h264.decode(av.Packet(frame.data))
         except Exception as exc:  # PyAV raises InvalidDataError and others on broken input
@@ -143,6 +146,7 @@ class FrameDecoder:
 
     @staticmethod
     def _jpeg(frame: CameraFrame) -> ShownFrame | Rejection:
+        _, Image = _codecs()
         try:
             image = Image.open(io.BytesIO(frame.data), formats=("JPEG",))
             if image.size != (frame.width, frame.height):
@@ -159,7 +163,16 @@ class FrameDecoder:
         )
 
 
+def _codecs() -> tuple[Any, Any]:
+    """The modules ``av`` and ``PIL.Image``, imported on first use."""
+    import av
+    from PIL import Image
+
+    return av, Image
+
+
 def _h264_decoder() -> Any:
+    av, _ = _codecs()
     ctx = av.CodecContext.create("h264", "r")
     ctx.thread_count = 1  # frame threads delay pictures and drop the corrupt flag
     ctx.options = {"max_pixels": str(4096 * 4096)}
@@ -404,6 +417,7 @@ class CameraFeed:
             return frame
         if (frame.width, frame.height) == size:
             return frame
+        _, Image = _codecs()
         image = (
             Image.fromarray(frame.rgb, "RGB")
             if frame.rgb is not None

@@ -40,7 +40,6 @@ from egc_common import keys
 from egc_common.messages import Telemetry
 from egc_common.stop_flag import StopRequest
 from egc_common.transport import payload_bytes
-from PIL import Image
 
 from egc_operator.camera_view import CameraReceiver, RobotClock, ShownFrame
 
@@ -86,6 +85,8 @@ def next_robot(candidates: Sequence[str], last: str | None) -> str | None:
 
 def shrink(frame: ShownFrame, width_px: int = THUMB_WIDTH_PX) -> tuple[bytes, int, int]:
     """The picture scaled to ``width_px`` wide (never up), as JPEG; (bytes, width, height)."""
+    from PIL import Image  # with the first thumbnail, not at every operator's start-up
+
     if frame.rgb is not None:
         picture = Image.fromarray(frame.rgb, "RGB")
     else:
