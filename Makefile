@@ -44,12 +44,8 @@ typecheck: venv
 # Two workers: three (CI run 33, quiet: 594 s against 642 s with two) ran the longest tests, the
 # browser and the real-time drives, all at once at the start, and a DWA robot in real processes
 # drove a 31 % longer way than its simulated twin (test_mode_agreement).
-# Bytecode is kept, in the venv (PYTHONPYCACHEPREFIX), even where PYTHONDONTWRITEBYTECODE is set
-# (as on this project's machines): else every Python process the suite starts compiles the
-# project's modules again (a robot's start-up: 0.73 s of CPU with it, 0.46 s without).
 SUITE_BUDGET_S ?= 2700
 pytest: venv
-	PYTHONDONTWRITEBYTECODE= PYTHONPYCACHEPREFIX=$(abspath $(VENV))/pycache \
 	EGC_SUITE_BUDGET_S=$(SUITE_BUDGET_S) $(BIN)/pytest -n 2 --dist worksteal
 
 bench: venv

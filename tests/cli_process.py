@@ -10,8 +10,7 @@
 - ``run_many(cases)`` runs command lines that should refuse their arguments, all in one process
   (``python -m egc_app.cli_worker``), each as the console script runs it: per line, its exit
   code and what it wrote (``Ran``). One interpreter and one import of the subcommands for all.
-- ``child_env(**extra)`` is the environment of every ``egc-teleop`` process a test starts: this
-  process's, with compiled bytecode kept (see the function).
+- ``child_env(**extra)``: this process's environment plus a few variables, for a child.
 """
 
 from __future__ import annotations
@@ -20,7 +19,6 @@ import json
 import os
 import subprocess
 import sys
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,23 +26,12 @@ from typing import Any
 
 CLI = [sys.executable, "-m", "egc_app.cli"]
 TIMEOUT_S = 600.0  # a limit against a hang, not a measure: a batch on a busy machine is slow
-PYCACHE = Path(tempfile.gettempdir()) / f"egc-teleop-pycache-{os.getuid()}"
 
 
 def child_env(**extra: str) -> dict[str, str]:
-    """This process's environment for a child ``python``, plus ``extra``.
-
-    With ``PYTHONDONTWRITEBYTECODE`` set (as on the shared machines and in CI) every child
-    compiled every module it imports from source, every time: about two thirds of a robot's
-    import time (0.73 s -> 0.46 s of CPU with the bytecode kept). A user's installed
-    ``egc-teleop`` keeps its bytecode, so the children here keep it too, in ``PYCACHE``
-    (``PYTHONPYCACHEPREFIX``; nothing is written next to the sources). A child then starts as
-    an installed one does; what it runs is the same code (a .pyc is used only while its
-    source's modification time and size match)."""
-    env = dict(os.environ)
-    if env.pop("PYTHONDONTWRITEBYTECODE", None) is not None:
-        env.setdefault("PYTHONPYCACHEPREFIX", str(PYCACHE))
-    return env | extra
+    """This process's environment plus ``extra``: for a child that needs a variable of its own
+    (the compiled-bytecode setting every child inherits is made once, in ``tests/conftest.py``)."""
+    return dict(os.environ) | extra
 
 
 def main(argv: Sequence[str], timeout_s: float = TIMEOUT_S) -> int:
@@ -56,7 +43,6 @@ def main(argv: Sequence[str], timeout_s: float = TIMEOUT_S) -> int:
         timeout=timeout_s,
         cwd=os.getcwd(),
         stdin=subprocess.DEVNULL,
-        env=child_env(),
     )
     sys.stdout.write(proc.stdout)
     sys.stderr.write(proc.stderr)
@@ -72,7 +58,6 @@ def parse(*argvs: Sequence[str]) -> list[dict[str, Any] | str]:
         text=True,
         timeout=TIMEOUT_S,
         check=True,
-        env=child_env(),
     )
     results = [json.loads(line) for line in proc.stdout.splitlines()]
     assert len(results) == len(argvs), proc.stderr

@@ -1,22 +1,21 @@
 """``egc-teleop`` command lines run in one long-lived process (``python -m egc_app.cli_worker``),
 for tests about what a command line prints, writes and returns: the interpreter's start and the
-subcommand's imports are paid once per test module, not once per command line.
+subcommand's imports are paid once per pytest process, not once per command line.
 
-``CliWorker.main(argv)`` is ``tests.cli_process.main`` without a process of its own: the exit
-code returned, what it printed written to this process's ``sys.stdout`` and ``sys.stderr`` (for
+``main(argv)`` (the shared worker's ``CliWorker.main``) is ``tests.cli_process.main`` without a
+process of its own: the exit code returned, what it printed written to this process's ``sys.stdout`` and ``sys.stderr`` (for
 ``capsys``). Tests about the process itself (signals, crashes, warnings printed at exit, a
 traceback on a real stderr) start ``python -m egc_app.cli`` as before.
 """
 
 from __future__ import annotations
 
+import atexit
 import json
 import os
 import subprocess
 import sys
 from collections.abc import Sequence
-
-from tests.cli_process import child_env
 
 WORKER = [sys.executable, "-m", "egc_app.cli_worker"]
 
@@ -38,7 +37,6 @@ class CliWorker:
                 stdout=subprocess.PIPE,
                 text=True,
                 bufsize=1,
-                env=child_env(),
             )
         assert proc.stdin is not None and proc.stdout is not None
         proc.stdin.write(
@@ -62,3 +60,8 @@ class CliWorker:
                 self._proc.kill()
                 self._proc.wait()
             self._proc = None
+
+
+_SHARED = CliWorker()
+main = _SHARED.main
+atexit.register(_SHARED.close)

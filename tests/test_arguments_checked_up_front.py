@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 
 from tests import cli_process
-from tests.cli_process import Ran, child_env
+from tests.cli_process import Ran
 from tests.replay.logs import corridor_log
 
 
@@ -34,7 +34,6 @@ def egc(*argv: str, cwd: Path, timeout_s: float = 120.0) -> tuple[int, list[str]
             timeout=timeout_s,
             cwd=cwd,
             stdin=subprocess.DEVNULL,
-            env=child_env(),
         )
     except subprocess.TimeoutExpired:
         pytest.fail(f"{argv}: still running after {timeout_s} s instead of refusing its arguments")

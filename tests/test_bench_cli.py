@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from tests import cli_process
-from tests.cli_process import Ran, child_env
+from tests.cli_process import Ran
 
 
 def egc(*argv: str, timeout_s: float = 120.0) -> subprocess.CompletedProcess[str]:
@@ -28,7 +28,6 @@ def egc(*argv: str, timeout_s: float = 120.0) -> subprocess.CompletedProcess[str
         text=True,
         timeout=timeout_s,
         stdin=subprocess.DEVNULL,
-        env=child_env(),
     )
 
 

@@ -29,7 +29,6 @@ from pathlib import Path
 import pytest
 
 from tests import cli_process
-from tests.cli_process import child_env
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -330,7 +329,6 @@ def parse_check(argvs: list[list[str]]) -> list[dict]:
         text=True,
         timeout=600,
         cwd=ROOT,
-        env=child_env(),
     )
     assert proc.returncode == 0, proc.stderr
     results = [json.loads(line) for line in proc.stdout.splitlines() if line.strip()]

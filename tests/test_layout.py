@@ -12,8 +12,6 @@ from pathlib import Path
 
 import pytest
 
-from tests.cli_process import child_env
-
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = {
     "egc_common": ROOT / "common" / "egc_common",
@@ -77,7 +75,6 @@ def test_stdlib_operator_is_not_shadowed_from_the_repo_root():
         capture_output=True,
         text=True,
         check=True,
-        env=child_env(),
     )
     assert "egc" not in out.stdout
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.cli_worker import CliWorker
+from tests.cli_worker import main
 from tests.replay.logs import corridor_log
 from tests.shapes import L_SHAPE_FILE, PENTAGON_FILE
 
@@ -34,14 +34,6 @@ r_max = 1.2
 # ``filter``, ``replay`` and ``episode`` command lines run in one long-lived CLI process
 # (``tests.cli_worker``): what they print and return is the point. A bad file is checked in
 # real processes: nothing may start before it is refused.
-CLI = CliWorker()
-main = CLI.main
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _cli_worker():
-    yield
-    CLI.close()
 
 
 @pytest.mark.parametrize(

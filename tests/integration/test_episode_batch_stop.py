@@ -13,8 +13,6 @@ from pathlib import Path
 
 import pytest
 
-from tests.cli_process import child_env
-
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(60)]
 
 
@@ -59,7 +57,6 @@ def test_a_stopped_batch_stops_its_workers(tmp_path, sig):
          "--profile", "jackal", "--filter", "egc", "--max-time", "3000", "--out", str(out)],
         stdout=subprocess.DEVNULL,
         stderr=(tmp_path / "stderr").open("w"),  # a pipe would stay open while a worker lives
-        env=child_env(),
     )  # fmt: skip
     below: dict[int, int] = {}
     try:

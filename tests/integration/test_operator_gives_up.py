@@ -11,8 +11,6 @@ import time
 import pytest
 from egc_common.transport import free_tcp_port
 
-from tests.cli_process import child_env
-
 pytestmark = pytest.mark.integration
 
 
@@ -28,7 +26,7 @@ def test_a_peer_that_never_accepts_ends_the_run_at_its_duration(proto: str, dura
     cmd = [sys.executable, "-m", "egc_app.cli", "operator", "--no-view", "--script", "demo"]
     cmd += ["--zenoh-connect", f"{proto}/127.0.0.1:{port}", "--duration", duration_s]
     t0 = time.monotonic()
-    done = subprocess.run(cmd, capture_output=True, text=True, timeout=60, env=child_env())
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
     took = time.monotonic() - t0
     assert done.returncode == 2, done.stderr
     assert f"gave up after {duration_s} s" in done.stderr and "never accepted" in done.stderr

@@ -10,15 +10,13 @@ import sys
 import pytest
 from egc_common.transport import free_tcp_port, loopback_endpoint
 
-from tests.cli_process import child_env
-
 pytestmark = pytest.mark.integration
 
 
 def _robot(*args: str) -> subprocess.CompletedProcess[str]:
     cmd = [sys.executable, "-m", "egc_app.cli", "robot", "--robot", "paths"]
     cmd += ["--listen", loopback_endpoint(free_tcp_port()), *args]
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=child_env())
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=120)
 
 
 @pytest.mark.parametrize(

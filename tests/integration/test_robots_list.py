@@ -20,7 +20,6 @@ import time
 
 import pytest
 
-from tests.cli_process import child_env
 from tests.integration.test_router import start_router
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(150)]
@@ -42,7 +41,6 @@ def list_robots(port: int, wait_s: float) -> tuple[list[dict], subprocess.Comple
         capture_output=True,
         text=True,
         timeout=60,
-        env=child_env(),
     )
     assert done.returncode == 0, done.stderr
     return [json.loads(line) for line in done.stdout.splitlines()], done
@@ -128,7 +126,6 @@ def test_no_robots_is_exit_zero_and_an_empty_list(port, procs):
         capture_output=True,
         text=True,
         timeout=60,
-        env=child_env(),
     )
     assert plain.returncode == 0 and plain.stdout == "", plain
     assert "no robots seen" in plain.stderr
@@ -140,6 +137,5 @@ def test_bad_wait_is_one_line_and_exit_2():
         capture_output=True,
         text=True,
         timeout=60,
-        env=child_env(),
     )
     assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr

@@ -17,7 +17,6 @@ import time
 import pytest
 from egc_common.transport import free_port
 
-from tests.cli_process import child_env
 from tests.integration.harness import ROBOT, Observer, forward_file, operator_args
 from tests.integration.test_link import wait_full_speed
 
@@ -84,7 +83,6 @@ def test_port_in_use_and_bad_config_are_one_line_and_exit_2(port, procs, tmp_pat
         capture_output=True,
         text=True,
         timeout=30,
-        env=child_env(),
     )
     assert taken.returncode == 2
     assert taken.stderr.count("\n") == 1 and "Address already in use" in taken.stderr
@@ -96,7 +94,6 @@ def test_port_in_use_and_bad_config_are_one_line_and_exit_2(port, procs, tmp_pat
         capture_output=True,
         text=True,
         timeout=30,
-        env=child_env(),
     )
     assert wrong.returncode == 2
     assert wrong.stderr.count("\n") == 1 and "invalid zenoh config" in wrong.stderr

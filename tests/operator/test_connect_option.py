@@ -10,8 +10,6 @@ from egc_common.cli_args import CliArgumentParser
 from egc_common.transport import options_from_args
 from egc_operator import cli
 
-from tests.cli_process import child_env
-
 
 def parse(*argv: str):
     parser = CliArgumentParser(prog="egc-teleop operator")
@@ -51,7 +49,6 @@ def test_bad_connect_values_are_one_line_usage_errors(argv):
         capture_output=True,
         text=True,
         timeout=60,
-        env=child_env(),
     )
     assert proc.returncode == 2
     assert len(proc.stderr.strip().splitlines()) == 1 and "--connect" in proc.stderr

@@ -8,8 +8,6 @@ from pathlib import Path
 
 import pytest
 
-from tests.cli_process import child_env
-
 
 @pytest.mark.parametrize(
     ("argv", "message"),
@@ -27,7 +25,6 @@ def test_fleet_options_are_checked_in_one_line(tmp_path: Path, argv: list[str], 
         cwd=tmp_path,
         timeout=60,
         stdin=subprocess.DEVNULL,
-        env=child_env(),
     )
     assert done.returncode == 2
     lines = done.stderr.strip().splitlines()

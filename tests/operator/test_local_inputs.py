@@ -44,7 +44,7 @@ from egc_operator.via_route import (
     parse_route_text,
 )
 
-from tests.cli_process import Ran, child_env, run_many
+from tests.cli_process import Ran, run_many
 
 BOM = "\ufeff"
 
@@ -64,7 +64,6 @@ def operator(
         text=True,
         cwd=cwd,
         timeout=timeout,
-        env=child_env(),
         **kwargs,
     )
 
@@ -149,7 +148,6 @@ def test_a_pipe_that_never_ends_is_read_only_up_to_the_limit(tmp_path: Path, opt
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         cwd=tmp_path,
-        env=child_env(),
     )
     assert proc.stdin is not None and proc.stderr is not None
     stdin = proc.stdin

@@ -9,8 +9,6 @@ import sys
 
 from egc_common.transport import free_tcp_port
 
-from tests.cli_process import child_env
-
 
 def test_an_operator_without_a_view_never_imports_rerun() -> None:
     """A real operator process driving for a second with ``--no-view`` and no robot: at its
@@ -27,7 +25,7 @@ def test_an_operator_without_a_view_never_imports_rerun() -> None:
         "print(code, heavy)\n"
     )
     done = subprocess.run(
-        [sys.executable, "-c", probe], capture_output=True, text=True, timeout=120, env=child_env()
+        [sys.executable, "-c", probe], capture_output=True, text=True, timeout=120
     )
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip().splitlines()[-1] == "0 []", done.stdout

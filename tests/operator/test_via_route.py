@@ -25,8 +25,6 @@ from egc_operator.via_route import (
     route_from_options,
 )
 
-from tests.cli_process import child_env
-
 S = 1_000_000_000
 
 
@@ -113,7 +111,6 @@ def test_bad_values_exit_2_with_one_line(tmp_path: Path, argv: list[str], messag
         text=True,
         cwd=tmp_path,
         timeout=60,
-        env=child_env(),
     )
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()

@@ -16,7 +16,7 @@ from egc_robot.pipeline import FILTERS
 from rosbags.rosbag2 import StoragePlugin, Writer
 
 from tests.cli_process import parse
-from tests.cli_worker import CliWorker
+from tests.cli_worker import main
 from tests.replay.logs import (
     PERIOD_NS,
     START_NS,
@@ -34,14 +34,6 @@ PINNED = ("scans", "commands", "changed", "max_cut_mps", "hold_s", "closest_m", 
 # Command lines run in one long-lived CLI process (``tests.cli_worker``): these tests are about
 # what ``egc-teleop replay`` prints, writes and returns; the ones about a process of its own
 # start ``python -m egc_app.cli`` (``test_a_real_process_*``, ``*_in_a_real_process_*``).
-CLI = CliWorker()
-main = CLI.main
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _cli_worker():
-    yield
-    CLI.close()
 
 
 def replay(capsys, *args: str) -> tuple[int, dict | None, str]:

@@ -22,7 +22,7 @@ from egc_robot.replay_core import (
     velocity_fault,
 )
 
-from tests.cli_worker import CliWorker
+from tests.cli_worker import main
 from tests.replay.logs import TS, T, corridor_log
 
 S = 1_000_000_000
@@ -33,14 +33,6 @@ UNTIL = 10  # commands with scans 0-9 only (t = 0.0-0.9 s), scans until t = 5.9 
 # Command lines run in one long-lived CLI process (``tests.cli_worker``): these tests are about
 # what ``egc-teleop replay`` prints, writes and returns; the ones about a process of its own
 # start ``python -m egc_app.cli`` (``test_a_real_process_*``, ``*_in_a_real_process_*``).
-CLI = CliWorker()
-main = CLI.main
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _cli_worker():
-    yield
-    CLI.close()
 
 
 def replay(capsys, *args: str) -> tuple[int, dict | None, str]:
