@@ -62,17 +62,21 @@ def test_step4_inverts_step2(v, w):
     assert math.isclose(w2, w, rel_tol=1e-9, abs_tol=1e-12)
 
 
+def reference_ek_point_or_limit(x: float, y: float, l_m: float) -> tuple[float, float] | None:
+    """The literal formulas' EK point, or where they overflow (|y| < ~1e-300: NaN) their limit
+    y -> 0: a point straight ahead stays where it is, one straight behind has none."""
+    e = reference_ek_point(x, y, l_m)
+    if e is None or np.isfinite(e).all():
+        return e
+    return (x, 0.0) if x > 0 else None
+
+
 @given(st.lists(st.tuples(st.floats(-6, 6), st.floats(-6, 6)), max_size=60), st.floats(0.1, 2))
 @settings(max_examples=300)
 def test_transform_agrees_with_the_literal_formulas(pts, l_m):
     """The vectorised transform uses two identities of the pinned formulas; check them."""
     ek, kept = ek_transform(np.array(pts, dtype=float).reshape(-1, 2), l_m)
-    expected = [reference_ek_point(x, y, l_m) for x, y in pts]
-    # where the literal formulas overflow (|y| < ~1e-300), the answer is their limit y -> 0
-    expected = [
-        e if e is None or np.isfinite(e).all() else ((x, 0.0) if x > 0 else None)
-        for e, (x, _) in zip(expected, pts, strict=True)
-    ]
+    expected = [reference_ek_point_or_limit(x, y, l_m) for x, y in pts]
     assert kept.tolist() == [e is not None for e in expected]
     for got, want in zip(ek, [e for e in expected if e is not None], strict=True):
         # to 1e-9 of the point's EK distance: far behind (d ~ 1e51 for y ~ 1e-51) the literal
@@ -96,7 +100,7 @@ def test_nothing_within_r_max_passes_the_command_unchanged(v, w, pts):
 def test_passes_unchanged_exactly_when_nearest_ek_point_is_r_max_away(v, w, pts):
     assume(v != 0.0)
     sign = 1.0 if v > 0 else -1.0
-    ek = [reference_ek_point(sign * x, y, L_P3DX) for x, y in pts]
+    ek = [reference_ek_point_or_limit(sign * x, y, L_P3DX) for x, y in pts]
     p = ek_command_point(abs(v), sign * w, P3DX.horizon_s, L_P3DX)
     d = min((math.hypot(e[0] - p[0], e[1] - p[1]) for e in ek if e is not None), default=math.inf)
     assume(abs(d - P3DX.r_max_m) > 1e-9)
