@@ -40,6 +40,7 @@ import threading
 import time
 import uuid
 from collections import deque
+from collections.abc import Callable
 from datetime import timedelta
 from pathlib import Path
 from typing import Any
@@ -211,8 +212,13 @@ def open_view(
         stamp=stamp,
     )
     check_target(target)
-    view = _open(target, robot_id, application_id, recording_name, fleet=fleet)
     address = viewer_address(target)
+    # Rerun 0.41's connect_grpc blocks 5 s when no viewer answers, then its sink sends nothing
+    # (a viewer started later got only the layout), and dropping it waits 5 s more (at close or
+    # exit). So a missing viewer is connected to once it answers (``watch_viewer``); until then
+    # the recording buffers in memory, as that sink did, and the viewer gets all of it.
+    later = target.kind == "connect" and address is not None and reachable(address) is not None
+    view = _open(target, robot_id, application_id, recording_name, fleet=fleet, later=later)
     if target.kind == "spawn" and address is not None:
         why = reachable(address)
         if why is not None:
@@ -270,20 +276,24 @@ def _open(
     recording_name: str | None,
     world_bounds_m: tuple[float, float, float, float] | None = None,
     fleet: bool = False,
+    later: bool = False,
 ) -> OperatorView:
+    """``later``: connect to the viewer when it answers (see ``open_view``), not now."""
     if target.kind == "none":
         return OperatorView(None, robot_id, where="operator view disabled (--no-view)")
     batcher = FILE_BATCHER if target.kind == "save" else None
     rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4(), batcher_config=batcher)
     blueprint = operator_blueprint(robot_id, world_bounds_m=world_bounds_m, fleet=fleet)
     try:
-        where = attach(rec, target, blueprint)
+        where = attach(rec, target, blueprint, defer=later)
     except (RuntimeError, OSError) as exc:  # e.g. the file or port was taken since the check
         option = {"save": "--save", "serve_web": "--serve-web", "connect": "--connect"}
         raise UsageError(f"{option.get(target.kind, 'view')}: {exc}") from None
     rec.send_recording_name(recording_name or f"{robot_id}: operator view")
     view = OperatorView(rec, robot_id, where=where)
     view.save_path = target.path if target.kind == "save" else None
+    if later:
+        view._connect = functools.partial(attach, rec, target, blueprint)
     return view
 
 
@@ -335,6 +345,8 @@ class OperatorView:
         self._camera_ns: int | None = None  # robot time of the camera's newest row
         self._camera_stale = False
         self._watch_stop = threading.Event()
+        self._watcher: threading.Thread | None = None
+        self._connect: Callable[[], object] | None = None  # attaches the viewer that was missing
         self.save_path: Path | None = None  # the recording file, when the view is saved to one
         if recording is not None:
             self._log_static(recording)
@@ -631,6 +643,8 @@ class OperatorView:
         Text events still waiting for a robot time (no robot was ever heard) go at time 0.
         """
         self._watch_stop.set()
+        if self._watcher is not None:
+            self._watcher.join()  # a connection under way ends before the recording is closed
         with self._lock:
             rec, self._rec = self._rec, None
             if rec is not None:
@@ -674,11 +688,14 @@ class OperatorView:
     def watch_viewer(self, address: tuple[str, int], url: str) -> None:
         """Check every ``VIEWER_PROBE_S`` that the viewer at ``address`` accepts connections;
         say once on stderr when it does not (and when it is back). Rerun buffers the view for
-        it meanwhile; the driving never waits for it."""
+        it meanwhile; the driving never waits for it. A view opened without its viewer is
+        connected to it here, once it answers."""
 
         def watch() -> None:
             while True:
                 why = reachable(address)
+                if why is None and self._connect is not None:
+                    self._connect_now(url)
                 if why is not None and self._viewer_missing is None:
                     print(
                         f"egc-teleop: warning: no viewer answers at {url} ({why}); the view "
@@ -693,7 +710,17 @@ class OperatorView:
                 if self._watch_stop.wait(VIEWER_PROBE_S):
                     return
 
-        threading.Thread(target=watch, name="viewer-watch", daemon=True).start()
+        self._watcher = threading.Thread(target=watch, name="viewer-watch", daemon=True)
+        self._watcher.start()
+
+    def _connect_now(self, url: str) -> None:
+        with self._lock:
+            connect, self._connect = self._connect, None
+        try:
+            if connect is not None:
+                connect()
+        except (RuntimeError, OSError) as exc:
+            print(f"egc-teleop: warning: could not connect to {url}: {exc}", file=sys.stderr)
 
     # -- internals -------------------------------------------------------------------------------
 

@@ -206,8 +206,14 @@ def open_hint(where: Path, display: bool, rerun: str = "rerun") -> str:
     )
 
 
-def attach(rec: rr.RecordingStream, target: ViewerTarget, blueprint: rrb.Blueprint) -> str:
-    """Connect ``rec`` to ``target`` with ``blueprint`` as default layout; say where, in a line."""
+def attach(
+    rec: rr.RecordingStream, target: ViewerTarget, blueprint: rrb.Blueprint, *, defer: bool = False
+) -> str:
+    """Connect ``rec`` to ``target`` with ``blueprint`` as default layout; say where, in a line.
+
+    ``defer``: a ``connect`` target's viewer is not there yet; say where the view will go but do
+    not connect (``rec`` buffers until a later ``attach`` does, see ``OperatorView.watch_viewer``).
+    """
     import rerun as rr
 
     if target.kind == "save":
@@ -220,7 +226,8 @@ def attach(rec: rr.RecordingStream, target: ViewerTarget, blueprint: rrb.Bluepri
         return f"{why}operator view saved to {where} ({hint})"
     if target.kind == "connect":
         assert target.url is not None
-        rec.connect_grpc(target.url, default_blueprint=blueprint)
+        if not defer:
+            rec.connect_grpc(target.url, default_blueprint=blueprint)
         return f"operator view streamed to the viewer at {target.url}"
     if target.kind == "serve_web":
         assert target.web_port is not None
