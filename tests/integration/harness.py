@@ -325,19 +325,25 @@ class Observer:
 
 
 def assert_no_jump(telemetry: list[Telemetry], accel_mps2: float = 0.3) -> None:
-    """Every entry into DRIVING happened on a centred command (v_ref = w_ref = 0), except a
-    short-gap resume (DESIGN 8), which must ramp up from what the base had at the acceleration
-    limit (one cycle of at most 0.1 s at ``accel_mps2``)."""
+    """Every entry into DRIVING happened on a centred command, except a short-gap resume
+    (DESIGN 8) or a command source's; either way the base ramped up from what it had, at the
+    acceleration limit (the state machine's own tests check the centred rule cycle by cycle).
+
+    Telemetry is a 20 Hz sample of a robot that cycles on each 50 Hz command: the cycle that
+    entered DRIVING on a centred command may be followed by a deflected one before the next
+    telemetry (CI run 35, at load 10: v_ref 0.14 with reason "fresh centred command" and
+    v_cmd 0.0056, one cycle's ramp). So the entry is checked by the robot's reason and by the
+    ramp over the time since the previous telemetry (at least one 0.1 s cycle)."""
     previous = None
     for t in telemetry:
         if t.state == "DRIVING" and previous is not None and previous.state != "DRIVING":
-            if t.reason == "resumed after a link gap":
-                ramp = abs(previous.v_cmd) + accel_mps2 * 0.1 + 1e-9
-                assert abs(t.v_cmd) <= ramp, f"resume jumped: {previous.v_cmd} -> {t.v_cmd}"
-            else:
-                assert t.v_ref == 0.0 and t.w_ref == 0.0, (
-                    f"robot entered DRIVING on a deflection {t}"
-                )
+            entries = ("resumed after a link gap", "fresh centred command")
+            assert t.reason in entries or t.reason.startswith("source "), (
+                f"robot entered DRIVING for another reason {t}"
+            )
+            elapsed_s = max(0.1, (t.stamp_ns - previous.stamp_ns) / 1e9)
+            ramp = abs(previous.v_cmd) + accel_mps2 * elapsed_s + 1e-9
+            assert abs(t.v_cmd) <= ramp, f"entry into DRIVING jumped: {previous.v_cmd} -> {t}"
         previous = t
 
 

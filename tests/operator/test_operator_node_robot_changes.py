@@ -88,9 +88,11 @@ def test_the_map_arrives_over_a_slow_round_trip(session: zenoh.Session) -> None:
     # the first query's answer, not a second query's: that would come after the node's map
     # timeout (6 s) and another round trip
     assert MAP_DELAY_S <= took < MAP_DELAY_S + 4.0
-    # the commands went on while the query was pending (65 at 50 Hz): it blocks neither
+    # the commands went on while the query was pending (65 at 50 Hz): it blocks neither. A node
+    # that waited for the answer sends none meanwhile; one starved by a busy machine still sends
+    # some (8 in CI run 35, at load 10), so the bar is a few, not a rate.
     asked, answered = published[:2]
-    assert answered - asked >= 10 * MAP_DELAY_S, published
+    assert answered - asked >= 4, published
 
 
 def test_a_robot_that_goes_and_comes_back_leaves_none_of_its_old_state(
