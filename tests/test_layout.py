@@ -105,6 +105,27 @@ def test_only_the_ros2_adapters_import_rclpy():
             assert not bad, f"{path.relative_to(ROOT)} imports {sorted(bad)} (DESIGN 11)"
 
 
+# Every rclpy executor is spun by ``egc_common.executor_thread.ExecutorThread`` (issue 31): an
+# executor shut down, or a node destroyed, under a thread still inside ``spin`` segfaults. The
+# tests' fake navigation stack kept the old way (a thread on ``executor.spin``, shut down with a
+# timeout) and a CI run (39) segfaulted in the next node's ``destroy_node``.
+UNSAFE_SPIN = re.compile(r"target=[\w.]*\.spin\b|\.shutdown\(timeout_sec=|rclpy\.spin\(")
+
+
+def test_every_ros2_executor_thread_is_an_executor_thread():
+    folders = [*PACKAGES.values(), ROOT / "egc_app", ROOT / "experiments", ROOT / "tests"]
+    folders.append(ROOT / "bench")
+    for folder in folders:
+        for path in folder.rglob("*.py"):
+            if path == Path(__file__).resolve():
+                continue
+            for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+                assert not UNSAFE_SPIN.search(line), (
+                    f"{path.relative_to(ROOT)}:{n}: spin an rclpy executor with "
+                    f"egc_common.executor_thread.ExecutorThread, not {line.strip()!r}"
+                )
+
+
 # ---------------------------------------------------------------------------------------------
 # egc_app, the console script (DESIGN 2): nothing imports it, and it holds argument parsing and
 # wiring only. The headless episode engine and the log replay used to live there, imported by

@@ -21,6 +21,7 @@ pytest.importorskip("rclpy", reason="ROS 2's rclpy is not installed (pip install
 pytest.importorskip("std_msgs.msg", reason="std_msgs is not installed (ros-jazzy-std-msgs)")
 
 import rclpy
+from egc_common.executor_thread import ExecutorThread
 from egc_common.transport import free_tcp_port, loopback_endpoint
 from geometry_msgs.msg import Twist
 from rclpy.context import Context
@@ -30,7 +31,7 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Bool
 
 from tests.integration.harness import ROBOT, Observer, Processes, joystick_file, operator_args
-from tests.ros2.fake_base import FakeBase
+from tests.ros2.fake_base import STOP_PATIENCE_S, FakeBase
 from tests.ros2.test_robot_ros import wait_log
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(180)]
@@ -84,12 +85,11 @@ class NavAndLock:
         self._executor = SingleThreadedExecutor(context=self._context)
         self._executor.add_node(self.node)
         self._stop = threading.Event()
-        self._threads = [
-            threading.Thread(target=self._executor.spin, daemon=True),
-            threading.Thread(target=self._loop, daemon=True),
-        ]
-        for thread in self._threads:
-            thread.start()
+        self._errors: list[Exception] = []
+        self._spinner = ExecutorThread(self._executor, self._errors.append, name="fake-nav-ros2")
+        self._loop_thread = threading.Thread(target=self._loop, daemon=True)
+        self._spinner.start()
+        self._loop_thread.start()
 
     def wait_matched(self, timeout_s: float = 30.0) -> None:
         deadline = time.monotonic() + timeout_s
@@ -125,12 +125,20 @@ class NavAndLock:
                         self.last_lock_ns = time.monotonic_ns()
 
     def close(self) -> None:
+        """As ``FakeBase.close``: both threads out, then the node goes. This one shut its
+        executor down under a thread still spinning it (``executor.spin``, joined with a
+        timeout); CI run 39 then segfaulted in the fake base's ``destroy_node`` right after."""
         self._stop.set()
-        self._threads[1].join(2)
-        self._executor.shutdown(timeout_sec=1.0)
-        self._threads[0].join(2)
+        self._loop_thread.join(STOP_PATIENCE_S)
+        spinner_out = self._spinner.stop(STOP_PATIENCE_S)
+        if self._loop_thread.is_alive() or not spinner_out:
+            raise AssertionError(
+                f"the fake navigation's threads did not stop in {STOP_PATIENCE_S} s"
+            )
+        self._executor.shutdown()
         self.node.destroy_node()
         self._context.try_shutdown()
+        assert not self._errors, f"the fake navigation's executor failed: {self._errors}"
 
 
 @pytest.fixture
