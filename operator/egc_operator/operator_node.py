@@ -569,8 +569,10 @@ class OperatorNode:
                     present = self._robot_alive
                 if present or now - opened >= _START_WAIT_NS:
                     start = now
-            # Until the robot is there (a slow link takes seconds to connect), the deadman is
-            # released, and a recorded script does not run ahead of the robot.
+            # Until the robot is there (a slow link takes seconds to connect), nothing is sent
+            # and a recorded script does not run ahead of the robot: a command could reach the
+            # robot before its liveliness token reaches us, and be refused as not in control.
+            sending = start is not None
             sample = RELEASED if start is None else self._source.sample((now - start) / NS_PER_S)
             if self._source.finished:
                 ended_at = now if ended_at is None else ended_at
@@ -583,7 +585,8 @@ class OperatorNode:
                         self._actions.append(action)
                     self._goal_wake.set()
                 pressed[action] = held
-            seq += 1
+            if sending:
+                seq += 1
             frame_ns = None if self._camera is None else _camera_stamp(self._camera)
             with self._lock:
                 stamp = self._sync.robot_now(now)
@@ -611,9 +614,10 @@ class OperatorNode:
                 rx_kbps=rx,
                 camera_age_ms=camera_age,
             )
-            self._publisher.put(command.encode())
-            self.published += 1
-            if stamp > 0:
+            if sending:
+                self._publisher.put(command.encode())
+                self.published += 1
+            if sending and stamp > 0:
                 self.history.add(
                     SentCommand(
                         stamp, sample.x, sample.y, sample.mode, sample.deadman, sample.estop
@@ -629,7 +633,7 @@ class OperatorNode:
             deadline += self._period_ns
             if deadline <= now:
                 deadline = now + self._period_ns
-            last = command
+            last = command if sending else last
         if last is not None and last.deadman:
             self._release_on_exit(last)
         stop.set()

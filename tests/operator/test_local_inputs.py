@@ -259,6 +259,58 @@ def test_the_cli_loops_a_one_row_file_until_stopped(tmp_path: Path):
     assert all(c[1] for c in cmds[first : last + 1])
 
 
+def test_nothing_is_sent_before_the_robot_is_seen(tmp_path: Path):
+    """Until the robot's liveliness token reaches the operator, it sends nothing: a command
+    could otherwise reach the robot first and be refused as not in control (CI run 44, over
+    UDP). With ``--robot`` the operator's node exists from the start (without it, a node is made
+    only for a robot seen). The robot's token is declared a second after the operator's own token is seen; the
+    first command arrives after it, and is seq 1."""
+    (tmp_path / "single.csv").write_text("t_s,x,y\n0,0.3,0\n", encoding="utf-8")
+    port = free_tcp_port()
+    session = open_session(ZenohOptions(listen=(loopback_endpoint(port),)))
+    got: list[tuple[float, int]] = []
+    lock = threading.Lock()
+    operator_seen = threading.Event()
+
+    def on_cmd(sample: Any) -> None:
+        cmd = decode_command(sample.payload.to_bytes())
+        assert not isinstance(cmd, Rejection)
+        with lock:
+            got.append((time.monotonic(), cmd.seq))
+
+    sub = session.declare_subscriber(keys.cmd("sim"), on_cmd)
+    alive = session.liveliness().declare_subscriber(
+        keys.alive_operators("sim"), lambda _: operator_seen.set()
+    )
+    ran: list[subprocess.CompletedProcess[str]] = []
+    argv = ("--robot", "sim", "--zenoh-connect", loopback_endpoint(port))
+    argv += ("--joystick-file", "single.csv")
+    run = threading.Thread(
+        target=lambda: ran.append(operator(tmp_path, *argv, "--loop", "--duration", "10"))
+    )
+    run.start()
+    token = None
+    try:
+        assert operator_seen.wait(8.0), "the operator's liveliness token never came"
+        time.sleep(1.0)
+        with lock:
+            before = len(got)
+        token_at = time.monotonic()
+        token = session.liveliness().declare_token(keys.alive_robot("sim"))
+        run.join(30)
+    finally:
+        if token is not None:
+            token.undeclare()
+        alive.undeclare()
+        sub.undeclare()
+        session.close()
+    assert ran and ran[0].returncode == 0, ran
+    with lock:
+        cmds = list(got)
+    assert before == 0 and cmds, (before, len(cmds), ran[0].stderr)
+    assert cmds[0][0] >= token_at and cmds[0][1] == 1, (cmds[0][0] - token_at, cmds[0][1])
+
+
 # -- 9: byte-order marks, plain numbers, the hidden clock offset -------------------------------
 
 
