@@ -290,10 +290,9 @@ def _open(
         option = {"save": "--save", "serve_web": "--serve-web", "connect": "--connect"}
         raise UsageError(f"{option.get(target.kind, 'view')}: {exc}") from None
     rec.send_recording_name(recording_name or f"{robot_id}: operator view")
-    view = OperatorView(rec, robot_id, where=where)
+    connect = functools.partial(attach, rec, target, blueprint) if later else None
+    view = OperatorView(rec, robot_id, where=where, connect_later=connect)
     view.save_path = target.path if target.kind == "save" else None
-    if later:
-        view._connect = functools.partial(attach, rec, target, blueprint)
     return view
 
 
@@ -310,7 +309,10 @@ class OperatorView:
         robot_id: str,
         where: str = "",
         owns_recording: bool = True,
+        connect_later: Callable[[], object] | None = None,
     ) -> None:
+        """``connect_later``: attaches the viewer that was missing when the view opened; the
+        viewer watch (``watch_viewer``) calls it once the viewer answers."""
         self.robot_id = robot_id
         self.where = where
         self._rec = recording
@@ -346,7 +348,7 @@ class OperatorView:
         self._camera_stale = False
         self._watch_stop = threading.Event()
         self._watcher: threading.Thread | None = None
-        self._connect: Callable[[], object] | None = None  # attaches the viewer that was missing
+        self._connect = connect_later
         self.save_path: Path | None = None  # the recording file, when the view is saved to one
         if recording is not None:
             self._log_static(recording)

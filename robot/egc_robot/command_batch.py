@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from egc_common.messages import OperatorCommand, Rejection, decode_command
+from egc_common.messages import OperatorCommand, Rejection
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,10 +48,11 @@ def control_bits(command: OperatorCommand, centre_tolerance: float) -> ControlBi
     )
 
 
-def payload_control_bits(payload: bytes, centre_tolerance: float) -> ControlBits | None:
-    """The control bits of a command payload, None when it does not decode (it will be
+def decoded_control_bits(
+    decoded: OperatorCommand | Rejection, centre_tolerance: float
+) -> ControlBits | None:
+    """The control bits of a decoded command payload, None when it did not decode (it will be
     rejected, so it changes nothing and needs no cycle before it)."""
-    decoded = decode_command(payload)
     if isinstance(decoded, Rejection):
         return None
     return control_bits(decoded, centre_tolerance)
@@ -59,5 +60,5 @@ def payload_control_bits(payload: bytes, centre_tolerance: float) -> ControlBits
 
 def cycle_before(pending: ControlBits | None, following: ControlBits | None) -> bool:
     """Whether the accepted command not yet cycled on (``pending``, None: there is none) needs
-    its cycle before the ``following`` payload (None: undecodable) is vetted."""
+    its cycle before the ``following`` command (None: undecodable) is vetted."""
     return pending is not None and following is not None and following != pending

@@ -410,9 +410,13 @@ class RobotController:
 
     def on_command(self, payload: object, now_ns: int) -> CommandVerdict:
         """Decode and vet one payload from ``egc/<robot>/cmd``; never raises."""
+        return self.vet_command(decode_command(payload), now_ns)
+
+    def vet_command(self, decoded: OperatorCommand | Rejection, now_ns: int) -> CommandVerdict:
+        """Vet one command already decoded (``messages.decode_command``: a Rejection is counted
+        as rejected); the rules 2-4 of the module docstring. Never raises."""
         if self._unreported is not None:
             self._report()
-        decoded = decode_command(payload)
         if isinstance(decoded, Rejection):
             return self._reject(None, decoded, now_ns)
         cmd = decoded

@@ -59,7 +59,14 @@ from typing import Protocol
 import zenoh
 from egc_common import keys
 from egc_common.event_log import EventLog
-from egc_common.messages import BaseCommand, StateMessage, encode_clock_reply
+from egc_common.messages import (
+    BaseCommand,
+    OperatorCommand,
+    Rejection,
+    StateMessage,
+    decode_command,
+    encode_clock_reply,
+)
 from egc_common.scan import Scan
 from egc_common.stop_flag import StopRequest
 from egc_common.transport import (
@@ -80,7 +87,7 @@ from egc_common.view_budget import (
     plan,
 )
 
-from egc_robot.command_batch import ControlBits, control_bits, cycle_before, payload_control_bits
+from egc_robot.command_batch import ControlBits, control_bits, cycle_before, decoded_control_bits
 from egc_robot.controller import CommandVerdict, CycleOutput, InputVerdict, RobotController
 from egc_robot.drivers import Driver
 from egc_robot.run_stats import RunStats
@@ -248,13 +255,14 @@ class RobotNode:
             for sample in samples:
                 try:
                     payload = payload_bytes(sample)
+                    decoded = decode_command(payload)  # once: for the batch and for vetting
                     if pending is not None and cycle_before(
-                        pending, payload_control_bits(payload, tolerance)
+                        pending, decoded_control_bits(decoded, tolerance)
                     ):
                         pending = None
                         self._command_cycle(latencies)
                     rx_ns = self._clock()
-                    verdict = self._handle_command(payload, rx_ns)
+                    verdict = self._handle_command(payload, decoded, rx_ns)
                     if verdict.accepted and verdict.command is not None:
                         self._on_report(verdict, rx_ns)
                         pending = control_bits(verdict.command, tolerance)
@@ -541,10 +549,13 @@ class RobotNode:
         except Exception as state_exc:
             log.error("could not publish the failed cycle's state: %s", state_exc)
 
-    def _handle_command(self, payload: bytes, rx_ns: int) -> CommandVerdict:
-        """Vet one command (accepted: it came from the operator in control and passed)."""
+    def _handle_command(
+        self, payload: bytes, decoded: OperatorCommand | Rejection, rx_ns: int
+    ) -> CommandVerdict:
+        """Vet one command, ``decoded`` from ``payload`` (accepted: it came from the operator
+        in control and passed)."""
         controller = self._controller
-        verdict = controller.on_command(payload, rx_ns)
+        verdict = controller.vet_command(decoded, rx_ns)
         if self._recorder is not None:
             reason = None if verdict.rejection is None else str(verdict.rejection)
             self._recorder.on_command(payload, verdict.accepted, reason, rx_ns)

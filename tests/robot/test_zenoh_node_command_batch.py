@@ -10,10 +10,10 @@ import time
 
 import pytest
 from egc_common import keys
-from egc_common.messages import BaseCommand, OperatorCommand
+from egc_common.messages import BaseCommand, OperatorCommand, decode_command
 from egc_common.profiles import PIONEER3DX
 from egc_common.transport import ZenohOptions, command_publisher, open_session
-from egc_robot.command_batch import ControlBits, control_bits, cycle_before, payload_control_bits
+from egc_robot.command_batch import ControlBits, control_bits, cycle_before, decoded_control_bits
 from egc_robot.controller import ControllerConfig, CycleOutput, RobotController
 from egc_robot.drivers import SensorUpdate
 from egc_robot.pipeline import PipelineConfig
@@ -131,6 +131,6 @@ def test_control_bits_separate_what_the_state_machine_acts_on():
     assert not cycle_before(base, control_bits(command(2, x=0.7), tol))
     assert not cycle_before(None, base)  # nothing pending: no cycle owed
     assert not cycle_before(base, None)  # an undecodable payload changes nothing
-    assert payload_control_bits(b"\x00not msgpack", tol) is None
-    assert payload_control_bits(command(3, x=0.5).encode(), tol) == base
+    assert decoded_control_bits(decode_command(b"\x00not msgpack"), tol) is None
+    assert decoded_control_bits(decode_command(command(3, x=0.5).encode()), tol) == base
     assert isinstance(base, ControlBits)
