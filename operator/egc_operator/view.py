@@ -101,6 +101,7 @@ from egc_operator.viewer_target import (
     check_target,
     choose_target,
     default_save_path,
+    launch_viewer,
     reachable,
     viewer_address,
 )
@@ -218,29 +219,26 @@ def open_view(
     # exit). So a missing viewer is connected to once it answers (``watch_viewer``); until then
     # the recording buffers in memory, as that sink did, and the viewer gets all of it.
     later = target.kind == "connect" and address is not None and reachable(address) is not None
-    view = _open(target, robot_id, application_id, recording_name, fleet=fleet, later=later)
-    if target.kind == "spawn" and address is not None:
-        why = reachable(address)
-        if why is not None:
+    why = launch_viewer(address[1]) if target.kind == "spawn" and address is not None else None
+    if why is None:
+        view = _open(target, robot_id, application_id, recording_name, fleet=fleet, later=later)
+    else:
+        # The display did not take a viewer: the hint must not say "rerun FILE" here.
+        fallback = ViewerTarget("save", path=default_save_path(robot_id, stamp), viewer_failed=True)
+        check_target(fallback)
+        view = _open(fallback, robot_id, application_id, recording_name, fleet=fleet)
+        assert fallback.path is not None
+        view.flush()
+        if fallback.path.exists():
+            view.where = f"the spawned viewer did not start ({why}); {view.where}"
+        else:  # never claim a file that is not there
             view.abandon()
-            # The display did not take a viewer: the hint must not say "rerun FILE" here.
-            fallback = ViewerTarget(
-                "save", path=default_save_path(robot_id, stamp), viewer_failed=True
+            view = OperatorView(None, robot_id)
+            view.where = (
+                f"the spawned viewer did not start ({why}) and the view could not be "
+                f"saved to {fallback.path.resolve()}; no view (use --save FILE.rrd)"
             )
-            check_target(fallback)
-            view = _open(fallback, robot_id, application_id, recording_name, fleet=fleet)
-            assert fallback.path is not None
-            view.flush()
-            if fallback.path.exists():
-                view.where = f"the spawned viewer did not start ({why}); {view.where}"
-            else:  # never claim a file that is not there
-                view.abandon()
-                view = OperatorView(None, robot_id)
-                view.where = (
-                    f"the spawned viewer did not start ({why}) and the view could not be "
-                    f"saved to {fallback.path.resolve()}; no view (use --save FILE.rrd)"
-                )
-            address = None
+        address = None
     print(f"egc-teleop: {view.where}", file=sys.stderr)
     if address is not None:
         view.watch_viewer(address, target.url or f"127.0.0.1:{address[1]}")

@@ -22,7 +22,9 @@ import os
 import shlex
 import shutil
 import socket
+import subprocess
 import sys
+import time
 import urllib.parse
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -137,7 +139,7 @@ def check_target(target: ViewerTarget) -> None:
                 )
 
 
-DEFAULT_VIEWER_PORT = 9876  # where rr.spawn's viewer listens
+DEFAULT_VIEWER_PORT = 9876  # where a spawned viewer listens
 
 
 def viewer_address(target: ViewerTarget) -> tuple[str, int] | None:
@@ -164,6 +166,58 @@ def reachable(address: tuple[str, int], timeout_s: float = 0.5) -> str | None:
             return None
     except OSError as exc:
         return exc.strerror or str(exc) or type(exc).__name__
+
+
+# A viewer that opens its window takes 1-3 s to listen; one that cannot (no X server) listens
+# for some 30 ms, then exits. rr.spawn did not tell the two apart: it waited ~6 s for a viewer
+# that had exited, then its gRPC sink waited 5 s more, and the process's exit another 5 s. A
+# viewer still running ``SPAWN_SETTLE_S`` after it began to listen has its window.
+SPAWN_WAIT_S = 10.0
+SPAWN_SETTLE_S = 1.0
+SPAWN_POLL_S = 0.05
+_SPAWNED: list[subprocess.Popen[bytes]] = []  # detached viewers, kept until this process exits
+
+
+def launch_viewer(
+    port: int = DEFAULT_VIEWER_PORT, wait_s: float = SPAWN_WAIT_S, executable: str | None = None
+) -> str | None:
+    """Start a Rerun viewer listening on ``port`` (in a session of its own, so it outlives the
+    operator, as rr.spawn's does) and wait until it accepts connections; None when it does
+    and is still running ``SPAWN_SETTLE_S`` later (or a viewer already listens there), else
+    why not: no executable, the viewer exited (its own message is on stderr), or it did not
+    listen within ``wait_s`` (then it is stopped). ``executable``: the installed rerun-sdk's
+    viewer unless given."""
+    address = ("127.0.0.1", port)
+    if reachable(address, timeout_s=0.2) is None:
+        return None
+    executable = executable or _rerun_executable()
+    if executable is None:
+        return "no rerun executable found"
+    argv = [executable, "--port", str(port), "--memory-limit", "75%", "--expect-data-soon"]
+    try:
+        viewer = subprocess.Popen(
+            argv,
+            stdin=subprocess.DEVNULL,
+            env={**os.environ, "RERUN_APP_ONLY": "true"},  # as rr.spawn: no analytics prompt
+            start_new_session=True,
+        )
+    except OSError as exc:
+        return f"{executable}: {exc.strerror or exc}"
+    deadline = time.monotonic() + wait_s
+    listening_since: float | None = None
+    while (code := viewer.poll()) is None:
+        now = time.monotonic()
+        if listening_since is None and reachable(address, timeout_s=SPAWN_POLL_S) is None:
+            listening_since = now
+        if listening_since is not None and now - listening_since >= SPAWN_SETTLE_S:
+            _SPAWNED.append(viewer)
+            return None
+        if listening_since is None and now >= deadline:
+            viewer.kill()
+            viewer.wait()
+            return f"it did not listen on port {port} within {wait_s:g} s"
+        time.sleep(SPAWN_POLL_S)
+    return f"it exited with code {code}"
 
 
 def _rerun_executable() -> str | None:
@@ -243,8 +297,9 @@ def attach(
             f"(from another machine, use this host's name; ports {target.web_port} and "
             f"{target.grpc_port})"
         )
-    if target.kind == "spawn":
-        rr.spawn(executable_path=_rerun_executable(), default_blueprint=blueprint, recording=rec)
+    if target.kind == "spawn":  # the viewer ``launch_viewer`` started (``viewer_address``)
+        url = f"rerun+http://127.0.0.1:{DEFAULT_VIEWER_PORT}/proxy"
+        rec.connect_grpc(url, default_blueprint=blueprint)
         return "operator view in a spawned Rerun viewer"
     return "operator view disabled (--no-view)"
 
