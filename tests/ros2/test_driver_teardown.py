@@ -36,6 +36,13 @@ def test_close_leaves_the_node_alone_while_a_callback_holds_the_executor_thread(
     driver.set_scan_listener(held_cycle)
     try:
         assert inside.wait(30), "no scan reached the driver"
+        # Its cycle held, the driver has sent nothing yet: a twist sent before discovery has
+        # matched the base's subscription to the driver's /cmd_vel is lost (CI run 50, load 9).
+        base.wait_for(
+            "the driver's /cmd_vel to match the base",
+            lambda: driver._publisher.get_subscription_count() > 0,
+            30.0,
+        )
         with caplog.at_level(logging.ERROR, logger="egc.robot.ros2"):
             driver.close()
         assert "executor thread did not stop" in caplog.text
