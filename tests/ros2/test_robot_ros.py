@@ -173,7 +173,9 @@ def test_a_base_that_wants_the_other_twist_type_is_named_in_the_log(ros_domain, 
     the robot said DRIVING and the base got nothing (outside check)."""
     base = FakeBase(cmd_type="twist-stamped")
     try:
-        procs.start("robot", "robot", "--robot", ROBOT, "--driver", "ros2")
+        # a free port: Zenoh's default (7447) may be another run's (CI run 52: in use)
+        listen = ("--listen", loopback_endpoint(free_tcp_port()))
+        procs.start("robot", "robot", "--robot", ROBOT, "--driver", "ros2", *listen)
         wait_log(
             procs,
             "robot",
