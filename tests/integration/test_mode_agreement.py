@@ -98,7 +98,10 @@ VIA_POINT = RunPoint(
 def test_both_modes_steer_to_the_operators_via_point(tmp_path):
     simulated = run_simulated(VIA_POINT)
     emulated = run_emulated(VIA_POINT, tmp_path / "emulated")
-    pairs = {k: (simulated[k], emulated[k]) for k in ("outcome", "path_m", "time_s")}
+    # hold and command ages in the message: a failure says whether the robot ran late
+    # (CI runs 37, 42 and 52: 2.80 m emulated, where the simulated robot drove 2.13 m)
+    shown = ("outcome", "path_m", "time_s", "hold_s", "cmd_age_p50_ms", "min_clearance_m")
+    pairs = {k: (simulated.get(k), emulated.get(k)) for k in shown}
     assert simulated["outcome"] == "reached", pairs
     assert emulated["outcome"] == simulated["outcome"], pairs
     assert not emulated["collided"], pairs
