@@ -98,14 +98,17 @@ VIA_POINT = RunPoint(
 def test_both_modes_steer_to_the_operators_via_point(tmp_path):
     simulated = run_simulated(VIA_POINT)
     emulated = run_emulated(VIA_POINT, tmp_path / "emulated")
-    # hold and command ages in the message: a failure says whether the robot ran late
-    # (CI runs 37, 42 and 52: 2.80 m emulated, where the simulated robot drove 2.13 m)
     shown = ("outcome", "path_m", "time_s", "hold_s", "cmd_age_p50_ms", "min_clearance_m")
     pairs = {k: (simulated.get(k), emulated.get(k)) for k in shown}
     assert simulated["outcome"] == "reached", pairs
     assert emulated["outcome"] == simulated["outcome"], pairs
     assert not emulated["collided"], pairs
-    assert emulated["path_m"] == pytest.approx(simulated["path_m"], rel=0.15), pairs
+    # The obstacle stands on the start-goal line, so DWA may pass it on either side: +y over
+    # 2.13 m (the simulated run), or -y over 2.81 m (CI runs 52, 55 and 57). Run 57's robot was
+    # not late: command age p50 12 ms and cycle lateness p50 15 ms, as in run 56's +y drive
+    # beside it (16 and 15 ms), and no HOLD. Either side is a way round; a robot that stalled,
+    # wandered or backed off would drive further.
+    assert 0.85 * simulated["path_m"] <= emulated["path_m"] <= 1.45 * simulated["path_m"], pairs
     # Real processes on a busy machine run late and hold now and then, so the emulated run
     # takes longer (15.4 s simulated against 26.8 s emulated at load 11-17); it is never much
     # faster, and not so slow that it drove another way.
