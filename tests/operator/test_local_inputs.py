@@ -263,8 +263,8 @@ def test_nothing_is_sent_before_the_robot_is_seen(tmp_path: Path):
     """Until the robot's liveliness token reaches the operator, it sends nothing: a command
     could otherwise reach the robot first and be refused as not in control (CI run 44, over
     UDP). With ``--robot`` the operator's node exists from the start (without it, a node is made
-    only for a robot seen). The robot's token is declared a second after the operator's own token is seen; the
-    first command arrives after it, and is seq 1."""
+    only for a robot seen). The robot's token is declared a second after the operator's own
+    token is seen; the first command arrives after it, and is seq 1."""
     (tmp_path / "single.csv").write_text("t_s,x,y\n0,0.3,0\n", encoding="utf-8")
     port = free_tcp_port()
     session = open_session(ZenohOptions(listen=(loopback_endpoint(port),)))

@@ -16,12 +16,11 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-import rerun_cli
 from egc_common.transport import free_tcp_port
 from egc_operator import viewer_target
 from egc_operator.viewer_target import launch_viewer
 
-RERUN_BINARY = str(Path(rerun_cli.__file__).with_name("rerun"))
+from tests.view.test_viewer_target import RERUN_BINARY
 
 
 @pytest.fixture
