@@ -8,8 +8,10 @@ given as their ``str``), ``{"error": LINE}`` with the parser's one line when it 
 
 For documentation and tests, which may not import ``egc_app`` (DESIGN 2: nothing imports the
 console script): a command line in a README parses, a coordinate with a leading minus is taken
-as a value. Whatever the subcommand would check once it runs (files, ports, maps) is not
-checked here.
+as a value. A subcommand's module may define ``check_arguments_alone(args)``: the checks of the
+arguments on their own that it makes before anything else (``--goal`` without ``--robot``), run
+here too; a ``UsageError`` from it is the line's error. Whatever the subcommand would check once
+it runs (files, ports, maps) is not checked here.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import sys
 from typing import Any
 
 from egc_common.cli_args import CliArgumentParser
+from egc_common.errors import UsageError
 
 from egc_app.cli import SUBCOMMANDS
 
@@ -31,7 +34,8 @@ def _parse(words: list[str]) -> dict[str, Any]:
         return {"error": f"not an egc-teleop subcommand: {words[:1]!r}"}
     name = words[0]
     parser = CliArgumentParser(prog=f"egc-teleop {name}")
-    importlib.import_module(SUBCOMMANDS[name][0]).configure(parser)
+    module = importlib.import_module(SUBCOMMANDS[name][0])
+    module.configure(parser)
     said = io.StringIO()
     try:
         with contextlib.redirect_stderr(said), contextlib.redirect_stdout(said):
@@ -41,6 +45,12 @@ def _parse(words: list[str]) -> dict[str, Any]:
             return {"error": "the parser printed its help and exited 0"}
         lines = said.getvalue().strip().splitlines()
         return {"error": lines[-1] if lines else f"the parser exited {exc.code}"}
+    check = getattr(module, "check_arguments_alone", None)
+    if check is not None:
+        try:
+            check(args)
+        except UsageError as exc:
+            return {"error": f"egc-teleop {name}: error: {exc}"}
     return {"command": name, "args": vars(args)}
 
 

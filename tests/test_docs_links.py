@@ -4,8 +4,9 @@
   heading (GitHub's anchors) or an explicit anchor of the page it points into;
 - every ``egc-teleop SUBCOMMAND ...`` command line in a ``sh``/``bash``/``shell``/``console``
   block (and every ``make demo DEMO_ARGS=...``) parses with the real argument parsers
-  (``python -m egc_app.parse_check``: the parsers without running anything; DESIGN 2: nothing
-  imports ``egc_app``);
+  (``python -m egc_app.parse_check``: the parsers without running anything, and the checks a
+  subcommand makes of its arguments alone, such as ``--goal`` without ``--robot``; DESIGN 2:
+  nothing imports ``egc_app``);
 - docs/cli.md has a section for every subcommand of ``egc_app/cli.py`` and names every one of
   its flags there, as ``egc-teleop NAME --help`` lists them;
 - the index (docs/README.md) reaches every page under docs/, directly or through pages it links;
@@ -359,17 +360,22 @@ def test_the_command_line_scanner():
 
 
 def test_the_parse_check_refuses_what_a_parser_refuses():
-    """The check can fail: a flag no parser has, a bad choice, an unknown subcommand."""
+    """The check can fail: a flag no parser has, a bad choice, an unknown subcommand, and
+    arguments the subcommand refuses together before it runs (via points without ``--robot``)."""
     results = parse_check(
         [
             ["robot", "--no-such-flag"],
             ["robot", "--driver", "carrier-pigeon"],
             ["teleport"],
+            ["operator", "--script", "demo", "--goal", "8,1.2"],
             ["robot"],
+            ["operator", "--robot", "sim", "--script", "demo", "--goal", "8,1.2"],
         ]
     )
-    assert all("error" in r for r in results[:3]), results
-    assert results[3].get("command") == "robot", results[3]
+    assert all("error" in r for r in results[:4]), results
+    assert "--goal and --route need --robot" in results[3]["error"], results[3]
+    assert results[4].get("command") == "robot", results[4]
+    assert results[5].get("command") == "operator", results[5]
 
 
 def test_every_documented_command_line_parses():

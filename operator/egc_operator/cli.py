@@ -253,23 +253,22 @@ def _route(args: argparse.Namespace) -> Route | None:
     return route if route.points else None
 
 
-def run(args: argparse.Namespace) -> int:
-    logging.basicConfig(level=args.log_level, format="operator: %(message)s", stream=sys.stderr)
-    if args.script == "list":
-        print("\n".join(script_names()))
-        return 0
+def check_arguments_alone(args: argparse.Namespace) -> None:
+    """The checks of the arguments on their own (nothing read, opened or connected), raising
+    UsageError: ``run`` makes them before it opens anything, and ``python -m
+    egc_app.parse_check`` makes them for the command lines in the documentation."""
     try:
-        robot_id = None if args.robot is None else keys.validate_id(args.robot)
-        first = None if args.first is None else keys.validate_id(args.first, "--first robot id")
-        operator_id = keys.validate_id(args.operator_id or default_operator_id(), "operator id")
-        cfg = config_mod.load(args.config, args.set, ("operator", "joystick"))
-        op_cfg = config_mod.section(cfg, "operator", OPERATOR_KEYS)
-    except ValueError as exc:  # includes ConfigError
+        if args.robot is not None:
+            keys.validate_id(args.robot)
+        if args.first is not None:
+            keys.validate_id(args.first, "--first robot id")
+        if args.operator_id:
+            keys.validate_id(args.operator_id, "operator id")
+    except ValueError as exc:
         raise UsageError(str(exc)) from None
-    if robot_id is not None and first is not None:
+    if args.robot is not None and args.first is not None:
         raise UsageError("--first is for an operator without --robot (which drives one robot)")
-    rate_hz = args.rate_hz if args.rate_hz is not None else _number(op_cfg, "rate_hz", 50.0)
-    if not 1.0 <= rate_hz <= 1000.0:
+    if args.rate_hz is not None and not 1.0 <= args.rate_hz <= 1000.0:
         raise UsageError("--rate-hz must be within [1, 1000]")
     if args.duration is not None and not 0 < args.duration <= MAX_DURATION_S:
         # nan and inf too: a timer cannot wait that long (a traceback in its thread)
@@ -284,12 +283,31 @@ def run(args: argparse.Namespace) -> int:
             "--filter none: 'none' is direct mode, chosen with --mode direct or the gamepad's "
             "mode button (a joystick file's mode column); --filter picks shared mode's filter"
         )
-    route = _route(args)
-    if robot_id is None and route is not None:
+    if args.robot is None and (args.goal or args.route):
         raise UsageError(
             "--goal and --route need --robot: via points belong to one robot, and an operator "
             "without --robot may switch between several"
         )
+
+
+def run(args: argparse.Namespace) -> int:
+    logging.basicConfig(level=args.log_level, format="operator: %(message)s", stream=sys.stderr)
+    if args.script == "list":
+        print("\n".join(script_names()))
+        return 0
+    try:
+        robot_id = None if args.robot is None else keys.validate_id(args.robot)
+        first = None if args.first is None else keys.validate_id(args.first, "--first robot id")
+        operator_id = keys.validate_id(args.operator_id or default_operator_id(), "operator id")
+        cfg = config_mod.load(args.config, args.set, ("operator", "joystick"))
+        op_cfg = config_mod.section(cfg, "operator", OPERATOR_KEYS)
+    except ValueError as exc:  # includes ConfigError
+        raise UsageError(str(exc)) from None
+    route = _route(args)  # a via point that is no number, or a --route file that can't be read
+    check_arguments_alone(args)
+    rate_hz = args.rate_hz if args.rate_hz is not None else _number(op_cfg, "rate_hz", 50.0)
+    if not 1.0 <= rate_hz <= 1000.0:
+        raise UsageError("[operator] rate_hz must be within [1, 1000]")
     source = _open_source(args, cfg)
     # The view first: a --save file that cannot be written or a --serve-web port in use is a
     # usage error (exit 2) before anything connects or drives.
