@@ -8,7 +8,12 @@
   pose in the base frame, optionally mounted upside down, or any ``ranges_override``,
 - publishes ``nav_msgs/Odometry``,
 - records every ``/cmd_vel`` with its arrival time (``time.monotonic_ns()``, comparable with
-  the processes' clocks on Linux).
+  the processes' clocks on Linux),
+- records the gaps between its own scans longer than two periods (``scan_gaps_ms``), so that a
+  robot that held for "sensor stale" says whether its lidar (this test process) went quiet.
+
+Its scans come from a thread of the pytest worker, so it keeps that worker's collections short
+as the observer does (``keep_collections_short``).
 
 Every test picks its own ``ROS_DOMAIN_ID`` and keeps discovery on this machine
 (``domain_for_test``), so tests and parallel runs cannot hear each other.
@@ -35,10 +40,13 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import LaserScan
 
+from tests.integration.harness import keep_collections_short
+
 _COUNTER = itertools.count()
 BEAMS = 360
 RANGE_MIN_M = 0.1
 RANGE_MAX_M = 8.0
+PERIOD_S = 0.05  # scans and odometry at 20 Hz
 # Both threads leave within a wait or a loop period; this long means one is stuck.
 STOP_PATIENCE_S = 30.0
 
@@ -71,6 +79,7 @@ class FakeBase:
         upside_down: bool = False,
         range_min_m: float = RANGE_MIN_M,
     ) -> None:
+        keep_collections_short()
         self.wall_x_m = wall_x_m
         self.range_min_m = range_min_m
         self.laser_yaw_rad = laser_yaw_rad
@@ -81,6 +90,8 @@ class FakeBase:
         self.x_m = 0.0
         self.max_x_m = 0.0
         self.cmds: list[CmdSample] = []
+        self.scans_published = 0
+        self.scan_gaps_ms: list[float] = []
         self._lock = threading.Lock()
         self._v = (0.0, 0.0)
         self._stamped = cmd_type == "twist-stamped"
@@ -127,7 +138,17 @@ class FakeBase:
                 return value
             time.sleep(0.01)
         last = self.commands()[-3:]
-        raise AssertionError(f"timed out after {timeout_s} s waiting for {what}; last: {last}")
+        raise AssertionError(
+            f"timed out after {timeout_s} s waiting for {what}; last: {last}; {self.health()}"
+        )
+
+    def health(self) -> str:
+        """What the base itself did: how far it went, its scans and their gaps."""
+        return (
+            f"the fake base drove to x {self.max_x_m:.3f} m at most and published "
+            f"{self.scans_published} scans; gaps between them over {2 * PERIOD_S * 1e3:.0f} ms: "
+            f"{[round(g) for g in self.scan_gaps_ms]}"
+        )
 
     def wait_connected(self, timeout_s: float = 30.0) -> None:
         """Until the robot's node hears our scans and we hear its /cmd_vel (ROS 2 discovery)."""
@@ -166,9 +187,9 @@ class FakeBase:
         return out
 
     def _loop(self) -> None:
-        period = 0.05
         last = time.monotonic()
-        while not self._stop.wait(period):
+        last_scan = None
+        while not self._stop.wait(PERIOD_S):
             now = time.monotonic()
             with self._lock:
                 v, _ = self._v
@@ -187,6 +208,12 @@ class FakeBase:
                 scan.range_max = RANGE_MAX_M
                 scan.ranges = self.ranges().astype(np.float32)
                 self._scan_pub.publish(scan)
+                self.scans_published += 1
+                if last_scan is not None and now - last_scan > 2 * PERIOD_S:
+                    self.scan_gaps_ms.append((now - last_scan) * 1e3)
+                last_scan = now
+            else:
+                last_scan = None
             odom = Odometry()
             odom.header.stamp = stamp
             odom.header.frame_id = "odom"

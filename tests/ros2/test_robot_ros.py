@@ -148,7 +148,7 @@ def test_a_wall_nearer_than_range_min_is_not_driven_into(ros_domain, procs, tmp_
         base.wait_for("20 twists", lambda: len(base.commands()) > 20, 10.0)
         cmds = base.commands()
         assert max(c.linear_mps for c in cmds) <= 0.0, max(c.linear_mps for c in cmds)
-        assert base.max_x_m + 0.254 < 0.5, base.max_x_m
+        assert base.max_x_m + 0.254 < 0.5, base.health()
     finally:
         base.close()
 
@@ -162,8 +162,8 @@ def test_twist_stamped_drives_and_stops_before_a_wall(ros_domain, procs, tmp_pat
         # Full stick towards the wall: EGC and the footprint sweep must stop it short.
         base.wait_for("the robot to stop", lambda: _stopped_for(base, 1.0), 30.0)
         # Pioneer 3-DX: half length 0.2275 m; it must stop with its front short of the wall.
-        assert base.max_x_m + 0.2275 < 1.2, base.max_x_m
-        assert base.max_x_m > 0.2, "it never drove"
+        assert base.max_x_m + 0.2275 < 1.2, base.health()
+        assert base.max_x_m > 0.2, f"it never drove: {base.health()}"
     finally:
         base.close()
 
@@ -196,7 +196,7 @@ def test_laser_mounted_upside_down_and_turned(ros_domain, procs, tmp_path):
         )
         base.wait_driving()
         base.wait_for("the robot to stop", lambda: _stopped_for(base, 1.0), 30.0)
-        assert base.max_x_m > 0.2 and base.max_x_m + 0.2275 < 1.2, base.max_x_m
+        assert base.max_x_m > 0.2 and base.max_x_m + 0.2275 < 1.2, base.health()
     finally:
         base.close()
 
