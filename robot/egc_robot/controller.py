@@ -656,6 +656,11 @@ class RobotController:
     def _pose_in(self, frame: str) -> tuple[float, float, float] | None:
         return self._map_pose if frame == "map" else self._pose
 
+    def scan_age_ms(self, now_ns: int) -> float | None:
+        """How long ago the newest scan arrived (None before the first)."""
+        scan = self._scan
+        return None if scan is None else max(0.0, (now_ns - scan.rx_ns) / 1e6)
+
     def on_scan(self, scan: Scan, now_ns: int) -> None:
         """The newest scan; its arrival time decides freshness (scan_timeout)."""
         if self._unreported is not None:

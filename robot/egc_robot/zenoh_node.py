@@ -696,10 +696,17 @@ class RobotNode:
             self._stats.on_cycle(out.facts)
         if out.state_changed is not None:
             changed = out.state_changed
+            scan_age = ""
+            if changed.reason == "sensor stale":  # the lidar's driver, or this process, went quiet
+                age_ms = self._controller.scan_age_ms(now)
+                scan_age = (
+                    ", no scan yet" if age_ms is None else f", newest scan {age_ms:.0f} ms old"
+                )
             log.info(
-                "state %s (%s)%s%s%s",
+                "state %s (%s)%s%s%s%s",
                 changed.state,
                 changed.reason,
+                scan_age,
                 f", operator {changed.operator}" if changed.operator else "",
                 f", source {changed.source}" if changed.source else "",
                 f", lock {changed.lock}" if changed.lock else "",

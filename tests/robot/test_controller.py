@@ -230,6 +230,14 @@ def test_sensor_stale_holds():
     rig.send(x=1.0)
     rig.cycle(dt_ms=250, scan=False)
     assert rig.c.state is State.HOLD and rig.c.reason == "sensor stale"
+    assert rig.c.scan_age_ms(rig.now) == 250.0  # the robot's log says how stale
+
+
+def test_the_scan_age_is_none_before_the_first_scan():
+    rig = Rig()
+    assert rig.c.scan_age_ms(rig.now) is None
+    rig.c.on_scan(open_scan(), rig.now)
+    assert rig.c.scan_age_ms(rig.now + 30 * MS) == 30.0
 
 
 def test_operator_liveliness_lost_holds_at_once_and_releases_control():
