@@ -255,8 +255,9 @@ def _route(args: argparse.Namespace) -> Route | None:
 
 def check_arguments_alone(args: argparse.Namespace) -> None:
     """The checks of the arguments on their own (nothing read, opened or connected), raising
-    UsageError: ``run`` makes them before it opens anything, and ``python -m
-    egc_app.parse_check`` makes them for the command lines in the documentation."""
+    UsageError: ``run`` makes them once it has read its configuration and via points, before
+    it opens a joystick, a view or a session; ``python -m egc_app.parse_check`` makes them for
+    the command lines in the documentation."""
     try:
         if args.robot is not None:
             keys.validate_id(args.robot)
