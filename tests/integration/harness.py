@@ -4,8 +4,8 @@
   kills every one of them at teardown, even stopped (SIGSTOP) ones, even when a test fails.
 - ``Observer`` is a Zenoh peer in the test process, connected to the robot's port: it records
   the robot's telemetry, state and base commands with arrival times, publishes scans (the
-  sensor half of a remote driver), and can act as an outside operator that publishes the
-  pinned OperatorCommand maps as plain msgpack dicts.
+  sensor half of a remote driver, from a process of its own: ``scan_process``), and can act as
+  an outside operator that publishes the pinned OperatorCommand maps as plain msgpack dicts.
 
 All times are ``time.monotonic_ns()``: on Linux CLOCK_MONOTONIC is shared by all processes of
 the machine, so the test's times are comparable with the robot's stamps.
@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import gc
 import json
-import math
 import re
 import signal
 import subprocess
@@ -28,13 +27,11 @@ from pathlib import Path
 from typing import Any
 
 import msgpack
-import numpy as np
 import zenoh
 from egc_common import keys
 from egc_common.messages import (
     BaseCommand,
     Rejection,
-    ScanMessage,
     StateMessage,
     Telemetry,
     decode_base_command,
@@ -152,20 +149,6 @@ class Record:
     base: list[tuple[int, BaseCommand]] = field(default_factory=list)
 
 
-def open_scan_message(
-    stamp_ns: int, beams: int = 360, range_m: float = 5.0, no_return_is_free: bool = False
-) -> ScanMessage:
-    return ScanMessage(
-        stamp_ns=stamp_ns,
-        angle_min_rad=-math.pi,
-        angle_increment_rad=2 * math.pi / beams,
-        range_min_m=0.05,
-        range_max_m=10.0,
-        ranges_m=np.full(beams, range_m, np.float32),
-        no_return_is_free=no_return_is_free,
-    )
-
-
 def keep_collections_short() -> None:
     """A full collection of a pytest worker's heap (the objects left by every test it ran
     before) stops all its threads: up to 212 ms in a process of 1,060 tests at load 3.5, past
@@ -181,7 +164,8 @@ class Observer:
 
     def __init__(self, port: int, mode: str = "peer") -> None:
         keep_collections_short()
-        config = build_config(ZenohOptions(mode=mode, connect=(loopback_endpoint(port),)))
+        self._endpoint, self._mode = loopback_endpoint(port), mode
+        config = build_config(ZenohOptions(mode=mode, connect=(self._endpoint,)))
         # The observer usually opens before the robot listens. The product's retry (250 ms,
         # doubling to 1 s) then connected it up to a second after the robot was ready, and every
         # test waited that second for its first telemetry; the test's own peer retries quickly.
@@ -197,8 +181,8 @@ class Observer:
             s.declare_subscriber(keys.state(ROBOT), self._on_state),
             s.declare_subscriber(keys.base_cmd(ROBOT), self._on_base),
         ]
-        self.scans_on = threading.Event()
-        self.scan_range_m = 5.0  # every beam of the scans it publishes (NaN: no information)
+        self._scan_range_m = 5.0  # every beam of the scans it publishes (NaN: no information)
+        self._scanner: subprocess.Popen[str] | None = None
         self.stick: dict[str, Any] = {}
         self.seq = 0
         self.op_lock = threading.Lock()  # held by the operator loop while it publishes
@@ -263,15 +247,33 @@ class Observer:
     # -- acting as a driver (scans) and as an outside operator ----------------------------------
 
     def start_scans(self, period_s: float = 0.05) -> None:
-        self.scans_on.set()
-        self._spawn(self._scan_loop, period_s)
+        """Scans every ``period_s`` from now on, from a process of its own (``scan_process``:
+        a thread of this worker went quiet for 261 ms under load, CI run 79)."""
+        assert self._scanner is None, "scans already started"
+        args = [self._endpoint, self._mode, ROBOT, repr(period_s), repr(self._scan_range_m)]
+        self._scanner = subprocess.Popen(
+            [sys.executable, "-m", "tests.integration.scan_process", *args],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+            cwd=ROOT,
+            env=child_env(PYTHONFAULTHANDLER="1"),
+        )
+        assert self._scanner.stdout is not None
+        ready = self._scanner.stdout.readline()  # its session is open: it publishes from now on
+        assert ready.strip() == "ready", f"the scan process did not start: {ready!r}"
 
-    def _scan_loop(self, period_s: float) -> None:
-        while not self._stop.wait(period_s):
-            if self.scans_on.is_set():
-                now = time.monotonic_ns()
-                scan = open_scan_message(now, range_m=self.scan_range_m, no_return_is_free=True)
-                self.session.put(keys.scan(ROBOT), scan.encode())
+    @property
+    def scan_range_m(self) -> float:
+        return self._scan_range_m
+
+    @scan_range_m.setter
+    def scan_range_m(self, range_m: float) -> None:
+        """Every beam of the scans from now on (NaN: no information)."""
+        self._scan_range_m = range_m
+        if self._scanner is not None and self._scanner.stdin is not None:
+            self._scanner.stdin.write(f"range {range_m!r}\n")
+            self._scanner.stdin.flush()
 
     def robot_clock_offset_ns(self) -> int:
         """Offset of the robot's clock from ours: the operator's own min-RTT estimator."""
@@ -329,6 +331,14 @@ class Observer:
 
     def close(self) -> None:
         self._stop.set()
+        if self._scanner is not None:
+            if self._scanner.stdin is not None:
+                self._scanner.stdin.close()  # its cue to stop
+            try:
+                self._scanner.wait(5)
+            except subprocess.TimeoutExpired:
+                self._scanner.kill()
+                self._scanner.wait(5)
         for thread in self._threads:
             thread.join(2)
         for sub in self._subs:

@@ -1,0 +1,82 @@
+"""The observer's lidar in a process of its own: ``python -m tests.integration.scan_process``.
+
+A robot holds when no scan has arrived for 200 ms (``scan_timeout_s``). When the scans came from
+a thread of the pytest worker, that thread shared its process with the test's Zenoh callbacks
+(every telemetry decoded), its polling and, under load, a third of a core: CI runs 11, 44 and 79
+saw the robot hold for "sensor stale" (run 79: "newest scan 261 ms old") and then wait for a
+centred stick that the test's operator never gives. A real lidar driver is a process of its own;
+so is this one, and it does nothing else.
+
+Arguments: ``ENDPOINT MODE ROBOT PERIOD_S RANGE_M``. It publishes an all-``RANGE_M`` scan every
+``PERIOD_S`` (paced on the clock, not by sleeping a period after each one) until its stdin
+closes. A line on stdin changes it: ``range R`` (``nan``: beams without information), ``on``,
+``off``. It prints ``ready`` once its session is open.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import threading
+import time
+
+import numpy as np
+from egc_common import keys
+from egc_common.messages import ScanMessage
+from egc_common.transport import ZenohOptions, build_config, open_config
+
+RETRY = {"period_init_ms": 20, "period_max_ms": 50, "period_increase_factor": 1.5}
+
+
+def scan(stamp_ns: int, range_m: float, beams: int = 360) -> bytes:
+    return ScanMessage(
+        stamp_ns=stamp_ns,
+        angle_min_rad=-math.pi,
+        angle_increment_rad=2 * math.pi / beams,
+        range_min_m=0.05,
+        range_max_m=10.0,
+        ranges_m=np.full(beams, range_m, np.float32),
+        no_return_is_free=True,
+    ).encode()
+
+
+def main(argv: list[str]) -> int:
+    endpoint, mode, robot, period_s, range_m = (
+        argv[0],
+        argv[1],
+        argv[2],
+        float(argv[3]),
+        float(argv[4]),
+    )
+    config = build_config(ZenohOptions(mode=mode, connect=(endpoint,)))
+    config.insert_json5("connect/retry", json.dumps(RETRY))
+    session = open_config(config)
+    setting = {"range_m": range_m, "on": True}
+    stop = threading.Event()
+
+    def read_commands() -> None:
+        for line in sys.stdin:
+            words = line.split()
+            if words[:1] == ["range"]:
+                setting["range_m"] = float(words[1])
+            elif words[:1] in (["on"], ["off"]):
+                setting["on"] = words[0] == "on"
+        stop.set()  # stdin closed: the test is done
+
+    threading.Thread(target=read_commands, daemon=True).start()
+    print("ready", flush=True)
+    key = keys.scan(robot)
+    due = time.monotonic()
+    while not stop.is_set():
+        now = time.monotonic()
+        if setting["on"]:
+            session.put(key, scan(time.monotonic_ns(), float(setting["range_m"])))
+        due = max(due + period_s, now + period_s / 2)  # after a stall: no burst to catch up
+        stop.wait(max(0.0, due - time.monotonic()))
+    session.close()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))
