@@ -181,6 +181,7 @@ class RobotNode:
         self._lock = threading.Lock()
         self._last_state_ns = 0
         self._last_cycle_ns = -(1 << 62)  # no cycle yet
+        self._cycle_late_ns = 0  # how late the newest timed cycle began
         self._faults = 0
         self._shut_down = False  # set under the lock: the zero command sent last stays last
         self._rejections = RejectionLog()
@@ -479,8 +480,9 @@ class RobotNode:
         while not stop.wait(max(0, deadline - self._clock()) / 1e9):
             now = self._clock()
             with self._lock:
-                if self._stats is not None:  # how late the cycle starts (the lock included)
-                    self._stats.on_loop_start(self._clock() - deadline, period)
+                self._cycle_late_ns = self._clock() - deadline  # the lock included
+                if self._stats is not None:
+                    self._stats.on_loop_start(self._cycle_late_ns, period)
                 try:
                     if now - self._last_cycle_ns >= period // 2:
                         self._poll_driver(now)
@@ -701,6 +703,9 @@ class RobotNode:
                 age_ms = self._controller.scan_age_ms(now)
                 scan_age = (
                     ", no scan yet" if age_ms is None else f", newest scan {age_ms:.0f} ms old"
+                )
+                scan_age += (
+                    f" (the fixed-rate loop last woke {self._cycle_late_ns / 1e6:.0f} ms late)"
                 )
             log.info(
                 "state %s (%s)%s%s%s%s",

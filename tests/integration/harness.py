@@ -183,6 +183,7 @@ class Observer:
         ]
         self._scan_range_m = 5.0  # every beam of the scans it publishes (NaN: no information)
         self._scanner: subprocess.Popen[str] | None = None
+        self.scan_gaps_ms: list[float] = []  # the scan process's, over two periods
         self.stick: dict[str, Any] = {}
         self.seq = 0
         self.op_lock = threading.Lock()  # held by the operator loop while it publishes
@@ -235,6 +236,7 @@ class Observer:
         raise AssertionError(
             f"timed out after {timeout_s} s waiting for {what}; last telemetry: "
             f"{None if last is None else (last.state, last.operator, last.v_cmd, last.rejected)}"
+            f"; gaps over two periods between the scan process's scans (ms): {self.scan_gaps_ms}"
         )
 
     def wait_state(self, state: str, timeout_s: float = 10.0, since_ns: int = 0) -> Telemetry:
@@ -262,6 +264,12 @@ class Observer:
         assert self._scanner.stdout is not None
         ready = self._scanner.stdout.readline()  # its session is open: it publishes from now on
         assert ready.strip() == "ready", f"the scan process did not start: {ready!r}"
+        self._spawn(self._read_scan_gaps, self._scanner.stdout)
+
+    def _read_scan_gaps(self, lines: Any) -> None:
+        for line in lines:
+            if line.startswith("gap "):
+                self.scan_gaps_ms.append(float(line.split()[1]))
 
     @property
     def scan_range_m(self) -> float:

@@ -10,7 +10,9 @@ so is this one, and it does nothing else.
 Arguments: ``ENDPOINT MODE ROBOT PERIOD_S RANGE_M``. It publishes an all-``RANGE_M`` scan every
 ``PERIOD_S`` (paced on the clock, not by sleeping a period after each one) until its stdin
 closes. A line on stdin changes it: ``range R`` (``nan``: beams without information), ``on``,
-``off``. It prints ``ready`` once its session is open.
+``off``. It prints ``ready`` once its session is open, then ``gap MS`` for every gap between
+two of its scans longer than two periods: a robot that held for "sensor stale" then says
+whether its lidar went quiet.
 """
 
 from __future__ import annotations
@@ -68,10 +70,16 @@ def main(argv: list[str]) -> int:
     print("ready", flush=True)
     key = keys.scan(robot)
     due = time.monotonic()
+    last: float | None = None
     while not stop.is_set():
         now = time.monotonic()
         if setting["on"]:
             session.put(key, scan(time.monotonic_ns(), float(setting["range_m"])))
+            if last is not None and now - last > 2 * period_s:
+                print(f"gap {(now - last) * 1e3:.0f}", flush=True)
+            last = now
+        else:
+            last = None
         due = max(due + period_s, now + period_s / 2)  # after a stall: no burst to catch up
         stop.wait(max(0.0, due - time.monotonic()))
     session.close()
