@@ -249,8 +249,8 @@ class Observer:
     # -- acting as a driver (scans) and as an outside operator ----------------------------------
 
     def start_scans(self, period_s: float = 0.05) -> None:
-        """Scans every ``period_s`` from now on, from a process of its own (``scan_process``:
-        a thread of this worker went quiet for 261 ms under load, CI run 79)."""
+        """Scans every ``period_s`` from now on, from a process of its own, as a lidar driver
+        is (``scan_process``, whose module docstring says why)."""
         assert self._scanner is None, "scans already started"
         args = [self._endpoint, self._mode, ROBOT, repr(period_s), repr(self._scan_range_m)]
         self._scanner = subprocess.Popen(

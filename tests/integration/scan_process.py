@@ -1,11 +1,12 @@
 """The observer's lidar in a process of its own: ``python -m tests.integration.scan_process``.
 
-A robot holds when no scan has arrived for 200 ms (``scan_timeout_s``). When the scans came from
-a thread of the pytest worker, that thread shared its process with the test's Zenoh callbacks
-(every telemetry decoded), its polling and, under load, a third of a core: CI runs 11, 44 and 79
-saw the robot hold for "sensor stale" (run 79: "newest scan 261 ms old") and then wait for a
-centred stick that the test's operator never gives. A real lidar driver is a process of its own;
-so is this one, and it does nothing else.
+A robot holds when no scan has arrived for 200 ms (``scan_timeout_s``). CI runs 11, 44 and 79,
+on a machine kept busy by other work, saw the robot hold for "sensor stale" (run 79: "newest
+scan 261 ms old") and then wait for a centred stick that the test's operator never gives. The
+scans came from a thread of the pytest worker, shared with the test's Zenoh callbacks (every
+telemetry decoded) and its polling. A real lidar driver is a process of its own; so is this one,
+and it does nothing else. That was not the whole cause: run 87 saw "newest scan 211 ms old" with
+this process. So it reports its own gaps, and the robot how late its loop woke.
 
 Arguments: ``ENDPOINT MODE ROBOT PERIOD_S RANGE_M``. It publishes an all-``RANGE_M`` scan every
 ``PERIOD_S`` (paced on the clock, not by sleeping a period after each one) until its stdin
