@@ -297,15 +297,16 @@ def run(args: argparse.Namespace) -> int:
         print("\n".join(script_names()))
         return 0
     try:
-        robot_id = None if args.robot is None else keys.validate_id(args.robot)
-        first = None if args.first is None else keys.validate_id(args.first, "--first robot id")
-        operator_id = keys.validate_id(args.operator_id or default_operator_id(), "operator id")
+        # --robot, --first and --operator-id are checked with the rest (check_arguments_alone)
+        operator_id = args.operator_id or keys.validate_id(default_operator_id(), "operator id")
         cfg = config_mod.load(args.config, args.set, ("operator", "joystick"))
         op_cfg = config_mod.section(cfg, "operator", OPERATOR_KEYS)
     except ValueError as exc:  # includes ConfigError
         raise UsageError(str(exc)) from None
     route = _route(args)  # a via point that is no number, or a --route file that can't be read
     check_arguments_alone(args)
+    robot_id: str | None = args.robot
+    first: str | None = args.first
     rate_hz = args.rate_hz if args.rate_hz is not None else _number(op_cfg, "rate_hz", 50.0)
     if not 1.0 <= rate_hz <= 1000.0:
         raise UsageError("[operator] rate_hz must be within [1, 1000]")

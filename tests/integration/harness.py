@@ -14,7 +14,6 @@ the machine, so the test's times are comparable with the robot's stamps.
 from __future__ import annotations
 
 import gc
-import json
 import re
 import signal
 import subprocess
@@ -39,14 +38,14 @@ from egc_common.messages import (
     decode_state,
     decode_telemetry,
 )
-from egc_common.transport import ZenohOptions, build_config, loopback_endpoint, open_config
+from egc_common.transport import loopback_endpoint, open_config
 from egc_operator.clock_sync import ClockSync
 
 from tests.cli_process import child_env
+from tests.integration.scan_process import quick_config
 
 ROBOT = "itest"
 MS = 1_000_000
-OBSERVER_RETRY = {"period_init_ms": 20, "period_max_ms": 50, "period_increase_factor": 1.5}
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -165,12 +164,7 @@ class Observer:
     def __init__(self, port: int, mode: str = "peer") -> None:
         keep_collections_short()
         self._endpoint, self._mode = loopback_endpoint(port), mode
-        config = build_config(ZenohOptions(mode=mode, connect=(self._endpoint,)))
-        # The observer usually opens before the robot listens. The product's retry (250 ms,
-        # doubling to 1 s) then connected it up to a second after the robot was ready, and every
-        # test waited that second for its first telemetry; the test's own peer retries quickly.
-        config.insert_json5("connect/retry", json.dumps(OBSERVER_RETRY))
-        self.session = open_config(config)
+        self.session = open_config(quick_config(self._endpoint, mode))
         self.rec = Record()
         self._lock = threading.Lock()
         self._stop = threading.Event()

@@ -10,10 +10,10 @@ this process. So it reports its own gaps, and the robot how late its loop woke.
 
 Arguments: ``ENDPOINT MODE ROBOT PERIOD_S RANGE_M``. It publishes an all-``RANGE_M`` scan every
 ``PERIOD_S`` (paced on the clock, not by sleeping a period after each one) until its stdin
-closes. A line on stdin changes it: ``range R`` (``nan``: beams without information), ``on``,
-``off``. It prints ``ready`` once its session is open, then ``gap MS`` for every gap between
-two of its scans longer than two periods: a robot that held for "sensor stale" then says
-whether its lidar went quiet.
+closes. A line ``range R`` on stdin changes its range (``nan``: beams without information). It
+prints ``ready`` once its session is open, then ``gap MS`` for every gap between two of its
+scans longer than two periods: a robot that held for "sensor stale" then says whether its lidar
+went quiet.
 """
 
 from __future__ import annotations
@@ -25,11 +25,21 @@ import threading
 import time
 
 import numpy as np
+import zenoh
 from egc_common import keys
 from egc_common.messages import ScanMessage
 from egc_common.transport import ZenohOptions, build_config, open_config
 
-RETRY = {"period_init_ms": 20, "period_max_ms": 50, "period_increase_factor": 1.5}
+QUICK_RETRY = {"period_init_ms": 20, "period_max_ms": 50, "period_increase_factor": 1.5}
+
+
+def quick_config(endpoint: str, mode: str) -> zenoh.Config:
+    """A test's own Zenoh session to ``endpoint``. It usually opens before the robot listens; the
+    product's retry (250 ms, doubling to 1 s) then connected it up to a second after the robot
+    was ready, so the test's sessions retry every 20-50 ms."""
+    config = build_config(ZenohOptions(mode=mode, connect=(endpoint,)))
+    config.insert_json5("connect/retry", json.dumps(QUICK_RETRY))
+    return config
 
 
 def scan(stamp_ns: int, range_m: float, beams: int = 360) -> bytes:
@@ -52,10 +62,8 @@ def main(argv: list[str]) -> int:
         float(argv[3]),
         float(argv[4]),
     )
-    config = build_config(ZenohOptions(mode=mode, connect=(endpoint,)))
-    config.insert_json5("connect/retry", json.dumps(RETRY))
-    session = open_config(config)
-    setting = {"range_m": range_m, "on": True}
+    session = open_config(quick_config(endpoint, mode))
+    setting = {"range_m": range_m}
     stop = threading.Event()
 
     def read_commands() -> None:
@@ -63,8 +71,6 @@ def main(argv: list[str]) -> int:
             words = line.split()
             if words[:1] == ["range"]:
                 setting["range_m"] = float(words[1])
-            elif words[:1] in (["on"], ["off"]):
-                setting["on"] = words[0] == "on"
         stop.set()  # stdin closed: the test is done
 
     threading.Thread(target=read_commands, daemon=True).start()
@@ -74,13 +80,10 @@ def main(argv: list[str]) -> int:
     last: float | None = None
     while not stop.is_set():
         now = time.monotonic()
-        if setting["on"]:
-            session.put(key, scan(time.monotonic_ns(), float(setting["range_m"])))
-            if last is not None and now - last > 2 * period_s:
-                print(f"gap {(now - last) * 1e3:.0f}", flush=True)
-            last = now
-        else:
-            last = None
+        session.put(key, scan(time.monotonic_ns(), setting["range_m"]))
+        if last is not None and now - last > 2 * period_s:
+            print(f"gap {(now - last) * 1e3:.0f}", flush=True)
+        last = now
         due = max(due + period_s, now + period_s / 2)  # after a stall: no burst to catch up
         stop.wait(max(0.0, due - time.monotonic()))
     session.close()
