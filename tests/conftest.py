@@ -1,6 +1,7 @@
 """Hypothesis profiles: CI is derandomized (the same examples every run, so a red build means a
 change, not a lucky draw); ``HYPOTHESIS_PROFILE=deep`` explores far more, with fresh randomness.
-The whole run stops within ``EGC_SUITE_BUDGET_S`` when that is set (``tests/suite_budget.py``).
+The whole run stops within ``EGC_SUITE_BUDGET_S`` when that is set (``tests/suite_budget.py``),
+and soon after a pytest-xdist worker crashes (``tests/worker_crash.py``).
 Every process the suite starts keeps its compiled bytecode (``_children_keep_their_bytecode``)."""
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
-from tests import suite_budget
+from tests import suite_budget, worker_crash
 
 
 def _children_keep_their_bytecode() -> None:
@@ -54,6 +55,7 @@ if os.environ.get("HYPOTHESIS_PROFILE", "ci") == "ci":
 
 def pytest_configure(config: pytest.Config) -> None:
     suite_budget.configure(config)
+    worker_crash.configure(config)
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

@@ -59,8 +59,8 @@ PINNED_TELEMETRY = {
 }
 
 
-def start_robot(procs, observer, port, *extra):
-    procs.start("robot", *robot_args(port, *extra))
+def start_robot(procs, observer, port, *extra, product_scan_timeout=False):
+    procs.start("robot", *robot_args(port, *extra, product_scan_timeout=product_scan_timeout))
     observer.wait_for("robot telemetry", observer.last_telemetry, 15)
     observer.start_scans()
 
@@ -386,7 +386,7 @@ def test_scans_without_information_are_a_stale_sensor(port, procs, observer, tmp
     DRIVING. They are rejected (as on the ROS 2 driver) and the sensor goes stale."""
     config = tmp_path / "robot.toml"
     config.write_text("[pipeline]\nno_return_is_free = true\n")
-    start_robot(procs, observer, port, "--config", str(config))
+    start_robot(procs, observer, port, "--config", str(config), product_scan_timeout=True)
     procs.start("alice", *operator_args(port, "alice", forward_file(tmp_path)))
     wait_full_speed(observer)
     blind = time.monotonic_ns()
@@ -408,7 +408,7 @@ def test_scans_without_information_are_a_stale_sensor(port, procs, observer, tmp
 
 def test_sensor_silent_when_the_driver_process_is_killed(port, procs, observer):
     pytest.importorskip("egc_sim.simulator")
-    procs.start("robot", *robot_args(port))
+    procs.start("robot", *robot_args(port, product_scan_timeout=True))
     observer.wait_for("robot telemetry", observer.last_telemetry, 15)
     sim_args = ["sim", "--robot", ROBOT, "--map", "hallway", "--zenoh-connect"]
     sim_args.append(f"tcp/127.0.0.1:{port}")

@@ -14,7 +14,13 @@ pytest.importorskip("rclpy", reason="ROS 2's rclpy is not installed (pip install
 
 from egc_common.transport import free_tcp_port, loopback_endpoint
 
-from tests.integration.harness import ROBOT, Processes, joystick_file, operator_args
+from tests.integration.harness import (
+    BUSY_MACHINE_SCAN_TIMEOUT,
+    ROBOT,
+    Processes,
+    joystick_file,
+    operator_args,
+)
 from tests.ros2.fake_base import FakeBase
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
@@ -46,10 +52,16 @@ def wait_log(procs: Processes, name: str, pattern: str, timeout_s: float = 30.0)
 
 
 def start_robot_and_operator(
-    base: FakeBase, procs: Processes, workdir: Path, stick_x: float, *robot_extra: str
+    base: FakeBase,
+    procs: Processes,
+    workdir: Path,
+    stick_x: float,
+    *robot_extra: str,
+    product_scan_timeout: bool = False,
 ) -> None:
     """The robot on --driver ros2, then an operator holding the deadman: centred for 1 s, then
-    ``stick_x`` forward for a minute."""
+    ``stick_x`` forward for a minute. The robot's scan timeout is the busy machine's
+    (``BUSY_MACHINE_SCAN_TIMEOUT``) unless ``product_scan_timeout``."""
     port = free_tcp_port()
     procs.start(
         "robot",
@@ -60,6 +72,7 @@ def start_robot_and_operator(
         "ros2",
         "--listen",
         loopback_endpoint(port),
+        *(() if product_scan_timeout else BUSY_MACHINE_SCAN_TIMEOUT),
         *robot_extra,
     )
     wait_log(procs, "robot", r"ready: driver ros2")
@@ -104,7 +117,7 @@ def test_drives_in_free_space_and_stops_within_half_a_second_of_a_silent_operato
 
 
 def test_stops_within_a_second_of_the_scans_stopping(base, procs, tmp_path):
-    start_robot_and_operator(base, procs, tmp_path, 0.5)
+    start_robot_and_operator(base, procs, tmp_path, 0.5, product_scan_timeout=True)
     base.wait_driving()
     base.wait_for("moving", lambda: base.commands()[-1].linear_mps > 0.05, 10.0)
     quiet_ns = time.monotonic_ns()

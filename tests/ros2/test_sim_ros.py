@@ -13,7 +13,13 @@ pytest.importorskip("rclpy", reason="ROS 2's rclpy is not installed (pip install
 
 from egc_common.transport import free_tcp_port, loopback_endpoint
 
-from tests.integration.harness import ROBOT, Processes, joystick_file, operator_args
+from tests.integration.harness import (
+    BUSY_MACHINE_SCAN_TIMEOUT,
+    ROBOT,
+    Processes,
+    joystick_file,
+    operator_args,
+)
 from tests.ros2.test_robot_ros import STOP_TIMEOUT_S, wait_log
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
@@ -48,7 +54,7 @@ def test_sim_ros2_drives_under_the_robot_and_stops_on_silence(
     procs.start(
         "robot",
         *["robot", "--robot", ROBOT, "--driver", "ros2", "--listen", loopback_endpoint(port)],
-        *["--summary", str(summary), *ros_flags],
+        *["--summary", str(summary), *ros_flags, *BUSY_MACHINE_SCAN_TIMEOUT],
     )
     wait_log(procs, "robot", r"ready: driver ros2")
     wait_log(procs, "sim", r"as a ROS 2 robot")

@@ -30,7 +30,14 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Bool
 
-from tests.integration.harness import ROBOT, Observer, Processes, joystick_file, operator_args
+from tests.integration.harness import (
+    BUSY_MACHINE_SCAN_TIMEOUT,
+    ROBOT,
+    Observer,
+    Processes,
+    joystick_file,
+    operator_args,
+)
 from tests.ros2.fake_base import STOP_PATIENCE_S, FakeBase
 from tests.ros2.test_robot_ros import wait_log
 
@@ -175,6 +182,7 @@ def start_robot(procs: Processes, tmp_path: Path, base: FakeBase, feeds: NavAndL
         str(config),
         "--listen",
         loopback_endpoint(port),
+        *BUSY_MACHINE_SCAN_TIMEOUT,
     )
     wait_log(procs, "robot", r"ready: driver ros2")
     base.wait_connected()
