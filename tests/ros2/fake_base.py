@@ -1,54 +1,46 @@
-"""A ROS 2 robot in the test process: a fake base and lidar for ``egc-teleop robot --driver ros2``.
+"""A ROS 2 robot for ``egc-teleop robot --driver ros2``: a fake base and lidar, driven by the test.
 
-``FakeBase`` is a real rclpy node (its own context, its own executor thread) that
+``FakeBase`` runs a real rclpy node in a process of its own (``fake_base_process``, whose
+docstring says why it is not a thread of the pytest worker) that
 
 - integrates the velocity it receives on ``/cmd_vel`` (Twist or TwistStamped) into a pose,
 - publishes ``sensor_msgs/LaserScan`` at 20 Hz (sensor-data QoS) of a world made of one wall
   across the x axis at ``wall_x_m`` (or no wall: all ``+inf``), seen by a laser with a given
   pose in the base frame, optionally mounted upside down, or any ``ranges_override``,
-- publishes ``nav_msgs/Odometry``,
-- records every ``/cmd_vel`` with its arrival time (``time.monotonic_ns()``, comparable with
-  the processes' clocks on Linux),
-- records the gaps between its own scans longer than two periods (``scan_gaps_ms``), so that a
-  robot that held for "sensor stale" says whether its lidar (this test process) went quiet.
+- publishes ``nav_msgs/Odometry``.
 
-Its scans come from a thread of the pytest worker, so it keeps that worker's collections short
-as the observer does (``keep_collections_short``).
+This side records every ``/cmd_vel`` with its arrival time in that process
+(``time.monotonic_ns()``, comparable with every process's clock on Linux), the base's pose, and
+the gaps between its scans longer than two periods (``scan_gaps_ms``), so that a robot that held
+for "sensor stale" says whether its lidar went quiet.
 
 Every test picks its own ``ROS_DOMAIN_ID`` and keeps discovery on this machine
-(``domain_for_test``), so tests and parallel runs cannot hear each other.
+(``domain_for_test``), so tests and parallel runs cannot hear each other. The process inherits
+both from this one's environment.
 """
 
 from __future__ import annotations
 
 import itertools
-import math
+import json
 import os
+import subprocess
+import sys
+import tempfile
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
-import rclpy
-from egc_common.executor_thread import ExecutorThread
-from geometry_msgs.msg import Twist, TwistStamped
-from nav_msgs.msg import Odometry
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
-from rclpy.signals import SignalHandlerOptions
-from sensor_msgs.msg import LaserScan
 
-from tests.integration.harness import keep_collections_short
+from tests.cli_process import child_env
+from tests.integration.harness import ROOT
+from tests.ros2.fake_base_process import PERIOD_S, STOP_PATIENCE_S
 
 _COUNTER = itertools.count()
-BEAMS = 360
 RANGE_MIN_M = 0.1
-RANGE_MAX_M = 8.0
-PERIOD_S = 0.05  # scans and odometry at 20 Hz
-# Both threads leave within a wait or a loop period; this long means one is stuck.
-STOP_PATIENCE_S = 30.0
+__all__ = ["STOP_PATIENCE_S", "CmdSample", "FakeBase", "domain_for_test"]
 
 
 def domain_for_test() -> int:
@@ -70,6 +62,25 @@ class CmdSample:
     frame_id: str | None
 
 
+class _ScanSwitch:
+    """``scans_on``: set() and clear() as on a ``threading.Event``, sent to the base's process."""
+
+    def __init__(self, base: FakeBase) -> None:
+        self._base = base
+        self._on = True
+
+    def set(self) -> None:
+        self._on = True
+        self._base._send("scans on")
+
+    def clear(self) -> None:
+        self._on = False
+        self._base._send("scans off")
+
+    def is_set(self) -> bool:
+        return self._on
+
+
 class FakeBase:
     def __init__(
         self,
@@ -79,52 +90,85 @@ class FakeBase:
         upside_down: bool = False,
         range_min_m: float = RANGE_MIN_M,
     ) -> None:
-        keep_collections_short()
-        self.wall_x_m = wall_x_m
-        self.range_min_m = range_min_m
-        self.laser_yaw_rad = laser_yaw_rad
-        self.upside_down = upside_down
-        self.ranges_override: np.ndarray | None = None
-        self.scans_on = threading.Event()
-        self.scans_on.set()
+        self.scans_on = _ScanSwitch(self)
         self.x_m = 0.0
         self.max_x_m = 0.0
         self.cmds: list[CmdSample] = []
         self.scans_published = 0
         self.scan_gaps_ms: list[float] = []
+        self._subscribers = 0
+        self._errors: list[str] = []
+        self._closed: str | None = None
+        self._ranges_override: np.ndarray | None = None
         self._lock = threading.Lock()
-        self._v = (0.0, 0.0)
-        self._stamped = cmd_type == "twist-stamped"
-        self._context = Context()
-        rclpy.init(context=self._context, signal_handler_options=SignalHandlerOptions.NO)
-        self.node = rclpy.create_node("fake_base", context=self._context)
-        reliable = QoSProfile(
-            depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE
+        settings = {
+            "cmd_type": cmd_type,
+            "wall_x_m": wall_x_m,
+            "laser_yaw_rad": laser_yaw_rad,
+            "upside_down": upside_down,
+            "range_min_m": range_min_m,
+        }
+        self._stderr: IO[bytes] = tempfile.TemporaryFile()  # noqa: SIM115 (closed by close())
+        self._proc = subprocess.Popen(
+            [sys.executable, "-m", "tests.ros2.fake_base_process", json.dumps(settings)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=self._stderr,
+            text=True,
+            cwd=ROOT,
+            env=child_env(PYTHONFAULTHANDLER="1"),
         )
-        self._scan_pub = self.node.create_publisher(LaserScan, "/scan", qos_profile_sensor_data)
-        self._odom_pub = self.node.create_publisher(Odometry, "/odom", reliable)
-        self.node.create_subscription(
-            TwistStamped if self._stamped else Twist, "/cmd_vel", self._on_cmd, reliable
+        assert self._proc.stdout is not None
+        ready = self._proc.stdout.readline()  # its node and threads run from now on
+        if ready.strip() != "ready":
+            self._proc.kill()
+            self._proc.wait()
+            raise AssertionError(f"the fake base did not start: {ready!r}\n{self._stderr_tail()}")
+        self._reader = threading.Thread(
+            target=self._read, args=(self._proc.stdout,), name="fake-base-reader", daemon=True
         )
-        self._executor = SingleThreadedExecutor(context=self._context)
-        self._executor.add_node(self.node)
-        self._errors: list[Exception] = []
-        self._spinner = ExecutorThread(self._executor, self._errors.append, name="fake-base-ros2")
-        self._stop = threading.Event()
-        self._loop_thread = threading.Thread(target=self._loop, name="fake-base-loop", daemon=True)
-        self._spinner.start()
-        self._loop_thread.start()
+        self._reader.start()
 
-    # -- /cmd_vel -------------------------------------------------------------------------------
+    def _send(self, line: str) -> None:
+        assert self._proc.stdin is not None
+        self._proc.stdin.write(line + "\n")
+        self._proc.stdin.flush()
 
-    def _on_cmd(self, msg: Any) -> None:
-        now = time.monotonic_ns()
-        twist = msg.twist if self._stamped else msg
-        frame = msg.header.frame_id if self._stamped else None
-        sample = CmdSample(now, twist.linear.x, twist.angular.z, frame)
-        with self._lock:
-            self.cmds.append(sample)
-            self._v = (twist.linear.x, twist.angular.z)
+    def _read(self, lines: Any) -> None:
+        for line in lines:
+            kind, _, rest = line.rstrip("\n").partition(" ")
+            words = rest.split()
+            with self._lock:
+                if kind == "cmd":
+                    frame = None if words[3] == "-" else words[3]
+                    self.cmds.append(
+                        CmdSample(int(words[0]), float(words[1]), float(words[2]), frame)
+                    )
+                elif kind == "tick":
+                    self.x_m = float(words[0])
+                    self.max_x_m = max(self.max_x_m, self.x_m)
+                    self.scans_published = int(words[1])
+                    self._subscribers = int(words[2])
+                elif kind == "gap":
+                    self.scan_gaps_ms.append(float(words[0]))
+                elif kind == "error":
+                    self._errors.append(rest)
+                elif kind == "closed":
+                    self._closed = rest
+
+    def _stderr_tail(self) -> str:
+        self._stderr.seek(0)
+        return self._stderr.read()[-3000:].decode(errors="replace")
+
+    @property
+    def ranges_override(self) -> np.ndarray | None:
+        return self._ranges_override
+
+    @ranges_override.setter
+    def ranges_override(self, ranges: np.ndarray | None) -> None:
+        """Every scan from now on (None: the wall again)."""
+        self._ranges_override = ranges
+        self._send(f"ranges {json.dumps(None if ranges is None else ranges.tolist())}")
 
     def commands(self, since_ns: int = 0) -> list[CmdSample]:
         with self._lock:
@@ -144,17 +188,18 @@ class FakeBase:
 
     def health(self) -> str:
         """What the base itself did: how far it went, its scans and their gaps."""
-        return (
-            f"the fake base drove to x {self.max_x_m:.3f} m at most and published "
-            f"{self.scans_published} scans; gaps between them over {2 * PERIOD_S * 1e3:.0f} ms: "
-            f"{[round(g) for g in self.scan_gaps_ms]}"
-        )
+        with self._lock:
+            return (
+                f"the fake base drove to x {self.max_x_m:.3f} m at most and published "
+                f"{self.scans_published} scans; gaps between them over {2 * PERIOD_S * 1e3:.0f} "
+                f"ms: {[round(g) for g in self.scan_gaps_ms]}"
+            )
 
     def wait_connected(self, timeout_s: float = 30.0) -> None:
         """Until the robot's node hears our scans and we hear its /cmd_vel (ROS 2 discovery)."""
         self.wait_for(
             "the robot's node to match our topics",
-            lambda: self._scan_pub.get_subscription_count() > 0 and self.commands(),
+            lambda: self._subscribers > 0 and self.commands(),
             timeout_s,
         )
         time.sleep(0.2)  # a few scans on their way
@@ -168,71 +213,27 @@ class FakeBase:
         )
         return int(sample.rx_ns)
 
-    # -- the world, the lidar and the odometry --------------------------------------------------
-
-    def ranges(self) -> np.ndarray:
-        if self.ranges_override is not None:
-            return self.ranges_override
-        angles = -math.pi + 2 * math.pi / BEAMS * np.arange(BEAMS)
-        # Physical direction in the base frame of each reported beam (the laser at the centre).
-        sign = -1.0 if self.upside_down else 1.0
-        robot_angles = self.laser_yaw_rad + sign * angles
-        out = np.full(BEAMS, np.inf)
-        if self.wall_x_m is not None:
-            c = np.cos(robot_angles)
-            with np.errstate(divide="ignore"):
-                d = np.where(c > 1e-6, (self.wall_x_m - self.x_m) / c, np.inf)
-            d = np.where(d < self.range_min_m, -np.inf, d)  # closer than range_min (REP 117)
-            out = np.where(d <= RANGE_MAX_M, d, np.inf)
-        return out
-
-    def _loop(self) -> None:
-        last = time.monotonic()
-        last_scan = None
-        while not self._stop.wait(PERIOD_S):
-            now = time.monotonic()
-            with self._lock:
-                v, _ = self._v
-            self.x_m += v * (now - last)
-            self.max_x_m = max(self.max_x_m, self.x_m)
-            last = now
-            stamp = self.node.get_clock().now().to_msg()
-            if self.scans_on.is_set():
-                scan = LaserScan()
-                scan.header.stamp = stamp
-                scan.header.frame_id = "laser"
-                scan.angle_min = -math.pi
-                scan.angle_increment = 2 * math.pi / BEAMS
-                scan.angle_max = math.pi - 2 * math.pi / BEAMS
-                scan.range_min = self.range_min_m
-                scan.range_max = RANGE_MAX_M
-                scan.ranges = self.ranges().astype(np.float32)
-                self._scan_pub.publish(scan)
-                self.scans_published += 1
-                if last_scan is not None and now - last_scan > 2 * PERIOD_S:
-                    self.scan_gaps_ms.append((now - last_scan) * 1e3)
-                last_scan = now
-            else:
-                last_scan = None
-            odom = Odometry()
-            odom.header.stamp = stamp
-            odom.header.frame_id = "odom"
-            odom.child_frame_id = "base_link"
-            odom.pose.pose.position.x = self.x_m
-            odom.pose.pose.orientation.w = 1.0
-            odom.twist.twist.linear.x = v
-            self._odom_pub.publish(odom)
-
     def close(self) -> None:
-        """Both threads out, then the node goes: destroying it under a thread still using it
-        segfaulted a CI run (issue 31). A thread still inside fails the test and the node is
-        left to the process's exit."""
-        self._stop.set()
-        self._loop_thread.join(STOP_PATIENCE_S)
-        spinner_out = self._spinner.stop(STOP_PATIENCE_S)
-        if self._loop_thread.is_alive() or not spinner_out:
-            raise AssertionError(f"the fake base's threads did not stop in {STOP_PATIENCE_S} s")
-        self._executor.shutdown()
-        self.node.destroy_node()
-        self._context.try_shutdown()
+        """The base's threads out, then its process ends (no node destroyed: see
+        ``fake_base_process``). A thread still inside, or a process that did not end, fails the
+        test."""
+        if self._proc.poll() is None:
+            try:
+                self._send("close")
+                self._proc.stdin.close()  # type: ignore[union-attr]
+            except OSError:
+                pass
+            try:
+                self._proc.wait(STOP_PATIENCE_S * 2 + 10)
+            except subprocess.TimeoutExpired:
+                self._proc.kill()
+                self._proc.wait()
+        self._reader.join(5)
+        code, closed = self._proc.returncode, self._closed
+        tail = self._stderr_tail()
+        self._stderr.close()
+        assert code == 0 and closed == "ok", (
+            f"the fake base's process ended with {code}, its threads {closed or 'never said'}:"
+            f"\n{tail}"
+        )
         assert not self._errors, f"the fake base's executor failed: {self._errors}"
