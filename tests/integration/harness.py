@@ -49,12 +49,19 @@ MS = 1_000_000
 ROOT = Path(__file__).resolve().parents[2]
 
 
+# Arguments that say where a robot's Zenoh session listens or connects.
+WIRED = {"--listen", "--zenoh-listen", "--connect", "--zenoh-connect", "--zenoh-config"}
+
+
 class Processes:
     def __init__(self, workdir: Path) -> None:
         self.workdir = workdir
         self.children: dict[str, subprocess.Popen[bytes]] = {}
 
     def start(self, name: str, *args: str) -> subprocess.Popen[bytes]:
+        if args[:1] == ("robot",) and not WIRED & set(args):
+            # Zenoh's default port (7447) may be another test's or another run's (CI run 52).
+            raise AssertionError(f"a test robot needs --listen on a free port: {args}")
         out = (self.workdir / f"{name}.log").open("wb")
         env = child_env(PYTHONUNBUFFERED="1", PYTHONFAULTHANDLER="1")
         proc = subprocess.Popen(
