@@ -17,8 +17,8 @@ session, the command source, the status line and the view's recording. A switch:
    closes, which withdraws its liveliness token ``egc/<old>/alive/operator/<id>``: control is
    handed over (DESIGN 8, "explicit release or loss hands it over"). The old robot is never driven again by
    this operator until it is switched back to, as a new session.
-2. **Take.** A new node for the new robot starts at once, its source gated until its clock sync
-   has an estimate (the first command the robot takes is stamped on its clock, DESIGN 7; a
+2. **Take.** A new node for the new robot starts at once, its source gated (nothing sent) until
+   its clock sync has an estimate (the first command the robot takes is stamped on its clock, DESIGN 7; a
    robot that answers no clock query within a second gets unsynchronised commands, stamp 0,
    as an operator with ``--robot`` sends them). Its
    first commands come from a new operator session (new liveliness token, ``seq`` from 1), so

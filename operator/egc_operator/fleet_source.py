@@ -16,8 +16,8 @@ for all of them. ``FleetSource`` wraps that source:
 - **Release and gate per node** (``NodeSource``, what one node is given). A node's source is
   released when the session switches away from its robot (``release``): from then on it reads
   a centred stick with the deadman released, so the old robot's next command lets go (DESIGN 8
-  explicit release) even before its node has stopped. A new node's source reads released until
-  its ``gate`` opens (its clock sync has converged: the first command the new robot takes is
+  explicit release) even before its node has stopped. A new node's source holds back (its node
+  sends nothing: ``holding_back``) until its ``gate`` opens (its clock sync has converged: the first command the new robot takes is
   stamped on its clock, DESIGN 7), so the robot sees a new operator session start from the
   stick as it is then, and needs it centred (DESIGN 8).
 
@@ -107,8 +107,13 @@ class NodeSource:
     def release(self) -> None:
         self.released = True
 
+    def holding_back(self) -> bool:
+        """True while the gate is closed: the robot would refuse this node's released commands
+        as not in control (the demo over a 400 ms round trip had 21 of them), so none is sent."""
+        return self._gate is not None and not self.released and not self._gate()
+
     def sample(self, t_s: float) -> JoystickSample:
-        if self._gate is not None and not self.released and not self._gate():
+        if self.holding_back():
             return RELEASED
         return self._fleet._sample(self)
 

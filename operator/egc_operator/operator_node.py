@@ -561,6 +561,7 @@ class OperatorNode:
         ended_at: int | None = None
         seq = 0
         last: OperatorCommand | None = None
+        holding_back = getattr(self._source, "holding_back", None)
         while not stop.is_set():
             stop.wait(max(0, deadline - self._clock()) / NS_PER_S)
             now = self._clock()
@@ -572,7 +573,8 @@ class OperatorNode:
             # Until the robot is there (a slow link takes seconds to connect), nothing is sent
             # and a recorded script does not run ahead of the robot: a command could reach the
             # robot before its liveliness token reaches us, and be refused as not in control.
-            sending = start is not None
+            # A fleet's node also holds back until its clock sync converges (``holding_back``).
+            sending = start is not None and not (holding_back is not None and holding_back())
             sample = RELEASED if start is None else self._source.sample((now - start) / NS_PER_S)
             if self._source.finished:
                 ended_at = now if ended_at is None else ended_at

@@ -167,12 +167,14 @@ def test_the_gate_keeps_a_new_node_released_and_the_time_line_waits_for_it() -> 
     open_ = [False]
     fleet = FleetSource(track("t_s,x,y\n0,0.2,0\n1,0.4,0\n"), clock)
     node = fleet.node_source(gate=lambda: open_[0])
+    assert node.holding_back()  # its node sends nothing meanwhile
     assert node.sample(0.0) == RELEASED and not fleet.started
     clock.now += 5 * S
     open_[0] = True
+    assert not node.holding_back()
     assert node.sample(0.0).x == 0.2  # time 0 is the first sample let through
     node.release()
-    assert node.sample(0.0) == RELEASED
+    assert node.sample(0.0) == RELEASED and not node.holding_back()  # the release is sent
 
 
 def test_a_file_columns_robot_next_and_robot_prev() -> None:

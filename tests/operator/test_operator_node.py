@@ -210,3 +210,48 @@ def test_commands_carry_view_age_and_the_view_gets_the_history(session: zenoh.Se
     assert all(now == newest for now, _, newest in view.commands)
     command = node.history.newest
     assert command is not None and (command.x, command.y, command.mode) == (0.5, 0.25, "shared")
+
+
+class HeldBack(Stick):
+    """A fleet node's source before its clock sync converges (``NodeSource.holding_back``)."""
+
+    def __init__(self) -> None:
+        self.open = threading.Event()
+
+    def holding_back(self) -> bool:
+        return not self.open.is_set()
+
+
+def test_a_source_holding_back_sends_nothing_until_it_opens(session: zenoh.Session) -> None:
+    """Its released commands reached the robot before it held control and were refused as
+    not in control: the README's delayed-link demo counted 21 such rejections."""
+    sent: list[OperatorCommand] = []
+
+    def on_cmd(sample: zenoh.Sample) -> None:
+        cmd = decode_command(payload_bytes(sample))
+        assert isinstance(cmd, OperatorCommand)
+        sent.append(cmd)
+
+    entities = [
+        session.declare_subscriber(keys.cmd(ROBOT), on_cmd),
+        session.liveliness().declare_token(keys.alive_robot(ROBOT)),  # the robot is present
+    ]
+    source = HeldBack()
+    node = OperatorNode(session, ROBOT, "op1", source, rate_hz=50.0)
+    stop = threading.Event()
+    runner = threading.Thread(target=node.run, args=(stop,))
+    runner.start()
+    try:
+        time.sleep(0.5)  # 25 periods
+        assert sent == [] and node.published == 0
+        source.open.set()
+        wait_for(lambda: len(sent) >= 5)
+    finally:
+        stop.set()
+        runner.join(timeout=10)
+        node.close()
+        for entity in entities:
+            entity.undeclare()
+    assert (
+        sent[0].seq == 1 and sent[0].deadman
+    )  # the first command sent is the first of its session
