@@ -13,7 +13,7 @@ of its own, as a real base and lidar are, for two reasons the CI runs gave:
 Argument: one JSON object (``cmd_type``, ``wall_x_m``, ``laser_yaw_rad``, ``upside_down``,
 ``range_min_m``). Lines it prints, one per event:
 
-- ``ready`` once its node, publishers and threads run;
+- ``ready`` once its node and publishers exist, just before its threads start;
 - ``cmd RX_NS LINEAR ANGULAR FRAME`` for every ``/cmd_vel`` (FRAME ``-`` for a plain Twist);
 - ``tick X_M SCANS SUBSCRIBERS`` every period: its pose, scans published, ``/scan``'s subscribers;
 - ``gap MS`` for every gap between two of its scans longer than two periods;
@@ -99,6 +99,8 @@ class BaseNode:
         )
         self._stop = threading.Event()
         self._loop_thread = threading.Thread(target=self._loop, name="fake-base-loop", daemon=True)
+
+    def start(self) -> None:
         self._spinner.start()
         self._loop_thread.start()
 
@@ -169,7 +171,8 @@ class BaseNode:
 
 def main(argv: list[str]) -> None:
     base = BaseNode(json.loads(argv[0]))
-    base.say("ready")
+    base.say("ready")  # first: its threads print too (CI run 97 read a "tick" first)
+    base.start()
     for line in sys.stdin:
         words = line.strip().split(maxsplit=1)
         if words == ["scans", "on"]:
