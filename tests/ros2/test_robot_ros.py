@@ -17,6 +17,7 @@ from egc_common.transport import free_tcp_port, loopback_endpoint
 from tests.integration.harness import (
     BUSY_MACHINE_SCAN_TIMEOUT,
     ROBOT,
+    Observer,
     Processes,
     joystick_file,
     operator_args,
@@ -77,10 +78,30 @@ def start_robot_and_operator(
     )
     wait_log(procs, "robot", r"ready: driver ros2")
     base.wait_connected()
+    wait_for_a_fresh_scan(port)
     stick = joystick_file(
         workdir / "stick.csv", [(0, 0, 0, 1), (1.0, stick_x, 0, 1), (60, stick_x, 0, 1)]
     )
     procs.start("operator", *operator_args(port, "op", stick))
+
+
+def wait_for_a_fresh_scan(port: int, timeout_s: float = 30.0) -> None:
+    """Until the robot's telemetry says it has a scan under 100 ms old. The base hearing the
+    robot's /cmd_vel and seeing its /scan subscription is not enough: in CI run 104 (two suites
+    on two cores) the robot's own side of discovery had not matched yet when the operator took
+    control with its centred stick, the robot held for "sensor stale, no scan yet", and the
+    first scans came once the stick was forward: it waited for a centred stick (DESIGN 8)."""
+    observer = Observer(port)
+    try:
+        observer.wait_for(
+            "the robot's first fresh scan (telemetry scan_age_ms < 100)",
+            lambda: any(
+                t.scan_age_ms is not None and t.scan_age_ms < 100 for t in observer.telemetry()
+            ),
+            timeout_s,
+        )
+    finally:
+        observer.close()
 
 
 @pytest.fixture
