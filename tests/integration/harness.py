@@ -111,7 +111,7 @@ class Processes:
 # process pauses for 100-260 ms now and then (CI runs 62, 79, 87, 92: the lidar's own gaps up to
 # 178 ms, the robot's newest scan 207-261 ms old). A robot whose test is not about its sensor
 # then held for good behind a scripted stick that never centres. Those robots get a timeout fit
-# for such a machine; the tests of the timeout itself pass ``product_scan_timeout=True``.
+# for such a machine; the Zenoh driver's tests of the timeout pass ``product_scan_timeout=True``.
 BUSY_MACHINE_SCAN_TIMEOUT = ("--set", "safety.scan_timeout_s=0.6")
 
 

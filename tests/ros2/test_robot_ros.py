@@ -58,11 +58,10 @@ def start_robot_and_operator(
     workdir: Path,
     stick_x: float,
     *robot_extra: str,
-    product_scan_timeout: bool = False,
 ) -> None:
     """The robot on --driver ros2, then an operator holding the deadman: centred for 1 s, then
     ``stick_x`` forward for a minute. The robot's scan timeout is the busy machine's
-    (``BUSY_MACHINE_SCAN_TIMEOUT``) unless ``product_scan_timeout``."""
+    (``BUSY_MACHINE_SCAN_TIMEOUT``)."""
     port = free_tcp_port()
     procs.start(
         "robot",
@@ -73,7 +72,7 @@ def start_robot_and_operator(
         "ros2",
         "--listen",
         loopback_endpoint(port),
-        *(() if product_scan_timeout else BUSY_MACHINE_SCAN_TIMEOUT),
+        *BUSY_MACHINE_SCAN_TIMEOUT,
         *robot_extra,
     )
     wait_log(procs, "robot", r"ready: driver ros2")
@@ -138,7 +137,10 @@ def test_drives_in_free_space_and_stops_within_half_a_second_of_a_silent_operato
 
 
 def test_stops_within_a_second_of_the_scans_stopping(base, procs, tmp_path):
-    start_robot_and_operator(base, procs, tmp_path, 0.5, product_scan_timeout=True)
+    """With the busy machine's scan timeout (0.6 s), not the product's 0.2 s: in CI run 107 the
+    fake base's own scans paused 378 ms while it drove, and the robot held for good before the
+    scans were stopped. 0.2 s itself is the Zenoh driver's test (``test_link``)."""
+    start_robot_and_operator(base, procs, tmp_path, 0.5)
     base.wait_driving()
     base.wait_for("moving", lambda: base.commands()[-1].linear_mps > 0.05, 10.0)
     quiet_ns = time.monotonic_ns()
