@@ -3,17 +3,12 @@ the tests then running and prints its summary."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-import textwrap
 from pathlib import Path
 
 import pytest
 
+from tests.inner_pytest import run_suite
 from tests.suite_budget import BUDGET_ENV, SuiteBudget
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 class CrashReport:
@@ -52,14 +47,7 @@ def test_an_idle_run_is_called_stuck() -> None:
 
 @pytest.mark.slow
 def test_a_hanging_test_ends_the_run_with_its_name_and_the_summary(tmp_path: Path) -> None:
-    (tmp_path / "conftest.py").write_text(
-        "from tests import suite_budget\n\n\n"
-        "def pytest_configure(config):\n"
-        "    suite_budget.configure(config)\n"
-    )
-    (tmp_path / "test_hangs.py").write_text(
-        textwrap.dedent(
-            """
+    hangs = """
             import os, subprocess, sys, time
 
             def test_fails():
@@ -78,22 +66,8 @@ def test_a_hanging_test_ends_the_run_with_its_name_and_the_summary(tmp_path: Pat
             def test_never_reached():
                 pass
             """
-        )
-    )
-    env = {
-        **os.environ,
-        BUDGET_ENV: "10",
-        "SERVER_PID_FILE": str(tmp_path / "server.pid"),
-        "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
-    }
-    proc = subprocess.run(
-        [sys.executable, "-m", "pytest", "-n", "0", "-p", "no:cacheprovider", "-q", str(tmp_path)],
-        cwd=tmp_path,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=240,
-    )
+    env = {BUDGET_ENV: "10", "SERVER_PID_FILE": str(tmp_path / "server.pid")}
+    proc = run_suite(tmp_path, "suite_budget", {"test_hangs.py": hangs}, ["-n", "0"], env)
     out = proc.stdout
     assert proc.returncode == 2, out + proc.stderr  # interrupted
     assert "used up its budget of 10 s" in out and "after 1 of 3 tests" in out, out

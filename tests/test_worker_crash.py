@@ -3,64 +3,43 @@ issue 31): a real two-worker run of a small suite in which one test segfaults.""
 
 from __future__ import annotations
 
-import os
 import re
-import subprocess
-import sys
-import textwrap
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.inner_pytest import run_suite
+
 WAITING = 20
+CRASHES = f"""
+    import ctypes, os, time
+    import pytest
+
+    def log(what):
+        with open(os.environ["STARTS_FILE"], "a") as f:
+            f.write(f"{{what}} {{time.monotonic()}}\\n")
+
+    def test_segfaults():
+        time.sleep(1.0)
+        log("crash")
+        ctypes.string_at(0)  # a read of address 0: SIGSEGV, as rclpy's teardown did
+
+    @pytest.mark.parametrize("n", range({WAITING}))
+    def test_waits(n):
+        log("start")
+        time.sleep(2.0)
+    """
 
 
 @pytest.mark.slow
 def test_a_segfaulting_test_stops_every_worker_and_is_named(tmp_path: Path) -> None:
-    (tmp_path / "conftest.py").write_text(
-        "from tests import worker_crash\n\n\n"
-        "def pytest_configure(config):\n"
-        "    worker_crash.configure(config)\n"
-    )
-    (tmp_path / "test_crash.py").write_text(
-        textwrap.dedent(
-            f"""
-            import ctypes, os, time
-            import pytest
-
-            def log(what):
-                with open(os.environ["STARTS_FILE"], "a") as f:
-                    f.write(f"{{what}} {{time.monotonic()}}\\n")
-
-            def test_segfaults():
-                time.sleep(1.0)
-                log("crash")
-                ctypes.string_at(0)  # a read of address 0: SIGSEGV, as rclpy's teardown did
-
-            @pytest.mark.parametrize("n", range({WAITING}))
-            def test_waits(n):
-                log("start")
-                time.sleep(2.0)
-            """
-        )
-    )
     starts = tmp_path / "starts.txt"
-    env = {
-        **os.environ,
-        "STARTS_FILE": str(starts),
-        "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
-    }
-    proc = subprocess.run(
-        [
-            *(sys.executable, "-m", "pytest", "-n", "2", "--max-worker-restart=0"),
-            *("-p", "no:cacheprovider", "-p", "no:faulthandler", "-q", str(tmp_path)),
-        ],
-        cwd=tmp_path,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=240,
+    proc = run_suite(
+        tmp_path,
+        "worker_crash",
+        {"test_crash.py": CRASHES},
+        ["-n", "2", "--max-worker-restart=0", "-p", "no:faulthandler"],
+        {"STARTS_FILE": str(starts)},
     )
     out = proc.stdout
     assert proc.returncode == 2, out + proc.stderr  # interrupted, not merely failed

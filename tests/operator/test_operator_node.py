@@ -7,9 +7,11 @@ commands the node sends.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
 import time
+from collections.abc import Iterator
 from typing import Any
 
 import numpy.typing as npt
@@ -128,6 +130,23 @@ def wait_for(condition: Any, timeout_s: float = 10.0) -> None:
         time.sleep(0.01)
 
 
+@contextlib.contextmanager
+def running(node: OperatorNode, entities: list[Any]) -> Iterator[None]:
+    """``node.run`` in a thread of its own; then the node stops and closes, and the test's
+    ``entities`` (subscribers, queryables, tokens) go."""
+    stop = threading.Event()
+    runner = threading.Thread(target=node.run, args=(stop,))
+    runner.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        runner.join(timeout=10)
+        node.close()
+        for entity in entities:
+            entity.undeclare()
+
+
 def test_commands_carry_view_age_and_the_view_gets_the_history(session: zenoh.Session) -> None:
     sent: list[tuple[OperatorCommand, int]] = []
 
@@ -146,10 +165,7 @@ def test_commands_carry_view_age_and_the_view_gets_the_history(session: zenoh.Se
     ]
     view = RecordingView()
     node = OperatorNode(session, ROBOT, "op1", Stick(), rate_hz=50.0, view=view)
-    stop = threading.Event()
-    runner = threading.Thread(target=node.run, args=(stop,))
-    runner.start()
-    try:
+    with running(node, entities):
         wait_for(lambda: any(c.stamp_ns and c.deadman for c, _ in sent))  # synchronised, driving
         assert all(c.view_age_ms is None for c, _ in sent)  # no telemetry yet: key left out
         stamp = robot_clock() - 150 * MS  # telemetry that spent 150 ms on the way
@@ -172,12 +188,6 @@ def test_commands_carry_view_age_and_the_view_gets_the_history(session: zenoh.Se
         shown_at = robot_clock()  # the view has had it by now
         n = len(sent)
         wait_for(lambda: len(sent) >= n + 10)
-    finally:
-        stop.set()
-        runner.join(timeout=10)
-        node.close()
-        for entity in entities:
-            entity.undeclare()
     ((shown, received),) = view.telemetry
     assert shown.stamp_ns == stamp
     # ``received`` is the node's estimate of the robot's clock at arrival: between the true
@@ -238,20 +248,10 @@ def test_a_source_holding_back_sends_nothing_until_it_opens(session: zenoh.Sessi
     ]
     source = HeldBack()
     node = OperatorNode(session, ROBOT, "op1", source, rate_hz=50.0)
-    stop = threading.Event()
-    runner = threading.Thread(target=node.run, args=(stop,))
-    runner.start()
-    try:
+    with running(node, entities):
         time.sleep(0.5)  # 25 periods
         assert sent == [] and node.published == 0
         source.open.set()
         wait_for(lambda: len(sent) >= 5)
-    finally:
-        stop.set()
-        runner.join(timeout=10)
-        node.close()
-        for entity in entities:
-            entity.undeclare()
-    assert (
-        sent[0].seq == 1 and sent[0].deadman
-    )  # the first command sent is the first of its session
+    first = sent[0]
+    assert first.seq == 1 and first.deadman  # the first command of its session
