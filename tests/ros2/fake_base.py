@@ -14,22 +14,25 @@ This side records every ``/cmd_vel`` with its arrival time in that process
 the gaps between its scans longer than two periods (``scan_gaps_ms``), so that a robot that held
 for "sensor stale" says whether its lidar went quiet.
 
-Every test picks its own ``ROS_DOMAIN_ID`` and keeps discovery on this machine
+Every test holds a ``ROS_DOMAIN_ID`` of its own and keeps discovery on this machine
 (``domain_for_test``), so tests and parallel runs cannot hear each other. The process inherits
 both from this one's environment.
 """
 
 from __future__ import annotations
 
-import itertools
+import contextlib
+import fcntl
 import json
-import os
+import random
 import subprocess
 import sys
 import tempfile
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
+from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
@@ -38,20 +41,35 @@ from tests.cli_process import child_env
 from tests.integration.harness import ROOT
 from tests.ros2.fake_base_process import PERIOD_S, STOP_PATIENCE_S
 
-_COUNTER = itertools.count()
 RANGE_MIN_M = 0.1
+DOMAINS = 101  # ROS_DOMAIN_ID 1-101: the ports of each stay in Linux's default range
 __all__ = ["STOP_PATIENCE_S", "CmdSample", "FakeBase", "domain_for_test"]
 
 
-def domain_for_test() -> int:
-    """A ROS_DOMAIN_ID in [1, 101] of its own: pytest-xdist workers take disjoint residues, and
-    the process id spreads separate runs on one machine."""
-    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
-    index = int(worker[2:]) if worker[2:].isdigit() else 0
-    workers = max(1, int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
-    slots = 101 // workers
-    k = (os.getpid() * 7 + next(_COUNTER)) % slots
-    return 1 + index + workers * k
+@contextlib.contextmanager
+def domain_for_test() -> Iterator[int]:
+    """A ROS_DOMAIN_ID in [1, 101] that no other test on this machine holds meanwhile, in this
+    run or another: an exclusive lock on ``egc-ros-domain-N.lock`` in the temporary folder, held
+    until the block ends (or the process does). Picked from the process id alone, two suites
+    running at once could share a domain, and with it each other's /scan and /cmd_vel: in CI
+    run 131 a fake base got a moving twist after the robot had stopped, the robot's log showing
+    no reason for one."""
+    folder = Path(tempfile.gettempdir())
+    start = random.randrange(DOMAINS)
+    for i in range(DOMAINS):
+        domain = 1 + (start + i) % DOMAINS
+        lock = (folder / f"egc-ros-domain-{domain}.lock").open("w")
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            lock.close()
+            continue
+        try:
+            yield domain
+        finally:
+            lock.close()  # the lock goes with it
+        return
+    raise RuntimeError(f"all {DOMAINS} ROS 2 domains are held by tests on this machine")
 
 
 @dataclass
