@@ -34,6 +34,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import errno
 import gc
 import json
 import signal
@@ -126,6 +127,9 @@ def link_schedules(up: str, down: str, scenario: str | None) -> tuple[Schedule, 
     return schedules[0], schedules[1]
 
 
+EPHEMERAL_TRIES = 20
+
+
 def _reason(exc: OSError) -> str:
     return exc.strerror or str(exc) or type(exc).__name__
 
@@ -157,22 +161,39 @@ def build_relay(args: argparse.Namespace) -> Relay:
     return relay
 
 
-async def _serve(relay: Relay, args: argparse.Namespace, companions: list[Relay]) -> float:
-    try:
-        bound = await relay.start()
-    except OSError as exc:
-        raise UsageError(f"cannot listen on {relay.listen}: {_reason(exc)}") from None
-    companion, note = _companion(relay, args, bound.port)
-    if companion is not None:
+async def start_pair(relay: Relay, args: argparse.Namespace) -> tuple[Endpoint, Relay | None, str]:
+    """Start ``relay`` and, beside a ``udp/`` one, its TCP companion on the same port number.
+
+    With port 0 the kernel picks a free UDP port, whose number may be taken for TCP: CI run
+    136 failed so, with another suite beside it. Then both close and another port is tried
+    (``EPHEMERAL_TRIES`` in all); a port the user named is reported at once."""
+    for attempt in range(1, EPHEMERAL_TRIES + 1):
+        try:
+            bound = await relay.start()
+        except OSError as exc:
+            raise UsageError(f"cannot listen on {relay.listen}: {_reason(exc)}") from None
+        companion, note = _companion(relay, args, bound.port)
+        if companion is None:
+            return bound, None, note
         try:
             await companion.start()
         except OSError as exc:
             await relay.close()
+            ephemeral = relay.listen.port == 0 and exc.errno == errno.EADDRINUSE
+            if ephemeral and attempt < EPHEMERAL_TRIES:
+                continue
             raise UsageError(
                 f"cannot listen on {companion.listen} (the TCP half of a udp/ link; "
                 f"--udp-only relays UDP alone): {_reason(exc)}"
             ) from None
         companion.t0 = relay.t0  # one clock for outages and phases in both
+        return bound, companion, note
+    raise AssertionError("unreachable")  # the last attempt returns or raises
+
+
+async def _serve(relay: Relay, args: argparse.Namespace, companions: list[Relay]) -> float:
+    bound, companion, note = await start_pair(relay, args)
+    if companion is not None:
         companions.append(companion)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()

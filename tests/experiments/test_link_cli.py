@@ -608,3 +608,45 @@ def test_a_udp_relay_started_before_its_target_relays_tcp_once_the_target_is_up(
         if server is not None:
             server.close()
     assert proc.returncode == 0
+
+
+def test_an_ephemeral_udp_port_taken_for_tcp_is_traded_for_another(monkeypatch) -> None:
+    """CI run 136: ``--listen udp/127.0.0.1:0`` got a UDP port whose number another suite held
+    for TCP, and the link exited. It now closes both and takes another port."""
+    import argparse
+    import asyncio
+    import errno
+
+    real_start = link_cli.Relay.start
+    refused: list[int] = []
+
+    async def start(self):
+        if self.label == "tcp connection" and not refused:
+            refused.append(self.listen.port)
+            raise OSError(errno.EADDRINUSE, "Address already in use")
+        return await real_start(self)
+
+    monkeypatch.setattr(link_cli.Relay, "start", start)
+    parser = argparse.ArgumentParser()
+    link_cli.configure(parser)
+    args = parser.parse_args(["--listen", "udp/127.0.0.1:0", "--connect", "udp/127.0.0.1:9"])
+
+    async def pair():
+        relay = link_cli.build_relay(args)
+        bound, companion, _ = await link_cli.start_pair(relay, args)
+        assert companion is not None
+        try:
+            return bound.port, companion.listen.port
+        finally:
+            await companion.close()
+            await relay.close()
+
+    udp_port, tcp_port = asyncio.run(pair())
+    assert len(refused) == 1 and udp_port == tcp_port and udp_port != 0
+    # A port the user named is not traded: the same refusal is reported.
+    refused.clear()
+    named = parser.parse_args(
+        ["--listen", f"udp/127.0.0.1:{udp_port}", "--connect", "udp/127.0.0.1:9"]
+    )
+    with pytest.raises(link_cli.UsageError, match="the TCP half of a udp/ link"):
+        asyncio.run(link_cli.start_pair(link_cli.build_relay(named), named))
