@@ -137,7 +137,7 @@ class FakeBase:
             env=child_env(PYTHONFAULTHANDLER="1"),
         )
         assert self._proc.stdout is not None
-        ready = self._proc.stdout.readline()  # its node and threads run from now on
+        ready = self._proc.stdout.readline()  # its node exists; its threads start right after
         if ready.strip() != "ready":
             self._proc.kill()
             self._proc.wait()
